@@ -1,0 +1,354 @@
+"""The body model: segment masses and centres of mass (de Leva 1996), joint roles, COM and foot markers.
+
+Joint *roles* name the anatomical joints the model needs (``left_hip`` is the hip joint centre, i.e. the
+joint whose rotation swings the thigh). Roles are found from joint names for the CMU, Mixamo and common
+namings, or given by a user map (a dict or a YAML file ``role: JointName``). Each segment's centre of
+mass is a point fixed in one joint's frame, computed once in the rest pose, so the whole-body COM of a
+motion is a weighted sum of transformed points (see ``kinematics``).
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from .constants import UP_AXIS
+from .errors import FroudeError
+from .kinematics import fk_soa, from_soa, to_soa
+from .motion import Motion
+from .skeleton import Skeleton
+
+
+class JointMapError(FroudeError):
+    """Joint roles could not be found in a skeleton; the message names them."""
+
+
+# de Leva (1996) Table 4: mass fraction (male, female), COM fraction from the first endpoint (male, female).
+DE_LEVA = {
+    "head": ((0.0694, 0.0668), (0.5002, 0.4841)),  # vertex -> C7 (alternative endpoints)
+    "trunk": ((0.4346, 0.4257), (0.4310, 0.3782)),  # mid-shoulder JC -> mid-hip JC (alternative)
+    "upper_trunk": ((0.1596, 0.1545), (0.2999, 0.2077)),  # suprasternale -> xiphion
+    "middle_trunk": ((0.1633, 0.1465), (0.4502, 0.4512)),  # xiphion -> omphalion
+    "lower_trunk": ((0.1117, 0.1247), (0.6115, 0.4920)),  # omphalion -> mid-hip
+    "upper_arm": ((0.0271, 0.0255), (0.5772, 0.5754)),
+    "forearm": ((0.0162, 0.0138), (0.4574, 0.4559)),
+    "hand": ((0.0061, 0.0056), (0.7900, 0.7474)),
+    "thigh": ((0.1416, 0.1478), (0.4095, 0.3612)),
+    "shank": ((0.0433, 0.0481), (0.4395, 0.4352)),
+    "foot": ((0.0137, 0.0129), (0.4415, 0.4014)),
+}
+# Lengths of de Leva's three trunk parts as fractions of the whole trunk line, from the bottom
+# (mid-hip) up; male mean lengths lower 145.7 mm, middle 215.5 mm, upper 170.7 mm.
+_TRUNK_PARTS = (("lower_trunk", 0.0, 0.2739), ("middle_trunk", 0.2739, 0.6791), ("upper_trunk", 0.6791, 1.0))
+
+SIDES = ("left", "right")
+LIMB_ROLES = ("hip", "knee", "ankle", "toe", "shoulder", "elbow", "wrist")
+REQUIRED_ROLES = ("pelvis", "head") + tuple(f"{s}_{r}" for s in SIDES for r in LIMB_ROLES)
+OPTIONAL_ROLES = ("neck", "head_end") + tuple(f"{s}_{r}" for s in SIDES for r in ("toe_end", "hand_end"))
+
+# Core words (name without side and punctuation, lower case) for each limb role, in priority order.
+_CORE_WORDS = {
+    "hip": ("upleg", "thigh", "upperleg", "femur", "hip"),
+    "knee": ("leg", "shin", "calf", "lowerleg", "knee", "tibia", "shank"),
+    "ankle": ("foot", "ankle"),
+    "toe": ("toebase", "toe", "toes", "ball", "football"),
+    "toe_end": ("toeend", "toesend", "toetip", "toebaseend"),
+    "shoulder": ("arm", "upperarm", "humerus", "shoulder"),
+    "elbow": ("forearm", "lowerarm", "elbow"),
+    "wrist": ("hand", "wrist"),
+    "hand_end": ("handmiddle1", "handindex1", "hand_end", "handend", "fingerbase"),
+}
+_CENTRAL_WORDS = {
+    "head": ("head",),
+    "head_end": ("headtopend", "headend", "headtop", "headsite"),
+    "neck": ("neck", "neck1", "neck01"),
+}
+_SIDE_PATTERNS = (
+    ("left", re.compile(r"^(left|l)(?=[a-z])|^l_|(_|\.)l$|left$")),
+    ("right", re.compile(r"^(right|r)(?=[a-z])|^r_|(_|\.)r$|right$")),
+)
+
+
+def _normalize(name: str) -> str:
+    name = name.split(":")[-1].split("|")[-1]
+    return re.sub(r"[^a-z0-9_.]", "", name.lower())
+
+
+def _side_and_core(name: str) -> tuple[str | None, str]:
+    n = _normalize(name)
+    for side, pat in _SIDE_PATTERNS:
+        if pat.search(n):
+            core = pat.sub("", n)
+            return side, re.sub(r"[^a-z0-9]", "", core)
+    return None, re.sub(r"[^a-z0-9]", "", n)
+
+
+def find_roles(skeleton: Skeleton, joint_map: Mapping[str, str] | None = None) -> dict[str, int]:
+    """Role -> joint index for a skeleton, from its joint names and an optional user map (role -> name).
+
+    Raises JointMapError naming every required role that could not be found.
+    """
+    roles: dict[str, int] = {"pelvis": 0}
+    parsed = [_side_and_core(n) for n in skeleton.names]
+    for side in SIDES:
+        for role, words in _CORE_WORDS.items():
+            for w in words:
+                hits = [j for j, (s, c) in enumerate(parsed) if s == side and c == w]
+                if hits:
+                    roles[f"{side}_{role}"] = hits[0]
+                    break
+    for role, words in _CENTRAL_WORDS.items():
+        for w in words:
+            hits = [j for j, (s, c) in enumerate(parsed) if s is None and c == w]
+            if hits:
+                roles[role] = hits[0]
+                break
+    # Some skeletons (CMU) name the clavicle "Shoulder" and the upper arm "Arm"; others name the
+    # shoulder joint "Shoulder". The priority order above prefers "arm".
+    if joint_map:
+        for role, name in joint_map.items():
+            if role not in REQUIRED_ROLES + OPTIONAL_ROLES:
+                raise JointMapError(
+                    f"unknown role '{role}' in the joint map; roles are: {', '.join(REQUIRED_ROLES + OPTIONAL_ROLES)}"
+                )
+            if name not in skeleton.names:
+                raise JointMapError(f"joint map: role '{role}' names joint '{name}', which the skeleton lacks")
+            roles[role] = skeleton.names.index(name)
+    missing = [r for r in REQUIRED_ROLES if r not in roles]
+    if missing:
+        raise JointMapError(
+            "cannot map joints for roles: " + ", ".join(missing)
+            + " (give a joint map YAML 'role: JointName'; joints are: " + ", ".join(skeleton.names) + ")"
+        )
+    return roles
+
+
+def load_joint_map(path: str | Path) -> dict[str, str]:
+    """Read a YAML joint map ``role: JointName``."""
+    import yaml
+
+    try:
+        data = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError) as e:
+        raise JointMapError(f"{path}: cannot read joint map: {e}") from None
+    if not isinstance(data, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in data.items()):
+        raise JointMapError(f"{path}: a joint map is a YAML mapping 'role: JointName'")
+    return data
+
+
+@dataclass(frozen=True, eq=False)
+class BodyModel:
+    """Segment masses and COM points of a skeleton, and its foot markers.
+
+    seg_names: (S,) segment names; seg_joint: (S,) joint index each segment is fixed to;
+    seg_local: (S, 3) segment COM in that joint's frame [m]; seg_mass: (S,) [kg].
+    marker_joint: (2, 3) joint of each foot marker (left, right) x (ankle, toe, toe end);
+    marker_local: (2, 3, 3) marker positions in their joint frames [m].
+    roles: role -> joint index. leg_length: mean hip-knee-ankle bone length [m]. stature: [m].
+    """
+
+    skeleton: Skeleton
+    total_mass: float
+    sex: str
+    seg_names: tuple[str, ...]
+    seg_joint: np.ndarray
+    seg_local: np.ndarray
+    seg_mass: np.ndarray
+    marker_joint: np.ndarray
+    marker_local: np.ndarray
+    roles: Mapping[str, int]
+    leg_length: float
+    stature: float
+    notes: tuple[str, ...] = field(default=())
+
+    @classmethod
+    def from_skeleton(
+        cls,
+        skeleton: Skeleton,
+        mass: float = 70.0,
+        sex: str = "male",
+        overrides: Mapping[str, float] | None = None,
+        joint_map: Mapping[str, str] | None = None,
+    ) -> "BodyModel":
+        """Build the de Leva model for a skeleton.
+
+        mass: total body mass [kg]; sex: "male" or "female" (de Leva's tables);
+        overrides: segment name -> mass fraction (e.g. {"head": 0.10}); the remaining fractions are
+            rescaled so that the total stays 1. Segment names: head, upper_trunk, middle_trunk,
+            lower_trunk, and left_/right_ upper_arm, forearm, hand, thigh, shank, foot.
+        joint_map: role -> joint name, for skeletons whose names are not recognised.
+        """
+        if not (np.isfinite(mass) and mass > 0):
+            raise FroudeError(f"body mass must be > 0 kg, got {mass}")
+        if sex not in ("male", "female"):
+            raise FroudeError(f"sex must be 'male' or 'female', got '{sex}'")
+        k = 0 if sex == "male" else 1
+        roles = find_roles(skeleton, joint_map)
+        rest = skeleton.rest_positions()
+        ends = {j: np.asarray(off) for j, off in reversed(skeleton.end_sites)}  # first end site wins
+        notes = []
+
+        def pos(role):
+            return rest[roles[role]]
+
+        def end_point(role, end_role, fallback_from):
+            """Rest position of an end point: a mapped joint, the joint's end site, or an estimate."""
+            if end_role in roles:
+                return rest[roles[end_role]]
+            j = roles[role]
+            if j in ends:
+                return rest[j] + ends[j]
+            kids = skeleton.children(j)
+            if kids:
+                return rest[kids[0]] if np.linalg.norm(skeleton.offsets[kids[0]]) > 0 else rest[j]
+            # estimate: continue the parent bone by half its length
+            direction = rest[j] - pos(fallback_from)
+            notes.append(f"no end point for '{skeleton.names[j]}': estimated")
+            return rest[j] + 0.5 * direction
+
+        segs = []  # (name, joint, rest COM point, de Leva key)
+
+        def add(name, joint, prox, dist, key):
+            c = prox + DE_LEVA[key][1][k] * (dist - prox)
+            segs.append((name, joint, c, key))
+
+        # Head+neck: vertex -> C7. Vertex = head end site; C7 ≈ the neck joint (or the head joint).
+        vertex = end_point("head", "head_end", "neck" if "neck" in roles else "pelvis")
+        c7 = pos("neck") if "neck" in roles else pos("head")
+        add("head", roles["head"], vertex, c7, "head")
+        # Trunk: three parts along mid-hip JC -> mid-shoulder JC, each fixed to the spine joint below it.
+        mid_hip = 0.5 * (pos("left_hip") + pos("right_hip"))
+        mid_sh = 0.5 * (pos("left_shoulder") + pos("right_shoulder"))
+        path = []
+        j = roles["head"]
+        while j >= 0:
+            path.append(j)
+            j = skeleton.parents[j]
+        path = path[::-1]  # root ... head
+        for key, lo, hi in _TRUNK_PARTS:
+            bottom = mid_hip + lo * (mid_sh - mid_hip)
+            top = mid_hip + hi * (mid_sh - mid_hip)
+            c = top + DE_LEVA[key][1][k] * (bottom - top)  # fractions are measured from the top landmark
+            below = [p for p in path[:-1] if rest[p][UP_AXIS] <= c[UP_AXIS] + 1e-9] or [path[0]]
+            segs.append((key, below[-1], c, key))
+        for side in SIDES:
+            s = side + "_"
+            add(s + "upper_arm", roles[s + "shoulder"], pos(s + "shoulder"), pos(s + "elbow"), "upper_arm")
+            add(s + "forearm", roles[s + "elbow"], pos(s + "elbow"), pos(s + "wrist"), "forearm")
+            hand_end = end_point(s + "wrist", s + "hand_end", s + "elbow")
+            add(s + "hand", roles[s + "wrist"], pos(s + "wrist"), hand_end, "hand")
+            add(s + "thigh", roles[s + "hip"], pos(s + "hip"), pos(s + "knee"), "thigh")
+            add(s + "shank", roles[s + "knee"], pos(s + "knee"), pos(s + "ankle"), "shank")
+            toe_end = end_point(s + "toe", s + "toe_end", s + "ankle")
+            add(s + "foot", roles[s + "ankle"], pos(s + "ankle"), toe_end, "foot")
+
+        fractions = np.array([DE_LEVA[key][0][k] for _, _, _, key in segs])
+        fractions = fractions / fractions.sum()  # female table sums to 0.9999
+        names = tuple(n for n, _, _, _ in segs)
+        if overrides:
+            for name, frac in overrides.items():
+                if name not in names:
+                    raise FroudeError(f"unknown segment '{name}' in mass overrides; segments: {', '.join(names)}")
+                if not 0 <= frac < 1:
+                    raise FroudeError(f"mass fraction of '{name}' must be in [0, 1), got {frac}")
+            fixed = np.array([n in overrides for n in names])
+            fixed_total = sum(overrides.values())
+            if fixed_total >= 1:
+                raise FroudeError("mass overrides sum to 1 or more")
+            fractions[~fixed] *= (1 - fixed_total) / fractions[~fixed].sum()
+            fractions[fixed] = [overrides[n] for n in np.array(names)[fixed]]
+        seg_joint = np.array([j for _, j, _, _ in segs])
+        seg_local = np.array([c - rest[j] for _, j, c, _ in segs])
+
+        marker_joint = np.zeros((2, 3), dtype=np.int64)
+        marker_local = np.zeros((2, 3, 3))
+        for i, side in enumerate(SIDES):
+            s = side + "_"
+            a, t = roles[s + "ankle"], roles[s + "toe"]
+            marker_joint[i] = (a, t, t)
+            marker_local[i, 2] = end_point(s + "toe", s + "toe_end", s + "ankle") - rest[t]
+
+        leg = [
+            np.linalg.norm(pos(s + "_knee") - pos(s + "_hip")) + np.linalg.norm(pos(s + "_ankle") - pos(s + "_knee"))
+            for s in SIDES
+        ]
+        leg_length = float(np.mean(leg))
+        stature = _stature(skeleton, roles, rest, vertex, marker_local, leg_length)
+        return cls(
+            skeleton, float(mass), sex, names, seg_joint, seg_local, fractions * mass,
+            marker_joint, marker_local, dict(roles), leg_length, stature, tuple(notes),
+        )
+
+    # ---- evaluation on motions -------------------------------------------------------------------
+    def fk(self, motion: Motion):
+        """Component-major FK of a motion: P (J, 3, F) [m], R (J, 9, F)."""
+        rp, rot, tr = to_soa(motion.root_positions, motion.rotations, motion.translations)
+        return fk_soa(self.skeleton.parents, self.skeleton.offsets, rp, rot, tr)
+
+    def com_soa(self, P: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """Whole-body COM (3, F) [m] from component-major FK outputs."""
+        F = P.shape[2]
+        acc = np.zeros((3, F))
+        for s in range(len(self.seg_mass)):
+            j = self.seg_joint[s]
+            m = self.seg_mass[s]
+            lx, ly, lz = self.seg_local[s] * m
+            for r in range(3):
+                acc[r] += P[j, r] * m + R[j, 3 * r] * lx + R[j, 3 * r + 1] * ly + R[j, 3 * r + 2] * lz
+        return acc / self.total_mass
+
+    def com(self, motion: Motion) -> np.ndarray:
+        """Whole-body centre of mass (F, 3) [m] of every frame."""
+        P, R = self.fk(motion)
+        return np.ascontiguousarray(self.com_soa(P, R).T)
+
+    def segment_points(self, p_world_joint: np.ndarray, R_world_joint: np.ndarray) -> np.ndarray:
+        """(F, S, 3) world segment COMs [m] from frame-major FK outputs."""
+        R = R_world_joint[:, self.seg_joint]
+        return p_world_joint[:, self.seg_joint] + np.einsum("fsab,sb->fsa", R, self.seg_local)
+
+    def foot_markers(self, motion: Motion) -> np.ndarray:
+        """(F, 2, 3, 3) foot markers [m]: (left, right) x (ankle, toe, toe end) x xyz."""
+        P, R = self.fk(motion)
+        return self.foot_markers_soa(P, R)
+
+    def foot_markers_soa(self, P: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """(F, 2, 3, 3) foot markers [m] from component-major FK outputs."""
+        F = P.shape[2]
+        out = np.empty((F, 2, 3, 3))
+        for i in range(2):
+            for k in range(3):
+                j = self.marker_joint[i, k]
+                lx, ly, lz = self.marker_local[i, k]
+                for r in range(3):
+                    out[:, i, k, r] = P[j, r] + R[j, 3 * r] * lx + R[j, 3 * r + 1] * ly + R[j, 3 * r + 2] * lz
+        return out
+
+    def com_and_markers(self, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+        """COM (F, 3) [m] and foot markers (F, 2, 3, 3) [m] from one FK pass."""
+        P, R = self.fk(motion)
+        return np.ascontiguousarray(self.com_soa(P, R).T), self.foot_markers_soa(P, R)
+
+    def world(self, motion: Motion):
+        """Frame-major FK: p_world_joint (F, J, 3) [m], R_world_joint (F, J, 3, 3)."""
+        return from_soa(*self.fk(motion))
+
+
+def _stature(skeleton, roles, rest, vertex, marker_local, leg_length) -> float:
+    """Standing height [m]: the limbs straightened (rest poses of mocap skeletons often splay the legs).
+
+    Sum of: the ankle's height above the sole (the larger of the toe markers' drop below the ankle in the
+    rest pose), shank and thigh lengths, the hip joint centres' drop below the mid-hip line to the
+    pelvis, and the vertical extent from the pelvis up to the head vertex.
+    """
+    up = UP_AXIS
+    ankle_height = 0.0
+    for side in SIDES:
+        a = rest[roles[side + "_ankle"]]
+        t = rest[roles[side + "_toe"]]
+        ankle_height = max(ankle_height, a[up] - t[up], a[up] - (t + marker_local[0, 2])[up])
+    hip_drop = rest[roles["pelvis"]][up] - 0.5 * (rest[roles["left_hip"]][up] + rest[roles["right_hip"]][up])
+    return float(ankle_height + leg_length + hip_drop + (vertex[up] - rest[roles["pelvis"]][up]))

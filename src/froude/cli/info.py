@@ -1,0 +1,104 @@
+"""``froude info CLIP.bvh``: what is in a clip — skeleton, units, cleaning, speed, steps, phases."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from ..body import BodyModel
+from ..gait import detect_gait, summarize
+from .common import add_load_options, load_clip
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "info", help="summarise a BVH clip: skeleton, units, speed, Froude number, steps, phases",
+        description="Summarise a BVH clip: skeleton (joints, DOF, leg length, height, units chosen), duration, "
+        "frame rate, mean speed, Froude number U = u/sqrt(g L), foot contacts with stance and flight "
+        "times, step frequency and length, COM vertical excursion, and what cleaning did.",
+    )
+    p.add_argument("clip", help="BVH file")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON instead of a table")
+    p.add_argument("--mass", type=float, default=70.0, help="body mass [kg] for the COM model (default 70)")
+    add_load_options(p)
+    p.set_defaults(func=run)
+
+
+def info_dict(motion, body, summary, gait) -> dict:
+    """The JSON-able summary of a clip (SI units)."""
+    sk = motion.skeleton
+    return {
+        "schema": "froude.info/1",
+        "file": motion.meta.get("source"),
+        "skeleton": {
+            "joints": sk.n_joints,
+            "dof": sk.n_channels,
+            "end_sites": len(sk.end_sites),
+            "leg_length_m": round(body.leg_length, 4),
+            "height_m": round(body.stature, 4),
+            "units": motion.meta.get("units"),
+            "length_scale_m_per_unit": motion.meta.get("length_scale"),
+        },
+        "cleaning": list(motion.meta.get("cleaning", ())),
+        "frames": motion.n_frames,
+        "frame_rate_hz": round(motion.fps, 3),
+        "duration_s": round(motion.duration, 4),
+        "kind": summary.kind,
+        "verdict": summary.reason,
+        "mean_speed_m_s": round(summary.mean_speed, 4),
+        "froude_U": round(summary.froude, 4),
+        "contacts": [
+            {"foot": s.side, "start_s": round(s.start * motion.frame_time, 4),
+             "stop_s": round(s.stop * motion.frame_time, 4), "partial": s.partial,
+             "ground_m": round(s.ground, 4)}
+            for s in gait.stances
+        ],
+        "stance_times_s": [round(float(t), 4) for t in summary.stance_times],
+        "flight_times_s": [round(float(t), 4) for t in summary.flight_times],
+        "has_flight_phase": summary.has_flight,
+        "double_support_fraction": round(summary.double_support_fraction, 4),
+        "step_frequency_hz": None if np.isnan(summary.step_frequency) else round(summary.step_frequency, 4),
+        "step_length_m": None if np.isnan(summary.step_length) else round(summary.step_length, 4),
+        "com_vertical_excursion_m": round(summary.com_vertical_excursion, 4),
+        "ground_height_m": round(gait.ground, 4),
+    }
+
+
+def _fmt_list(values, unit="s") -> str:
+    return ", ".join(f"{v:.3f}" for v in values) + f" {unit}" if len(values) else "none"
+
+
+def run(args) -> int:
+    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, quiet=args.json)
+    body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
+    com, markers = body.com_and_markers(motion)
+    gait = detect_gait(motion, body, markers)
+    summary = summarize(motion, body, com, gait)
+    d = info_dict(motion, body, summary, gait)
+    if args.json:
+        print(json.dumps(d, indent=2))
+        return 0
+    sk = d["skeleton"]
+    rows = [
+        ("file", d["file"]),
+        ("skeleton", f"{sk['joints']} joints, {sk['dof']} channels, {sk['end_sites']} end sites"),
+        ("leg length / height", f"{sk['leg_length_m']:.3f} m / {sk['height_m']:.3f} m"),
+        ("units", sk["units"]),
+        ("cleaning", "; ".join(d["cleaning"]) or "nothing dropped"),
+        ("frames", f"{d['frames']} at {d['frame_rate_hz']:.1f} Hz = {d['duration_s']:.3f} s"),
+        ("motion", f"{summary.kind}: {summary.reason}"),
+        ("mean speed", f"{d['mean_speed_m_s']:.3f} m/s (Froude number U = {d['froude_U']:.3f})"),
+        ("foot contacts", " ".join(
+            f"{c['foot'][0].upper()}{'*' if c['partial'] else ''}" for c in d["contacts"]
+        ) + f"  ({len(d['contacts'])}; * = cut by the clip's edge)"),
+        ("stance times", _fmt_list(summary.stance_times)),
+        ("flight times", _fmt_list(summary.flight_times) if summary.has_flight else "no flight phase"),
+        ("step frequency", "n/a" if d["step_frequency_hz"] is None else f"{d['step_frequency_hz']:.3f} Hz"),
+        ("step length", "n/a" if d["step_length_m"] is None else f"{d['step_length_m']:.3f} m"),
+        ("COM vertical excursion", f"{100 * d['com_vertical_excursion_m']:.1f} cm"),
+        ("double support", f"{100 * d['double_support_fraction']:.0f}% of frames"),
+    ]
+    width = max(len(k) for k, _ in rows)
+    for k, v in rows:
+        print(f"{k:<{width}}  {v}")
+    return 0

@@ -1,0 +1,480 @@
+"""BVH reading and writing.
+
+Reading accepts any channel order per joint, 3- or 6-channel (or any subset) joints, End Sites, tabs or
+spaces, CRLF, scientific notation and large files. Units are converted to metres at this boundary:
+``length_scale`` is given, or detected from the skeleton's standing height and reported. Cleaning (the
+synthetic T-pose first frame of the CMU conversions, invalid leading or trailing rows) is reported in
+``motion.meta["cleaning"]``, never silent. Every problem raises ``BvhError`` naming file and line.
+
+Position channels replace a joint's rest offset (the convention of most exporters); rotation channels
+compose intrinsically in file order.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .. import quat
+from ..errors import BvhError
+from ..motion import Motion
+from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
+
+_VALID_CHANNELS = set(POSITION_CHANNELS) | set(ROTATION_CHANNELS)
+
+#: Known length units: (name, metres per file unit, plausible stature range in file units).
+LENGTH_UNITS = (
+    ("metres", 1.0, (0.4, 3.5)),
+    ("CMU units", 0.056444, (12.0, 44.0)),
+    ("inches", 0.0254, (44.0, 125.0)),
+    ("centimetres", 0.01, (125.0, 400.0)),
+    ("millimetres", 0.001, (400.0, 4000.0)),
+)
+
+
+@dataclass(frozen=True)
+class _Token:
+    text: str
+    line: int
+
+
+def _tokenize(text: str) -> list[_Token]:
+    tokens = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        for word in line.split():
+            tokens.append(_Token(word, lineno))
+    return tokens
+
+
+class _Parser:
+    def __init__(self, path: str, text: str):
+        self.path = path
+        self.lines = text.splitlines()
+        self.tokens = _tokenize(text)
+        self.pos = 0
+
+    def error(self, msg: str, line: int | None = None) -> BvhError:
+        if line is None:
+            line = self.tokens[min(self.pos, len(self.tokens) - 1)].line if self.tokens else 1
+        return BvhError(msg, self.path, line)
+
+    def peek(self) -> _Token | None:
+        return self.tokens[self.pos] if self.pos < len(self.tokens) else None
+
+    def next(self, what: str) -> _Token:
+        tok = self.peek()
+        if tok is None:
+            last = self.tokens[-1].line if self.tokens else 1
+            raise BvhError(f"file ends early: expected {what}", self.path, last)
+        self.pos += 1
+        return tok
+
+    def expect(self, word: str) -> _Token:
+        tok = self.next(f"'{word}'")
+        if tok.text.upper() != word.upper():
+            raise self.error(f"expected '{word}', found '{tok.text}'", tok.line)
+        return tok
+
+    def number(self, what: str) -> float:
+        tok = self.next(what)
+        try:
+            value = float(tok.text)
+        except ValueError:
+            raise self.error(f"expected a number for {what}, found '{tok.text}'", tok.line) from None
+        if not np.isfinite(value):
+            raise self.error(f"{what} is not finite ('{tok.text}')", tok.line)
+        return value
+
+    def parse_hierarchy(self):
+        names, parents, offsets, channels, end_sites = [], [], [], [], []
+        tok = self.peek()
+        if tok is None:
+            raise BvhError("empty file: no HIERARCHY section", self.path, 1)
+        self.expect("HIERARCHY")
+        tok = self.next("ROOT")
+        if tok.text.upper() != "ROOT":
+            raise self.error(f"expected 'ROOT', found '{tok.text}'", tok.line)
+        self._parse_joint(-1, names, parents, offsets, channels, end_sites)
+        tok = self.peek()
+        if tok is not None and tok.text.upper() == "ROOT":
+            raise self.error("more than one ROOT: only single-rooted skeletons are supported", tok.line)
+        return names, parents, offsets, channels, end_sites
+
+    def _parse_joint(self, parent, names, parents, offsets, channels, end_sites):
+        name_tok = self.next("a joint name")
+        name = name_tok.text
+        # Names may contain spaces in some exporters: join words up to the brace on the same line.
+        while self.peek() is not None and self.peek().text != "{" and self.peek().line == name_tok.line:
+            name += " " + self.next("joint name").text
+        if name in names:
+            raise self.error(f"duplicate joint name '{name}'", name_tok.line)
+        index = len(names)
+        names.append(name)
+        parents.append(parent)
+        self.expect("{")
+        self.expect("OFFSET")
+        offsets.append([self.number(f"OFFSET of joint '{name}'") for _ in range(3)])
+        ch_tok = self.expect("CHANNELS")
+        n_tok = self.next("channel count")
+        try:
+            n = int(n_tok.text)
+        except ValueError:
+            raise self.error(f"expected a channel count for joint '{name}', found '{n_tok.text}'", n_tok.line) from None
+        if not 0 <= n <= 6:
+            raise self.error(f"joint '{name}' declares {n} channels (0-6 allowed)", n_tok.line)
+        chans = []
+        for _ in range(n):
+            c = self.next(f"a channel name of joint '{name}'")
+            canonical = c.text[0].upper() + c.text[1:].lower() if c.text else c.text
+            if canonical not in _VALID_CHANNELS:
+                raise self.error(f"unknown channel '{c.text}' in joint '{name}'", c.line)
+            if canonical in chans:
+                raise self.error(f"channel '{c.text}' repeated in joint '{name}'", c.line)
+            chans.append(canonical)
+        if sum(c in ROTATION_CHANNELS for c in chans) not in (0, 3):
+            raise self.error(f"joint '{name}' must have 0 or 3 rotation channels", ch_tok.line)
+        channels.append(tuple(chans))
+        while True:
+            tok = self.next(f"'}}' closing joint '{name}'")
+            word = tok.text.upper()
+            if word == "}":
+                return
+            if word == "JOINT":
+                self._parse_joint(index, names, parents, offsets, channels, end_sites)
+            elif word == "END":
+                self.expect("Site")
+                self.expect("{")
+                self.expect("OFFSET")
+                off = [self.number(f"End Site OFFSET of joint '{name}'") for _ in range(3)]
+                self.expect("}")
+                end_sites.append((index, off))
+            else:
+                raise self.error(f"unexpected '{tok.text}' inside joint '{name}'", tok.line)
+
+    def parse_motion_header(self):
+        tok = self.peek()
+        if tok is None:
+            raise BvhError("missing MOTION section", self.path, self.tokens[-1].line if self.tokens else 1)
+        if tok.text.upper() != "MOTION":
+            raise self.error(f"expected 'MOTION', found '{tok.text}'", tok.line)
+        self.pos += 1
+        t = self.next("'Frames:'")
+        if t.text.rstrip(":").upper() != "FRAMES":
+            raise self.error(f"expected 'Frames:', found '{t.text}'", t.line)
+        if not t.text.endswith(":"):
+            self.expect(":")
+        n_tok = self.next("frame count")
+        try:
+            n_frames = int(n_tok.text)
+        except ValueError:
+            raise self.error(f"expected an integer frame count, found '{n_tok.text}'", n_tok.line) from None
+        if n_frames <= 0:
+            raise self.error(f"the file declares {n_frames} frames: nothing to read", n_tok.line)
+        t = self.next("'Frame Time:'")
+        if t.text.upper() != "FRAME":
+            raise self.error(f"expected 'Frame Time:', found '{t.text}'", t.line)
+        t = self.next("'Time:'")
+        if t.text.rstrip(":").upper() != "TIME":
+            raise self.error(f"expected 'Time:', found '{t.text}'", t.line)
+        if not t.text.endswith(":"):
+            self.expect(":")
+        ft_tok = self.next("frame time")
+        try:
+            frame_time = float(ft_tok.text)
+        except ValueError:
+            raise self.error(f"expected a number for the frame time, found '{ft_tok.text}'", ft_tok.line) from None
+        if not (np.isfinite(frame_time) and frame_time > 0):
+            raise self.error(f"frame time must be > 0 s, found '{ft_tok.text}'", ft_tok.line)
+        return n_frames, frame_time, ft_tok.line
+
+
+def _read_rows(path: str, lines: list[str], first_line: int, n_frames: int, n_channels: int,
+               channel_names: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Parse the frame rows. Returns values (F, C) (NaN/inf kept for cleaning) and their line numbers (F,)."""
+    body = lines[first_line:]
+    row_lines = [i for i, l in enumerate(body) if l.strip()]
+    if len(row_lines) < n_frames:
+        last = first_line + (row_lines[-1] + 1 if row_lines else 0)
+        raise BvhError(
+            f"file ends early: {len(row_lines)} of {n_frames} declared frames present", path, max(last, first_line)
+        )
+    if len(row_lines) > n_frames:
+        extra = first_line + row_lines[n_frames] + 1
+        raise BvhError(f"more frame rows than the {n_frames} declared", path, extra)
+    text_rows = [body[i] for i in row_lines]
+    linenos = np.array(row_lines, dtype=np.int64) + first_line + 1
+    flat = " ".join(text_rows).split()
+    if len(flat) == n_frames * n_channels:
+        try:
+            values = np.array(flat, dtype=float).reshape(n_frames, n_channels)
+            return values, linenos
+        except ValueError:
+            pass  # a non-numeric token: locate it below
+    for k, row in enumerate(text_rows):
+        words = row.split()
+        if len(words) != n_channels:
+            raise BvhError(f"frame row has {len(words)} values, expected {n_channels}", path, int(linenos[k]))
+        for c, w in enumerate(words):
+            try:
+                float(w)
+            except ValueError:
+                raise BvhError(
+                    f"non-numeric value '{w}' for channel {channel_names[c]}", path, int(linenos[k])
+                ) from None
+    raise BvhError("could not parse frame rows", path, first_line)  # pragma: no cover
+
+
+def detect_length_scale(stature_file_units: float) -> tuple[float, str]:
+    """Metres per file unit and the unit's name, from the rest-pose stature in file units."""
+    for name, scale, (lo, hi) in LENGTH_UNITS:
+        if lo <= stature_file_units < hi:
+            return scale, name
+    raise BvhError(
+        f"cannot tell the length unit from a rest-pose stature of {stature_file_units:g} file units; "
+        "pass length_scale (metres per file unit)"
+    )
+
+
+def _pose_jump_deg(rot: np.ndarray) -> np.ndarray:
+    """(F-1,) median over joints of the rotation change [deg] between consecutive frames (F, J, 4).
+
+    The median, not the maximum: noisy hand channels make single-joint jumps common in real captures,
+    while a synthetic pose frame moves most joints at once.
+    """
+    return np.degrees(np.median(quat.angle_between(rot[1:], rot[:-1]), axis=1))
+
+
+def load_bvh(path: str | os.PathLike, *, length_scale: float | None = None, clean: bool = True) -> Motion:
+    """Read a BVH file into a ``Motion`` in SI units (+Y up).
+
+    path: the file.
+    length_scale: metres per file unit; None detects it from the rest-pose stature (meta["units"]).
+    clean: drop (and report in meta["cleaning"]) a synthetic rest/T-pose first frame and invalid
+        leading/trailing rows (all-zero, NaN or inf). With clean=False every row is kept and any
+        non-finite value is an error.
+    Raises BvhError (file and line in the message) on anything malformed.
+    """
+    path = str(path)
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as e:
+        raise BvhError(f"cannot read file: {e.strerror}", path) from None
+    if b"\x00" in raw[:65536]:
+        raise BvhError("not a BVH text file (binary content)", path, 1)
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = raw.decode("latin-1")
+    if not text.strip():
+        raise BvhError("empty file", path, 1)
+
+    parser = _Parser(path, text)
+    names, parents, offsets, channels, end_sites = parser.parse_hierarchy()
+    n_frames, frame_time, ft_line = parser.parse_motion_header()
+    n_channels = sum(len(c) for c in channels)
+    channel_names = [f"{names[j]}.{c}" for j in range(len(names)) for c in channels[j]]
+    values, linenos = _read_rows(path, parser.lines, ft_line, n_frames, n_channels, channel_names)
+
+    notes: list[str] = []
+    finite = np.isfinite(values).all(axis=1)
+    zero = np.all(values == 0.0, axis=1)
+    valid = finite & ~zero
+    if not clean:
+        bad = np.flatnonzero(~finite)
+        if bad.size:
+            k = bad[0]
+            c = int(np.flatnonzero(~np.isfinite(values[k]))[0])
+            raise BvhError(f"non-finite value for channel {channel_names[c]}", path, int(linenos[k]))
+        keep = np.ones(n_frames, bool)
+    else:
+        if not valid.any():
+            raise BvhError("no valid frame: every row is all-zero or non-finite", path, int(linenos[0]))
+        first, last = np.flatnonzero(valid)[[0, -1]]
+        inner_bad = np.flatnonzero(~finite[first : last + 1])
+        if inner_bad.size:
+            k = first + inner_bad[0]
+            c = int(np.flatnonzero(~np.isfinite(values[k]))[0])
+            raise BvhError(
+                f"non-finite value for channel {channel_names[c]} inside the motion (frame {k})",
+                path, int(linenos[k]),
+            )
+        keep = np.zeros(n_frames, bool)
+        keep[first : last + 1] = True
+        if first > 0:
+            notes.append(f"dropped {first} invalid leading row(s) (lines {linenos[0]}-{linenos[first - 1]})")
+        if last < n_frames - 1:
+            notes.append(
+                f"dropped {n_frames - 1 - last} invalid trailing row(s) (lines {linenos[last + 1]}-{linenos[-1]})"
+            )
+
+    # Rest offsets and units
+    offsets_file = np.array(offsets, dtype=float)
+    skel_file = Skeleton(tuple(names), np.array(parents), offsets_file, tuple(channels),
+                         tuple((j, np.array(o, float)) for j, o in end_sites))
+    stature_file = skel_file.standing_height()
+    if length_scale is None:
+        length_scale, unit_name = detect_length_scale(stature_file)
+        notes_units = f"{unit_name} detected from a rest-pose stature of {stature_file:g} file units"
+    else:
+        if not (np.isfinite(length_scale) and length_scale > 0):
+            raise BvhError(f"length_scale must be > 0, got {length_scale}", path)
+        unit_name = "given"
+        notes_units = f"length scale {length_scale:g} m per file unit (given)"
+    skeleton = skel_file.scaled(length_scale)
+
+    values = values[keep]
+    linenos = linenos[keep]
+    root_positions, rotations, translations = _channels_to_pose(skeleton, values, length_scale)
+
+    if clean and len(values) > 2:
+        # A synthetic pose frame (the CMU conversions add a T-pose as frame 0) shows up as a jump in joint
+        # rotations far larger than any other frame-to-frame change.
+        jumps = _pose_jump_deg(rotations)
+        rest = jumps[1:]
+        typical = np.percentile(rest, 99) if rest.size else 0.0
+        if jumps[0] > 5.0 and jumps[0] > 5.0 * typical:
+            notes.append(
+                f"dropped frame 0 (line {linenos[0]}): synthetic pose frame (T-pose), its joints turn by "
+                f"{jumps[0]:.0f} deg (median) to the next frame (99th percentile elsewhere {typical:.1f} deg)"
+            )
+            root_positions, rotations = root_positions[1:], rotations[1:]
+            translations = None if translations is None else translations[1:]
+            linenos = linenos[1:]
+
+    meta = {
+        "source": path,
+        "length_scale": float(length_scale),
+        "units": notes_units,
+        "cleaning": tuple(notes),
+        "first_line": int(linenos[0]),
+    }
+    return Motion(skeleton, root_positions, rotations, frame_time, translations, meta)
+
+
+def _channels_to_pose(skeleton: Skeleton, values: np.ndarray, length_scale: float):
+    F = values.shape[0]
+    J = skeleton.n_joints
+    rotations = np.empty((F, J, 4))
+    translations = None
+    if any(skeleton.has_translation_channels(j) for j in range(1, J)):
+        translations = np.broadcast_to(skeleton.offsets, (F, J, 3)).copy()
+    root_positions = np.broadcast_to(skeleton.offsets[0], (F, 3)).copy()
+    col = 0
+    for j in range(J):
+        chans = skeleton.channels[j]
+        rot_cols, rot_order = [], ""
+        for c in chans:
+            if c in POSITION_CHANNELS:
+                axis = POSITION_CHANNELS.index(c)
+                if j == 0:
+                    root_positions[:, axis] = values[:, col] * length_scale
+                else:
+                    translations[:, j, axis] = values[:, col] * length_scale
+            else:
+                rot_cols.append(col)
+                rot_order += c[0].lower()
+            col += 1
+        if rot_cols:
+            rotations[:, j] = quat.from_euler(np.radians(values[:, rot_cols]), rot_order)
+        else:
+            rotations[:, j] = quat.identity()
+    return root_positions, quat.make_continuous(rotations), translations
+
+
+def motion_to_channels(motion: Motion, length_scale: float = 1.0) -> np.ndarray:
+    """(F, C) BVH channel values (file units, degrees) of a motion, in the skeleton's channel layout."""
+    skel = motion.skeleton
+    F = motion.n_frames
+    out = np.empty((F, skel.n_channels))
+    trans = motion.local_translations()
+    col = 0
+    for j in range(skel.n_joints):
+        chans = skel.channels[j]
+        order = skel.rotation_order(j)
+        euler = np.degrees(quat.to_euler(motion.rotations[:, j], order)) if order else None
+        k = 0
+        for c in chans:
+            if c in POSITION_CHANNELS:
+                out[:, col] = trans[:, j, POSITION_CHANNELS.index(c)] / length_scale
+            else:
+                out[:, col] = euler[:, k]
+                k += 1
+            col += 1
+    return out
+
+
+def _format_block(values: np.ndarray) -> str:
+    # Fixed 6 decimals keeps every number within 5e-7 of the value (the round-trip bar is 1e-4) and
+    # is what DCC tools expect; "-0.000000" is normalised to "0.000000".
+    values = np.where(np.abs(values) < 5e-7, 0.0, values)
+    lines = [" ".join(f"{v:.6f}" for v in row) for row in values]
+    return "\n".join(lines) + "\n"
+
+
+def bvh_text(motion: Motion, length_scale: float | None = None) -> str:
+    """The BVH file text of a motion. length_scale: metres per file unit (default: the source's, else 1)."""
+    if length_scale is None:
+        length_scale = float(motion.meta.get("length_scale", 1.0))
+    skel = motion.skeleton
+    children = [[] for _ in range(skel.n_joints)]
+    for j in range(1, skel.n_joints):
+        children[skel.parents[j]].append(j)
+    ends = [[] for _ in range(skel.n_joints)]
+    for j, off in skel.end_sites:
+        ends[j].append(np.asarray(off) / length_scale)
+
+    out = ["HIERARCHY"]
+
+    def fmt(v):
+        return " ".join(f"{x:.6f}" for x in np.where(np.abs(v) < 5e-7, 0.0, v))
+
+    def write(j, depth):
+        ind = "\t" * depth
+        out.append(f"{ind}{'ROOT' if j == 0 else 'JOINT'} {skel.names[j]}")
+        out.append(f"{ind}{{")
+        out.append(f"{ind}\tOFFSET {fmt(skel.offsets[j] / length_scale)}")
+        out.append(f"{ind}\tCHANNELS {len(skel.channels[j])}" + "".join(" " + c for c in skel.channels[j]))
+        for c in children[j]:
+            write(c, depth + 1)
+        for off in ends[j]:
+            out.append(f"{ind}\tEnd Site")
+            out.append(f"{ind}\t{{")
+            out.append(f"{ind}\t\tOFFSET {fmt(off)}")
+            out.append(f"{ind}\t}}")
+        out.append(f"{ind}}}")
+
+    write(0, 0)
+    out.append("MOTION")
+    out.append(f"Frames: {motion.n_frames}")
+    out.append(f"Frame Time: {motion.frame_time:.7f}")
+    header = "\n".join(out) + "\n"
+    return header + _format_block(motion_to_channels(motion, length_scale))
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> None:
+    """Write text to path atomically: a temporary file in the same folder, then os.replace."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=str(path.parent))
+    try:
+        with os.fdopen(fd, "w", newline="\n") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def save_bvh(motion: Motion, path: str | os.PathLike, *, length_scale: float | None = None) -> None:
+    """Write a motion as BVH, atomically. length_scale: metres per file unit (default: the source's)."""
+    if not np.all(np.isfinite(motion.root_positions)) or not np.all(np.isfinite(motion.rotations)):
+        raise BvhError("refusing to write a motion with non-finite values", str(path))
+    atomic_write_text(path, bvh_text(motion, length_scale))
+
+

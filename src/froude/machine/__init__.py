@@ -1,0 +1,1 @@
+"""The simple running machine: dimensionless dynamics, control fit, limit cycle, transition table."""

@@ -1,0 +1,747 @@
+"""The dimensionless simple running machine (Pollard 1999, Fig. 1 right; §4 eq. 2; §5.3 eq. 5).
+
+A point mass on a massless, actuated spring leg, in the sagittal plane: x forward, y up, ground
+at y = 0. Everything here is **dimensionless**: touchdown leg length l0 = 1, g = 1, m = 1.
+
+=============  ==========================  =====================================
+quantity       dimensionless unit          to SI
+=============  ==========================  =====================================
+length         l0                          × l0 [m]
+time           √(l0/g)                     × √(l0/g) [s]
+velocity       √(g l0)  (U is the Froude)  × √(g l0) [m/s]
+acceleration   g                           × g [m/s²]
+force          m g  (body weights)         × m g [N]
+stiffness      m g / l0   (K)              × m g / l0 [N/m]
+=============  ==========================  =====================================
+
+Phases of one *step* (apex → apex):
+
+* fall: ballistic from the apex (x = 0, y = H, ẋ = U, ẏ = 0) until the COM height is cos θ0 while
+  descending; the foot lands at x_c = x_td + sin θ0 (ahead of the COM), y = 0, and stays put;
+* stance: force along the leg (contact → COM) of magnitude f = K (l_d(τ) − l), l = |COM − contact|,
+  l_d(τ) = 1 + a + b τ + c τ², τ = (t − t_td)/T_c. τ may exceed 1 (the polynomial is extrapolated).
+  If a < 0 the leg is slack at touchdown: the force is clamped at 0 until it first becomes
+  positive ("armed"); after that the model force is used unclamped;
+* liftoff: the first time (after arming) the force would pull, f = 0 crossing from > 0 to ≤ 0,
+  i.e. l = l_d(τ). Located to ~1e-13 in time by Newton iterations on partial integration steps;
+* rise: ballistic to the next apex (U', H').
+
+Stance is integrated by classical RK4 (in its exact Runge–Kutta–Nyström form, since the
+acceleration depends on position and time only) with a fixed step per row
+h = 1 / (n √(1/T_c² + K/π²)) — i.e. ≈ n steps per nominal stance or per half spring period,
+whichever is shorter. h is a smooth function of (K, T_c) so finite-difference Jacobians of the
+step map are clean.
+
+Everything is vectorised over broadcast arrays of states, angles and control parameters: the
+same code serves a single step, a batch of finite-difference perturbations and a transition
+table of 10⁵–10⁶ points. Invalid rows are flagged (``valid`` False, ``reason`` code) and their
+outputs set to NaN, so a NaN never hides behind ``valid`` True.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from froude.constants import GRAVITY
+from froude.errors import PlanError
+
+__all__ = [
+    "Control", "StepResult", "Trajectory", "step", "simulate", "fall_time", "energy",
+    "REASONS", "OK", "BAD_INPUT", "APEX_BELOW_TOUCHDOWN", "COLLAPSE", "STALL", "NO_LIFTOFF",
+    "LIFTOFF_DESCENDING", "N_PER_STANCE", "MIN_COM_HEIGHT", "MAX_STANCE_FACTOR",
+    "time_scale", "to_si_time", "to_si_length", "to_si_velocity", "to_si_force",
+    "to_si_stiffness", "froude_number",
+]
+
+# --- invalid-reason codes (StepResult.reason) -------------------------------------------------
+OK = 0
+BAD_INPUT = 1             #: non-finite input, U ≤ 0, K ≤ 0 or T_c ≤ 0
+APEX_BELOW_TOUCHDOWN = 2  #: H < cos θ0: the leg cannot reach the ground from this apex
+COLLAPSE = 3              #: COM height ≤ MIN_COM_HEIGHT during stance (or cos θ0 that low)
+STALL = 4                 #: horizontal velocity ≤ 0 during stance
+NO_LIFTOFF = 5            #: stance longer than MAX_STANCE_FACTOR · T_c
+LIFTOFF_DESCENDING = 6    #: liftoff with vertical velocity ≤ 0: there is no next apex
+REASONS = {
+    OK: "ok", BAD_INPUT: "bad input (non-finite, U <= 0, K <= 0 or T_c <= 0)",
+    APEX_BELOW_TOUCHDOWN: "apex below touchdown height (H < cos theta0)",
+    COLLAPSE: "COM collapsed (height <= 0.2 l0) in stance",
+    STALL: "horizontal velocity <= 0 in stance (stall)",
+    NO_LIFTOFF: "no liftoff within the stance time limit",
+    LIFTOFF_DESCENDING: "liftoff with downward velocity (no next apex)",
+}
+
+#: Default RK4 steps per nominal stance (or per half spring period, whichever is shorter).
+N_PER_STANCE = 64
+#: COM height [l0] at or below which stance is declared a collapse.
+MIN_COM_HEIGHT = 0.2
+#: Longest allowed stance, in units of the nominal stance duration T_c.
+MAX_STANCE_FACTOR = 5.0
+#: Rows integrated together; keeps the ~40 work arrays inside L2 cache.
+CHUNK = 8192
+
+
+# --- SI conversion (trivial, but named so call sites say what they do) --------------------------
+def time_scale(l0_m, g=GRAVITY):
+    """Dimensionless time unit √(l0/g) [s] for touchdown leg length l0 [m]."""
+    return np.sqrt(np.asarray(l0_m, float) / g)
+
+
+def to_si_time(t, l0_m, g=GRAVITY):
+    """Dimensionless time → [s]."""
+    return np.asarray(t) * time_scale(l0_m, g)
+
+
+def to_si_length(x, l0_m):
+    """Dimensionless length (units of l0) → [m]."""
+    return np.asarray(x) * l0_m
+
+
+def to_si_velocity(v, l0_m, g=GRAVITY):
+    """Dimensionless velocity (units of √(g l0), U is the Froude number) → [m/s]."""
+    return np.asarray(v) * np.sqrt(g * np.asarray(l0_m, float))
+
+
+def to_si_force(f, m_kg, g=GRAVITY):
+    """Dimensionless force (body weights) → [N]."""
+    return np.asarray(f) * m_kg * g
+
+
+def to_si_stiffness(K, m_kg, l0_m, g=GRAVITY):
+    """Dimensionless stiffness K = k l0/(m g) → k [N/m]."""
+    return np.asarray(K) * m_kg * g / l0_m
+
+
+def froude_number(u_mps, l0_m, g=GRAVITY):
+    """U = u/√(g l0): horizontal speed [m/s] → dimensionless."""
+    return np.asarray(u_mps) / np.sqrt(g * np.asarray(l0_m, float))
+
+
+# --- data ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Control:
+    """Dimensionless stance control of eq. 2: f = K (l_d(τ) − l), l_d = 1 + a + b τ + c τ².
+
+    K:   leg stiffness k l0/(m g) [-]
+    a:   desired-length offset at touchdown [l0]
+    b:   linear coefficient [l0 per unit τ]
+    c:   quadratic coefficient [l0 per unit τ²]
+    T_c: nominal stance duration [√(l0/g)]; τ = (t − t_touchdown)/T_c
+
+    Fields are floats, or arrays that broadcast against the state arrays (batch evaluation).
+    """
+
+    K: float
+    a: float = 0.0
+    b: float = 0.0
+    c: float = 0.0
+    T_c: float = 1.0
+
+    NAMES = ("K", "a", "b", "c", "T_c")
+
+    def as_tuple(self):
+        """(K, a, b, c, T_c)."""
+        return (self.K, self.a, self.b, self.c, self.T_c)
+
+    def to_si(self, m_kg, l0_m, g=GRAVITY):
+        """dict of SI values: k [N/m], a, b, c [m], T_c [s], l0 [m], m [kg]."""
+        return {"k": float(self.K) * m_kg * g / l0_m, "a": float(self.a) * l0_m,
+                "b": float(self.b) * l0_m, "c": float(self.c) * l0_m,
+                "T_c": float(self.T_c) * math.sqrt(l0_m / g), "l0": float(l0_m), "m": float(m_kg)}
+
+    @classmethod
+    def from_si(cls, k_N_per_m, a_m, b_m, c_m, T_c_s, m_kg, l0_m, g=GRAVITY):
+        """Dimensionless Control from SI: k [N/m], a, b, c [m], T_c [s], m [kg], l0 [m]."""
+        return cls(K=k_N_per_m * l0_m / (m_kg * g), a=a_m / l0_m, b=b_m / l0_m, c=c_m / l0_m,
+                   T_c=T_c_s / math.sqrt(l0_m / g))
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """Result of :func:`step`, every field an array of the broadcast input shape S.
+
+    Positions are relative to the starting apex (x = 0); all dimensionless (see module doc).
+
+    U_next, H_next:  next apex state [√(g l0)], [l0]
+    t_fall:          apex → touchdown [√(l0/g)]
+    t_stance:        touchdown → liftoff
+    t_rise:          liftoff → next apex
+    t_flight:        liftoff → next touchdown = t_rise + fall_time(H_next, θ0), assuming the next
+                     step uses the same θ0; NaN where H_next < cos θ0 even if ``valid``
+    x_touchdown:     COM x at touchdown [l0]
+    vy_touchdown:    COM vertical velocity at touchdown (≤ 0)
+    x_contact:       foot (contact point) x during stance [l0]
+    x_liftoff, y_liftoff, vx_liftoff, vy_liftoff: COM state at liftoff
+    apex_dx:         next apex x − this apex x [l0]
+    step_length:     next contact x − this contact x with the same θ0 next step (NaN like t_flight)
+    peak_force:      largest leg force in stance [m g] (parabolic refinement on the RK4 nodes)
+    valid:           bool, the apex → apex step is physically valid
+    reason:          int8 code, see REASONS (0 = ok)
+    """
+
+    U_next: np.ndarray
+    H_next: np.ndarray
+    t_fall: np.ndarray
+    t_stance: np.ndarray
+    t_rise: np.ndarray
+    t_flight: np.ndarray
+    x_touchdown: np.ndarray
+    vy_touchdown: np.ndarray
+    x_contact: np.ndarray
+    x_liftoff: np.ndarray
+    y_liftoff: np.ndarray
+    vx_liftoff: np.ndarray
+    vy_liftoff: np.ndarray
+    apex_dx: np.ndarray
+    step_length: np.ndarray
+    peak_force: np.ndarray
+    valid: np.ndarray
+    reason: np.ndarray
+
+
+def fall_time(H, theta0):
+    """Apex → touchdown time √(2 (H − cos θ0)) [√(l0/g)]; NaN where H < cos θ0."""
+    drop = np.asarray(H, float) - np.cos(theta0)
+    with np.errstate(invalid="ignore"):
+        return np.where(drop >= 0.0, np.sqrt(np.maximum(drop, 0.0) * 2.0), np.nan)
+
+
+def energy(pos, vel, contact=None, stance=None, control=None, tau=None):
+    """Mechanical energy [m g l0] = ½|v|² + y (+ spring ½ K (l_d − l)² in stance).
+
+    pos, vel: (..., 2) COM position and velocity; contact: (..., 2) contact point; stance: (...)
+    bool; tau: (...) stance phase (for l_d). The spring term is only the potential of a passive
+    spring, i.e. energy is conserved only for a = b = c = 0 (then l_d ≡ 1).
+    """
+    pos = np.asarray(pos, float)
+    vel = np.asarray(vel, float)
+    e = 0.5 * np.sum(vel * vel, axis=-1) + pos[..., 1]
+    if control is not None and contact is not None and stance is not None:
+        l = np.linalg.norm(pos - np.nan_to_num(np.asarray(contact, float)), axis=-1)
+        tau = np.zeros_like(l) if tau is None else np.nan_to_num(np.asarray(tau, float))
+        ld = 1.0 + control.a + tau * (control.b + control.c * tau)
+        e = e + np.where(stance, 0.5 * control.K * (ld - l) ** 2, 0.0)
+    return e
+
+
+# --- stance integration -------------------------------------------------------------------------
+def _desired_length(tau, a1, b, c):
+    """l_d(τ) = 1 + a + b τ + c τ² with a1 = 1 + a."""
+    ld = c * tau
+    ld += b
+    ld *= tau
+    ld += a1
+    return ld
+
+
+def _accel(px, py, ld, K, armed):
+    """Leg acceleration at COM position (px, py) relative to the contact, desired length ld.
+
+    Returns (ax, ay, g) with g = l_d − l (force = K g). ``armed`` None means all rows armed;
+    otherwise unarmed rows have the force clamped at ≥ 0 (slack leg before first push).
+    """
+    l = px * px
+    l += py * py
+    np.sqrt(l, out=l)
+    g = ld - l
+    if armed is not None:
+        g = np.where(armed, g, np.maximum(g, 0.0))
+    fl = K * g
+    fl /= l
+    ax = fl * px
+    fl *= py
+    fl -= 1.0
+    return ax, fl, g
+
+
+def _partial_step(px, py, vx, vy, ax1, ay1, s, tau0, invTc, K, a1, b, c):
+    """One RK4 (Nyström form) step of per-row size s from a node; all rows armed.
+
+    Returns the end state (px, py, vx, vy), g = l_d − l there and dg/dt there.
+    """
+    hs = 0.5 * s
+    s2 = s * s
+    tm = tau0 + hs * invTc
+    te = tau0 + s * invTc
+    x2 = px + hs * vx
+    y2 = py + hs * vy
+    ldm = _desired_length(tm, a1, b, c)
+    lde = _desired_length(te, a1, b, c)
+    ax2, ay2, _ = _accel(x2, y2, ldm, K, None)
+    ax3, ay3, _ = _accel(x2 + 0.25 * s2 * ax1, y2 + 0.25 * s2 * ay1, ldm, K, None)
+    xe = px + s * vx
+    ye = py + s * vy
+    ax4, ay4, _ = _accel(xe + 0.5 * s2 * ax2, ye + 0.5 * s2 * ay2, lde, K, None)
+    s6 = s / 6.0
+    pxn = xe + s * s6 * (ax1 + ax2 + ax3)
+    pyn = ye + s * s6 * (ay1 + ay2 + ay3)
+    vxn = vx + s6 * (ax1 + 2.0 * (ax2 + ax3) + ax4)
+    vyn = vy + s6 * (ay1 + 2.0 * (ay2 + ay3) + ay4)
+    l = np.sqrt(pxn * pxn + pyn * pyn)
+    g = lde - l
+    gdot = (b + 2.0 * c * te) * invTc - (pxn * vxn + pyn * vyn) / l
+    return pxn, pyn, vxn, vyn, g, gdot
+
+
+def _integrate_stance(px, py, vx, vy, K, a, b, c, Tc, n_per_stance, max_stance, record=False):
+    """Integrate stance for N rows from touchdown to liftoff (or failure).
+
+    px, py: (N,) COM position relative to the contact [l0]; vx, vy: (N,) velocity; K, a, b, c,
+    Tc: (N,) control. Returns dict of (N,) arrays: t [√(l0/g)] stance duration, px, py, vx, vy at
+    liftoff, fmax [m g], reason (int8; OK / COLLAPSE / STALL / NO_LIFTOFF). With ``record`` (meant
+    for small N) also 'nodes': list of (t, px, py, vx, vy, ax, ay) arrays, one per RK4 node,
+    ending with the liftoff node (rows that already lifted off keep being integrated there, so
+    only use a row's nodes up to its t).
+    """
+    N = px.shape[0]
+    h = 1.0 / (n_per_stance * np.sqrt(1.0 / (Tc * Tc) + K * (1.0 / math.pi ** 2)))
+    invTc = 1.0 / Tc
+    htau = h * invTc
+    kmax = np.ceil(max_stance * Tc / h)
+    a1 = 1.0 + a
+
+    out_t = np.full(N, np.nan)
+    out_px = np.full(N, np.nan)
+    out_py = np.full(N, np.nan)
+    out_vx = np.full(N, np.nan)
+    out_vy = np.full(N, np.nan)
+    out_f = np.full(N, np.nan)
+    out_reason = np.full(N, NO_LIFTOFF, dtype=np.int8)
+
+    idx = np.arange(N)
+    ax1, ay1, g1 = _accel(px, py, a1, K, None)
+    armed = g1 > 0.0
+    g1 = np.maximum(g1, 0.0)
+    if not armed.all():
+        ax1, ay1, _ = _accel(px, py, a1, K, armed)
+    alive = np.ones(N, bool)
+    # Peak-force tracking: value at the max node and its two neighbours (parabolic refinement).
+    f_prev = K * g1
+    fmax = f_prev.copy()
+    f_before = np.full(N, np.nan)
+    f_after = np.full(N, np.nan)
+    just_max = np.ones(N, bool)
+    nodes = [] if record else None
+    if record:
+        nodes.append((np.zeros(N), px.copy(), py.copy(), vx.copy(), vy.copy(), ax1.copy(), ay1.copy()))
+
+    def finish(sel, t, qx, qy, wx, wy, reason):
+        rows = idx[sel]
+        out_t[rows] = t
+        out_px[rows] = qx
+        out_py[rows] = qy
+        out_vx[rows] = wx
+        out_vy[rows] = wy
+        out_reason[rows] = reason
+        fm, fb, fa = fmax[sel], f_before[sel], f_after[sel]
+        # Vertex of the parabola through three equally spaced nodes; only where both
+        # neighbours exist and the max is a strict interior one.
+        den = fb - 2.0 * fm + fa
+        with np.errstate(invalid="ignore", divide="ignore"):
+            d = np.where(den < 0.0, 0.5 * (fb - fa) / den, 0.0)
+            refined = fm - 0.25 * (fb - fa) * d
+        out_f[rows] = np.where(np.isfinite(refined) & (np.abs(d) <= 1.0), refined, fm)
+        alive[sel] = False
+
+    kmin_max = kmax.min() if N else 0.0
+    k = 0
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        while idx.size:
+            all_armed = bool(armed.all())
+            arm = None if all_armed else armed
+            hh = 0.5 * h
+            h2 = h * h
+            tau0 = k * htau
+            tm = tau0 + 0.5 * htau
+            te = tau0 + htau
+            ldm = _desired_length(tm, a1, b, c)
+            lde = _desired_length(te, a1, b, c)
+            # Classical RK4 written for x'' = f(t, x) (identical result, fewer operations).
+            x2 = hh * vx
+            x2 += px
+            y2 = hh * vy
+            y2 += py
+            ax2, ay2, _ = _accel(x2, y2, ldm, K, arm)
+            q = 0.25 * h2
+            t3 = q * ax1
+            t3 += x2
+            u3 = q * ay1
+            u3 += y2
+            ax3, ay3, _ = _accel(t3, u3, ldm, K, arm)
+            xe = h * vx
+            xe += px
+            ye = h * vy
+            ye += py
+            q = 0.5 * h2
+            t4 = q * ax2
+            t4 += xe
+            u4 = q * ay2
+            u4 += ye
+            ax4, ay4, _ = _accel(t4, u4, lde, K, arm)
+            q = h2 * (1.0 / 6.0)
+            sx = ax1 + ax2
+            sx += ax3
+            pxn = q * sx
+            pxn += xe
+            sy = ay1 + ay2
+            sy += ay3
+            pyn = q * sy
+            pyn += ye
+            sx += ax2
+            sx += ax3
+            sx += ax4
+            sx *= h * (1.0 / 6.0)
+            vxn = sx
+            vxn += vx
+            sy += ay2
+            sy += ay3
+            sy += ay4
+            sy *= h * (1.0 / 6.0)
+            vyn = sy
+            vyn += vy
+            # Acceleration at the new node: stage 1 of the next step, and the event function.
+            ax1n, ay1n, gn = _accel(pxn, pyn, lde, K, None)
+
+            lift = gn <= 0.0
+            lift &= armed
+            lift &= alive
+            if lift.any():
+                # Newton on the partial step size s ∈ (0, h]: g(node + s) = 0.
+                L = lift
+                g0 = np.maximum(g1[L], 0.0)
+                hL = h[L]
+                den = g0 - gn[L]
+                s = np.where(den > 0.0, hL * g0 / np.where(den > 0.0, den, 1.0), hL)
+                args = (px[L], py[L], vx[L], vy[L], ax1[L], ay1[L])
+                ctl = (tau0[L], invTc[L], K[L], a1[L], b[L], c[L])
+                for _ in range(8):
+                    qx, qy, wx, wy, gs, gd = _partial_step(*args, s, *ctl)
+                    ds = np.where(gd < 0.0, gs / gd, 0.0)
+                    s = np.clip(s - ds, 0.0, hL)
+                    if np.all(np.abs(ds) <= 1e-13):
+                        break
+                qx, qy, wx, wy, gs, gd = _partial_step(*args, s, *ctl)
+                finish(L, k * hL + s, qx, qy, wx, wy, OK)
+                if record:
+                    # Liftoff node for the dense output (a partial step: irregular spacing).
+                    ts = np.full(N, np.nan)
+                    ts[idx[L]] = k * hL + s
+                    rec = [ts] + [np.full(N, np.nan) for _ in range(6)]
+                    for arr, val in zip(rec[1:], (qx, qy, wx, wy)):
+                        arr[idx[L]] = val
+                    axl, ayl, _ = _accel(qx, qy, _desired_length((k * hL + s) * invTc[L], a1[L], b[L], c[L]), K[L], None)
+                    rec[5][idx[L]] = axl
+                    rec[6][idx[L]] = ayl
+                    nodes.append(("liftoff", rec))
+
+            armed |= gn > 0.0
+            # Failures (only rows still in stance).
+            # Failures (only rows still in stance); one combined test first, it rarely fires.
+            bad = pyn <= MIN_COM_HEIGHT
+            bad |= vxn <= 0.0
+            if bad.any():
+                b1 = alive & (pyn <= MIN_COM_HEIGHT)
+                if b1.any():
+                    finish(b1, np.nan, np.nan, np.nan, np.nan, np.nan, COLLAPSE)
+                b1 = alive & (vxn <= 0.0)
+                if b1.any():
+                    finish(b1, np.nan, np.nan, np.nan, np.nan, np.nan, STALL)
+            if k + 1 >= kmin_max:
+                b1 = alive & (k + 1 >= kmax)
+                if b1.any():
+                    finish(b1, np.nan, np.nan, np.nan, np.nan, np.nan, NO_LIFTOFF)
+
+            # Peak force bookkeeping at the new node (in place: no new arrays per step).
+            fn = np.maximum(gn, 0.0)
+            fn *= K
+            np.copyto(f_after, fn, where=just_max)
+            np.greater(fn, fmax, out=just_max)
+            np.copyto(f_before, f_prev, where=just_max)
+            np.copyto(fmax, fn, where=just_max)
+            f_prev = fn
+
+            px, py, vx, vy = pxn, pyn, vxn, vyn
+            if not all_armed:
+                ax1n, ay1n, _ = _accel(px, py, lde, K, armed)
+            ax1, ay1, g1 = ax1n, ay1n, gn
+            k += 1
+            if record:
+                nodes.append(((k * h).copy(), px.copy(), py.copy(), vx.copy(), vy.copy(),
+                              ax1.copy(), ay1.copy()))
+                if not alive.any():
+                    break
+                continue
+
+            n_alive = int(np.count_nonzero(alive))
+            if n_alive == 0:
+                break
+            if n_alive < 0.75 * idx.size:
+                # Compact: drop finished rows so later steps only pay for live ones.
+                keep = alive
+                idx = idx[keep]
+                px, py, vx, vy = px[keep], py[keep], vx[keep], vy[keep]
+                ax1, ay1, g1 = ax1[keep], ay1[keep], g1[keep]
+                K, a1, b, c = K[keep], a1[keep], b[keep], c[keep]
+                h, htau, invTc, kmax = h[keep], htau[keep], invTc[keep], kmax[keep]
+                armed = armed[keep]
+                f_prev, fmax, f_before, f_after = f_prev[keep], fmax[keep], f_before[keep], f_after[keep]
+                just_max = just_max[keep]
+                alive = np.ones(idx.size, bool)
+                kmin_max = kmax.min()
+    res = {"t": out_t, "px": out_px, "py": out_py, "vx": out_vx, "vy": out_vy, "fmax": out_f,
+           "reason": out_reason}
+    if record:
+        res["nodes"] = nodes
+    return res
+
+
+# --- the step map -------------------------------------------------------------------------------
+_STEP_FIELDS = [f.name for f in fields(StepResult)]
+
+
+def _step_flat(U, H, th, K, a, b, c, Tc, n_per_stance, max_stance, chunk):
+    """step() on 1-D arrays of equal length N; returns dict of (N,) arrays."""
+    N = U.shape[0]
+    reason = np.zeros(N, np.int8)
+    finite = np.isfinite(U) & np.isfinite(H) & np.isfinite(th) & np.isfinite(K) & np.isfinite(a) \
+        & np.isfinite(b) & np.isfinite(c) & np.isfinite(Tc)
+    with np.errstate(invalid="ignore"):
+        bad = ~finite | ~(U > 0.0) | ~(K > 0.0) | ~(Tc > 0.0)
+        ctd = np.cos(th)
+        std = np.sin(th)
+        drop = H - ctd
+        reason[~bad & (ctd <= MIN_COM_HEIGHT)] = COLLAPSE
+        reason[~bad & ~(drop >= 0.0)] = APEX_BELOW_TOUCHDOWN
+        reason[bad] = BAD_INPUT
+    t_fall = np.sqrt(np.where(reason == OK, 2.0 * drop, np.nan))
+    x_td = U * t_fall
+    x_c = x_td + std
+
+    t_st = np.full(N, np.nan)
+    px = np.full(N, np.nan)
+    py = np.full(N, np.nan)
+    vx = np.full(N, np.nan)
+    vy = np.full(N, np.nan)
+    fpk = np.full(N, np.nan)
+    rows = np.flatnonzero(reason == OK)
+    for s in range(0, rows.size, chunk):
+        r = rows[s:s + chunk]
+        res = _integrate_stance(-std[r], ctd[r], U[r].copy(), -t_fall[r], K[r], a[r], b[r], c[r],
+                                Tc[r], n_per_stance, max_stance)
+        t_st[r], px[r], py[r], vx[r], vy[r], fpk[r] = (res["t"], res["px"], res["py"], res["vx"],
+                                                       res["vy"], res["fmax"])
+        reason[r] = res["reason"]
+    with np.errstate(invalid="ignore"):
+        reason[(reason == OK) & ~(vy > 0.0)] = LIFTOFF_DESCENDING
+    ok = reason == OK
+    nan = np.where(ok, 0.0, np.nan)  # adds NaN to every output of an invalid row
+    x_lo = x_c + px + nan
+    y_lo = py + nan
+    vx_lo = vx + nan
+    vy_lo = vy + nan
+    t_rise = vy_lo
+    H_next = y_lo + 0.5 * vy_lo * vy_lo
+    with np.errstate(invalid="ignore"):
+        t_fall_next = fall_time(H_next, th)
+    apex_dx = x_lo + vx_lo * t_rise
+    return {
+        "U_next": vx_lo, "H_next": H_next, "t_fall": t_fall + nan, "t_stance": t_st + nan,
+        "t_rise": t_rise, "t_flight": t_rise + t_fall_next, "x_touchdown": x_td + nan,
+        "vy_touchdown": -t_fall + nan, "x_contact": x_c + nan, "x_liftoff": x_lo,
+        "y_liftoff": y_lo, "vx_liftoff": vx_lo, "vy_liftoff": vy_lo, "apex_dx": apex_dx,
+        "step_length": apex_dx + vx_lo * t_fall_next + np.sin(th) - x_c,
+        "peak_force": fpk + nan, "valid": ok, "reason": reason,
+    }
+
+
+def step(U, H, theta0, control, *, n_per_stance=N_PER_STANCE, max_stance=MAX_STANCE_FACTOR,
+         chunk=CHUNK):
+    """One step of the running machine, apex → next apex (eq. 5), vectorised.
+
+    U:       apex horizontal velocity [√(g l0)] (Froude number), array-like, broadcastable
+    H:       apex COM height [l0]
+    theta0:  touchdown leg angle from vertical [rad], foot ahead of the COM
+    control: :class:`Control` (fields broadcast against U, H, theta0)
+    n_per_stance: RK4 steps per nominal stance (accuracy ~1e-8 at the default 64)
+    max_stance:   stance longer than max_stance · T_c is invalid (NO_LIFTOFF)
+    chunk:        rows integrated together (memory/cache; results do not depend on it)
+
+    Returns a :class:`StepResult` whose fields have the broadcast shape S of all inputs.
+    """
+    arrs = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in
+                                 (U, H, theta0, *control.as_tuple())))
+    shape = arrs[0].shape
+    flat = [np.ascontiguousarray(x).reshape(-1) for x in arrs]
+    out = _step_flat(*flat, n_per_stance, max_stance, max(int(chunk), 1))
+    return StepResult(**{k: out[k].reshape(shape) for k in _STEP_FIELDS})
+
+
+# --- dense trajectory ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Trajectory:
+    """Dense machine trajectory over n steps, starting at an apex at x = 0 (dimensionless).
+
+    Samples (S = number of samples, t = 0, dt, 2 dt, … ≤ t_apex[-1]):
+      t:        (S,) time [√(l0/g)]
+      pos:      (S, 2) COM (x, y) [l0]
+      vel:      (S, 2) COM velocity [√(g l0)]
+      force:    (S, 2) ground/leg force on the COM [m g] (zero in flight)
+      stance:   (S,) bool
+      contact:  (S, 2) contact point during stance, NaN in flight [l0]
+      step_index: (S,) int, the step (apex i → apex i+1) each sample belongs to
+    Events / per-step (n = number of steps):
+      t_apex: (n+1,), U_apex: (n+1,), H_apex: (n+1,), x_apex: (n+1,)
+      t_touchdown, t_liftoff: (n,); contact_x: (n,); theta0: (n,); peak_force: (n,)
+      controls: tuple of the n per-step Controls
+    """
+
+    t: np.ndarray
+    pos: np.ndarray
+    vel: np.ndarray
+    force: np.ndarray
+    stance: np.ndarray
+    contact: np.ndarray
+    step_index: np.ndarray
+    t_apex: np.ndarray
+    U_apex: np.ndarray
+    H_apex: np.ndarray
+    x_apex: np.ndarray
+    t_touchdown: np.ndarray
+    t_liftoff: np.ndarray
+    contact_x: np.ndarray
+    theta0: np.ndarray
+    peak_force: np.ndarray
+    controls: tuple
+
+    @property
+    def dt(self):
+        return float(self.t[1] - self.t[0]) if self.t.size > 1 else float("nan")
+
+
+def _hermite(t0, t1, y0, d0, y1, d1, t):
+    """Cubic Hermite interpolation between nodes t0 < t1 (arrays broadcast)."""
+    hh = t1 - t0
+    s = (t - t0) / hh
+    s2 = s * s
+    s3 = s2 * s
+    return ((2 * s3 - 3 * s2 + 1) * y0 + (s3 - 2 * s2 + s) * hh * d0
+            + (-2 * s3 + 3 * s2) * y1 + (s3 - s2) * hh * d1)
+
+
+def simulate(U, H, theta0, control, dt, *, n_steps=None, n_per_stance=N_PER_STANCE,
+             max_stance=MAX_STANCE_FACTOR):
+    """Dense trajectory of the machine over a sequence of steps, for synthesis.
+
+    U, H:     starting apex state (scalars) [√(g l0)], [l0]; the run starts at x = 0, t = 0
+    theta0:   touchdown angle [rad], a scalar (then ``n_steps`` is required) or a sequence (n,)
+    control:  a :class:`Control` (all steps) or a sequence of n Controls (per step)
+    dt:       sample spacing [√(l0/g)]
+
+    Returns a :class:`Trajectory`. Stance samples use cubic Hermite interpolation of the same RK4
+    nodes that :func:`step` uses (so apex states agree with :func:`step` exactly); flight
+    samples are exact parabolas. Raises PlanError naming the step and reason if a step is invalid.
+    """
+    th = np.atleast_1d(np.asarray(theta0, float))
+    if th.size == 1 and n_steps is not None:
+        th = np.full(int(n_steps), th[0])
+    n = th.size
+    if isinstance(control, Control):
+        controls = (control,) * n
+    else:
+        controls = tuple(control)
+        if len(controls) != n:
+            raise PlanError(f"got {len(controls)} controls for {n} steps")
+    if not dt > 0:
+        raise PlanError(f"dt must be > 0, got {dt}")
+
+    t_apex = np.zeros(n + 1)
+    U_ap = np.zeros(n + 1)
+    H_ap = np.zeros(n + 1)
+    x_ap = np.zeros(n + 1)
+    U_ap[0], H_ap[0] = float(U), float(H)
+    t_td = np.zeros(n)
+    t_lo = np.zeros(n)
+    xc = np.zeros(n)
+    fpk = np.zeros(n)
+    stance_nodes = []
+    for i in range(n):
+        ctl = controls[i]
+        Ui, Hi, thi = U_ap[i], H_ap[i], th[i]
+        drop = Hi - math.cos(thi)
+        if not (Ui > 0 and drop >= 0 and math.cos(thi) > MIN_COM_HEIGHT):
+            code = BAD_INPUT if not Ui > 0 else (APEX_BELOW_TOUCHDOWN if drop < 0 else COLLAPSE)
+            raise PlanError(f"step {i}: {REASONS[code]} (U={Ui:.6g}, H={Hi:.6g}, theta0={thi:.6g})")
+        tf = math.sqrt(2.0 * drop)
+        t_td[i] = t_apex[i] + tf
+        xc[i] = x_ap[i] + Ui * tf + math.sin(thi)
+        one = lambda v: np.array([float(v)])  # noqa: E731
+        res = _integrate_stance(one(-math.sin(thi)), one(math.cos(thi)), one(Ui), one(-tf),
+                                one(ctl.K), one(ctl.a), one(ctl.b), one(ctl.c), one(ctl.T_c),
+                                n_per_stance, max_stance, record=True)
+        code = int(res["reason"][0])
+        if code == OK and not res["vy"][0] > 0:
+            code = LIFTOFF_DESCENDING
+        if code != OK:
+            raise PlanError(f"step {i}: {REASONS[code]} (U={Ui:.6g}, H={Hi:.6g}, theta0={thi:.6g})")
+        ts = float(res["t"][0])
+        nodes = [nd for nd in res["nodes"] if not isinstance(nd[0], str) and nd[0][0] < ts]
+        lo = [nd for nd in res["nodes"] if isinstance(nd[0], str)][0][1]
+        arr = np.array([[v[0] for v in nd] for nd in nodes] + [[v[0] for v in lo]])  # (M, 7)
+        arr[:, 0] += t_td[i]
+        arr[:, 1] += xc[i]
+        stance_nodes.append(arr)
+        t_lo[i] = t_td[i] + ts
+        fpk[i] = res["fmax"][0]
+        vy = float(res["vy"][0])
+        U_ap[i + 1] = float(res["vx"][0])
+        H_ap[i + 1] = float(res["py"][0]) + 0.5 * vy * vy
+        t_apex[i + 1] = t_lo[i] + vy
+        x_ap[i + 1] = xc[i] + float(res["px"][0]) + U_ap[i + 1] * vy
+
+    S = int(math.floor(t_apex[-1] / dt + 1e-9)) + 1
+    t = np.arange(S) * dt
+    pos = np.zeros((S, 2))
+    vel = np.zeros((S, 2))
+    force = np.zeros((S, 2))
+    contact = np.full((S, 2), np.nan)
+    stance = np.zeros(S, bool)
+    sidx = np.clip(np.searchsorted(t_apex, t, side="right") - 1, 0, n - 1)
+    # Flight before touchdown of step i (from apex i), after liftoff of step i (to apex i+1).
+    pre = t < t_td[sidx]
+    post = t > t_lo[sidx]
+    for mask, which in ((pre, 0), (post, 1)):
+        j = sidx[mask]
+        ta = t_apex[j + which]
+        dtt = t[mask] - ta
+        pos[mask, 0] = x_ap[j + which] + U_ap[j + which] * dtt
+        pos[mask, 1] = H_ap[j + which] - 0.5 * dtt * dtt
+        vel[mask, 0] = U_ap[j + which]
+        vel[mask, 1] = -dtt
+    st = ~pre & ~post
+    stance[st] = True
+    for i in np.unique(sidx[st]):
+        m = st & (sidx == i)
+        arr = stance_nodes[i]
+        tq = t[m]
+        k = np.clip(np.searchsorted(arr[:, 0], tq, side="right") - 1, 0, arr.shape[0] - 2)
+        n0, n1 = arr[k], arr[k + 1]
+        for d in range(2):
+            pos[m, d] = _hermite(n0[:, 0], n1[:, 0], n0[:, 1 + d], n0[:, 3 + d], n1[:, 1 + d],
+                                 n1[:, 3 + d], tq)
+            vel[m, d] = _hermite(n0[:, 0], n1[:, 0], n0[:, 3 + d], n0[:, 5 + d], n1[:, 3 + d],
+                                 n1[:, 5 + d], tq)
+        # The force is evaluated from the model at the interpolated position (exact eq. 2),
+        # not interpolated: f = K (l_d − l) along the leg.
+        ctl = controls[i]
+        rel = pos[m] - np.array([xc[i], 0.0])
+        l = np.linalg.norm(rel, axis=1)
+        tau = (tq - t_td[i]) / ctl.T_c
+        g = 1.0 + ctl.a + tau * (ctl.b + ctl.c * tau) - l
+        f = ctl.K * np.maximum(g, 0.0)
+        force[m] = (f / l)[:, None] * rel
+        contact[m] = (xc[i], 0.0)
+    return Trajectory(t=t, pos=pos, vel=vel, force=force, stance=stance, contact=contact,
+                      step_index=sidx, t_apex=t_apex, U_apex=U_ap, H_apex=H_ap, x_apex=x_ap,
+                      t_touchdown=t_td, t_liftoff=t_lo, contact_x=xc, theta0=th,
+                      peak_force=fpk, controls=controls)

@@ -1,0 +1,278 @@
+"""The physics report: what any motion does physically, and for outputs how well it tracks its machine.
+
+Every figure is measured from the motion itself (its COM from the body model and its foot markers), so
+the same report judges a mocap clip, froude's output and a naive retarget alike. Written next to every
+output as ``*.report.json``.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from . import quat
+from .body import BodyModel
+from .constants import GRAVITY, UP_AXIS
+from .gait import Gait, detect_gait, summarize
+from .motion import Motion
+
+_HORIZONTAL = [a for a in range(3) if a != UP_AXIS]
+
+#: The project's physics bars (DESIGN.md "Quality bars").
+BARS = {
+    "flight_gravity_rel_tol": 0.03,
+    "com_tracking_rms_mm": 5.0,
+    "com_tracking_max_mm": 10.0,
+    "foot_skate_mm": 5.0,
+    "penetration_mm": 5.0,
+    "joint_jump_ratio": 1.5,
+}
+
+
+@dataclass
+class Report:
+    """Physics report of a motion (SI units unless the name says otherwise). NaN: not measurable."""
+
+    duration_s: float
+    n_frames: int
+    frame_rate_hz: float
+    mean_speed_m_s: float
+    froude_U: float
+    leg_length_m: float
+    mass_kg: float
+    step_frequency_hz: float
+    step_length_m: float
+    stance_times_s: list
+    flight_times_s: list
+    com_vertical_excursion_m: float
+    flight_gravity_m_s2: float
+    flight_gravity_per_phase: list
+    flight_horizontal_accel_m_s2: float
+    foot_skate_mm: float
+    penetration_mm: float
+    float_mm: float
+    peak_vertical_force_bw: float
+    leg_stiffness_n_m: float
+    leg_stiffness_K: float
+    max_joint_jump_deg: float
+    # outputs only
+    com_tracking_rms_mm: float = float("nan")
+    com_tracking_max_mm: float = float("nan")
+    foot_marker_rms_mm: float = float("nan")
+    foot_marker_max_mm: float = float("nan")
+    pose_deviation_mean_deg: float = float("nan")
+    pose_deviation_max_deg: float = float("nan")
+    reference_max_joint_jump_deg: float = float("nan")
+    extras: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        return {"schema": "froude.report/1", **{k: _jsonable(v) for k, v in d.items()}}
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=2, allow_nan=True)
+
+    def check_bars(self) -> list[str]:
+        """Which of the project's physics bars this report fails (empty list: all pass)."""
+        fails = []
+        g_err = abs(self.flight_gravity_m_s2 - GRAVITY) / GRAVITY
+        if not g_err <= BARS["flight_gravity_rel_tol"]:
+            fails.append(f"flight gravity {self.flight_gravity_m_s2:.2f} m/s^2 (9.81 +- 3%)")
+        if not np.isnan(self.com_tracking_rms_mm):
+            if not self.com_tracking_rms_mm <= BARS["com_tracking_rms_mm"]:
+                fails.append(f"COM tracking RMS {self.com_tracking_rms_mm:.2f} mm (<= 5)")
+            if not self.com_tracking_max_mm <= BARS["com_tracking_max_mm"]:
+                fails.append(f"COM tracking max {self.com_tracking_max_mm:.2f} mm (<= 10)")
+        if not self.foot_skate_mm <= BARS["foot_skate_mm"]:
+            fails.append(f"foot skate {self.foot_skate_mm:.2f} mm (<= 5)")
+        if not self.penetration_mm <= BARS["penetration_mm"]:
+            fails.append(f"ground penetration {self.penetration_mm:.2f} mm (<= 5)")
+        if not np.isnan(self.reference_max_joint_jump_deg):
+            lim = BARS["joint_jump_ratio"] * self.reference_max_joint_jump_deg
+            if not self.max_joint_jump_deg <= lim:
+                fails.append(
+                    f"joint jump {self.max_joint_jump_deg:.2f} deg (<= 1.5 x reference {self.reference_max_joint_jump_deg:.2f})"
+                )
+        return fails
+
+
+def _jsonable(v):
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, (np.floating, np.integer)):
+        return v.item()
+    if isinstance(v, dict):
+        return {k: _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    return v
+
+
+def flight_gravity(com: np.ndarray, frame_time: float, flights, min_frames: int = 6) -> tuple[float, list[float], float]:
+    """Gravity seen in flight: a parabola fitted to the COM height of each flight phase.
+
+    com: (F, 3) [m]; flights: [(start, stop), ...] frame intervals. Returns the duration-weighted mean
+    g [m/s^2] (9.81 for physical motion), the per-phase values, and the RMS horizontal COM acceleration
+    in flight [m/s^2] (≈ 0 for physical motion: nothing pushes a body in the air).
+    Phases shorter than ``min_frames`` frames are skipped (too short to fit a parabola robustly).
+    """
+    gs, ws, acc_h = [], [], []
+    for a, b in flights:
+        if b - a < min_frames:
+            continue
+        t = np.arange(b - a) * frame_time
+        y = com[a:b, UP_AXIS]
+        c2 = np.polyfit(t, y, 2)[0]
+        gs.append(-2.0 * c2)
+        ws.append(b - a)
+        for ax in _HORIZONTAL:
+            acc_h.append(2.0 * np.polyfit(t, com[a:b, ax], 2)[0])
+    if not gs:
+        return float("nan"), [], float("nan")
+    g = float(np.average(gs, weights=ws))
+    return g, [float(x) for x in gs], float(np.sqrt(np.mean(np.square(acc_h))))
+
+
+def foot_skate_mm(markers: np.ndarray, gait: Gait, contact_tol: float) -> float:
+    """Largest sliding of a foot marker while it bears load [mm].
+
+    markers: (F, 2, 3, 3) [m]. For each stance and each marker of the stance foot, the frames in which
+    the marker is within ``contact_tol`` [m] of that stance's ground count as loaded; skate is the
+    largest horizontal distance of the marker from where it was first loaded. Rolling from heel to toe
+    changes which marker is loaded, which is not sliding.
+    """
+    worst = 0.0
+    for s in gait.stances:
+        seg = markers[s.start : s.stop, s.foot]  # (n, 3 markers, 3)
+        loaded = seg[..., UP_AXIS] <= s.ground + contact_tol
+        for k in range(seg.shape[1]):
+            idx = np.flatnonzero(loaded[:, k])
+            if idx.size < 2:
+                continue
+            p = seg[idx, k][:, _HORIZONTAL]
+            worst = max(worst, float(np.max(np.linalg.norm(p - p[0], axis=1))))
+    return 1000.0 * worst
+
+
+def max_joint_jump_deg(motion: Motion) -> float:
+    """Largest frame-to-frame rotation change of any joint [deg] (root orientation included)."""
+    if motion.n_frames < 2:
+        return 0.0
+    return float(np.degrees(quat.angle_between(motion.rotations[1:], motion.rotations[:-1]).max()))
+
+
+def vertical_force_bw(com: np.ndarray, frame_time: float) -> np.ndarray:
+    """(F,) vertical ground force in body weights from the COM height (eq. 1 projected on +Y).
+
+    Uses the project's one differentiation of COM trajectories (``machine.forces``).
+    """
+    from .machine.forces import com_acceleration
+
+    acc = com_acceleration(com, frame_time)
+    return 1.0 + acc[:, UP_AXIS] / GRAVITY
+
+
+def physics_report(
+    motion: Motion,
+    body: BodyModel | None = None,
+    *,
+    ground_height: float | None = None,
+    machine_com: np.ndarray | None = None,
+    marker_targets: np.ndarray | None = None,
+    reference_pose: Motion | None = None,
+    reference_max_joint_jump_deg: float | None = None,
+    com_and_markers: tuple[np.ndarray, np.ndarray] | None = None,
+) -> Report:
+    """The physics report of DESIGN.md for any motion; tracking figures when targets are given.
+
+    ground_height: the floor's height [m] (outputs know it); None estimates it per stance.
+    machine_com: (F, 3) the simple machine's COM path [m]; marker_targets: (F, 2, 3, 3) [m], NaN where
+    a marker had no target; reference_pose: the time-warped reference on the same frames (pose deviation);
+    reference_max_joint_jump_deg: the reference's own largest frame-to-frame joint change.
+    """
+    if body is None:
+        body = BodyModel.from_skeleton(motion.skeleton)
+    com, markers = com_and_markers if com_and_markers is not None else body.com_and_markers(motion)
+    gait = detect_gait(motion, body, markers)
+    if ground_height is not None:
+        gait = _with_ground(gait, ground_height)
+    summ = summarize(motion, body, com, gait)
+    dt = motion.frame_time
+    L = body.leg_length
+    g_fl, g_list, acc_h = flight_gravity(com, dt, gait.flights)
+
+    h_low = markers[..., UP_AXIS].min(axis=2)  # (F, 2) lowest marker per foot
+    ground_f = np.full(motion.n_frames, gait.ground)
+    if ground_height is None:
+        for s in gait.stances:  # per-stance ground for an uneven real floor
+            ground_f[s.start : s.stop] = s.ground
+    penetration = float(max(0.0, np.max(ground_f[:, None] - h_low))) * 1000.0
+    floats = [float(np.min(h_low[s.start : s.stop, s.foot]) - ground_f[s.start]) for s in gait.stances]
+    float_mm = 1000.0 * max([0.0] + floats)
+    skate = foot_skate_mm(markers, gait, contact_tol=0.02 * L)
+
+    fz = vertical_force_bw(com, dt) if motion.n_frames >= 8 else np.full(motion.n_frames, np.nan)
+    inner = slice(3, max(3, motion.n_frames - 3))  # filter edges are least trustworthy
+    peak_bw = float(np.nanmax(fz[inner])) if motion.n_frames > 8 else float("nan")
+    k_leg, K = _stiffness(com, gait, fz, body)
+
+    rep = Report(
+        duration_s=motion.duration, n_frames=motion.n_frames, frame_rate_hz=motion.fps,
+        mean_speed_m_s=summ.mean_speed, froude_U=summ.froude, leg_length_m=L, mass_kg=body.total_mass,
+        step_frequency_hz=summ.step_frequency, step_length_m=summ.step_length,
+        stance_times_s=summ.stance_times.tolist(), flight_times_s=summ.flight_times.tolist(),
+        com_vertical_excursion_m=summ.com_vertical_excursion, flight_gravity_m_s2=g_fl,
+        flight_gravity_per_phase=g_list, flight_horizontal_accel_m_s2=acc_h, foot_skate_mm=skate,
+        penetration_mm=penetration, float_mm=float_mm, peak_vertical_force_bw=peak_bw,
+        leg_stiffness_n_m=k_leg, leg_stiffness_K=K, max_joint_jump_deg=max_joint_jump_deg(motion),
+    )
+    if machine_com is not None:
+        err = np.linalg.norm(com - machine_com, axis=1)
+        rep.com_tracking_rms_mm = 1000.0 * float(np.sqrt(np.mean(err**2)))
+        rep.com_tracking_max_mm = 1000.0 * float(err.max())
+    if marker_targets is not None:
+        err = np.linalg.norm(markers - marker_targets, axis=-1)
+        err = err[np.isfinite(err)]
+        if err.size:
+            rep.foot_marker_rms_mm = 1000.0 * float(np.sqrt(np.mean(err**2)))
+            rep.foot_marker_max_mm = 1000.0 * float(err.max())
+    if reference_pose is not None:
+        dev = np.degrees(quat.angle_between(motion.rotations[:, 1:], reference_pose.rotations[:, 1:]))
+        rep.pose_deviation_mean_deg = float(dev.mean())
+        rep.pose_deviation_max_deg = float(dev.max())
+    if reference_max_joint_jump_deg is not None:
+        rep.reference_max_joint_jump_deg = float(reference_max_joint_jump_deg)
+    return rep
+
+
+def _with_ground(gait: Gait, ground: float) -> Gait:
+    from dataclasses import replace
+
+    return replace(gait, ground=float(ground), stances=tuple(replace(s, ground=float(ground)) for s in gait.stances))
+
+
+def _stiffness(com: np.ndarray, gait: Gait, fz_bw: np.ndarray, body: BodyModel) -> tuple[float, float]:
+    """Leg stiffness k = F_peak / ΔL over full stances (McMahon & Cheng): [N/m] and K = k l0/(m g)."""
+    ks, Ks = [], []
+    m = body.total_mass
+    for s in gait.full_stances:
+        leg = com[s.start : s.stop] - s.contact_point
+        leg[:, UP_AXIS] = com[s.start : s.stop, UP_AXIS] - s.ground
+        length = np.linalg.norm(leg, axis=1)
+        l0 = length[0]
+        dL = l0 - length.min()
+        f_peak = np.nanmax(fz_bw[s.start : s.stop]) * m * GRAVITY
+        if dL > 1e-3 and np.isfinite(f_peak):
+            ks.append(f_peak / dL)
+            Ks.append(f_peak / dL * l0 / (m * GRAVITY))
+    if not ks:
+        return float("nan"), float("nan")
+    return float(np.mean(ks)), float(np.mean(Ks))
+
+
+def write_report(report: Report, path) -> None:
+    """Write a report as JSON, atomically."""
+    from .io.bvh import atomic_write_text
+
+    atomic_write_text(path, report.to_json() + "\n")

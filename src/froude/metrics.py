@@ -167,9 +167,9 @@ def vertical_force_bw(com: np.ndarray, frame_time: float) -> np.ndarray:
 
     Uses the project's one differentiation of COM trajectories (``machine.forces``).
     """
-    from .machine.forces import com_acceleration
+    from .machine.forces import smooth_com
 
-    acc = com_acceleration(com, frame_time)
+    acc = smooth_com(com, frame_time)[2]
     return 1.0 + acc[:, UP_AXIS] / GRAVITY
 
 

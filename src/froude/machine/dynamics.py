@@ -746,13 +746,15 @@ def _hermite(t0, t1, y0, d0, y1, d1, t):
 
 
 def simulate(U, H, theta0, control, dt, *, n_steps=None, n_per_stance=N_PER_STANCE,
-             max_stance=MAX_STANCE_FACTOR):
+             max_stance=MAX_STANCE_FACTOR, times=None):
     """Dense trajectory of the machine over a sequence of steps, for synthesis.
 
     U, H:     starting apex state (scalars) [√(g l0)], [l0]; the run starts at x = 0, t = 0
     theta0:   touchdown angle [rad], a scalar (then ``n_steps`` is required) or a sequence (n,)
     control:  a :class:`Control` (all steps) or a sequence of n Controls (per step)
     dt:       sample spacing [√(l0/g)]
+    times:    optional explicit sample times (S,) in [0, t_apex[-1]] [√(l0/g)] instead of k·dt
+              (e.g. one stride sampled at output frame times modulo the stride, to tile a periodic gait)
 
     Returns a :class:`Trajectory`. Stance samples use cubic Hermite interpolation of the same RK4
     nodes that :func:`step` uses (so apex states agree with :func:`step` exactly); flight
@@ -812,8 +814,12 @@ def simulate(U, H, theta0, control, dt, *, n_steps=None, n_per_stance=N_PER_STAN
         t_apex[i + 1] = t_lo[i] + vy
         x_ap[i + 1] = xc[i] + float(res["px"]) + U_ap[i + 1] * vy
 
-    S = int(math.floor(t_apex[-1] / dt + 1e-9)) + 1
-    t = np.arange(S) * dt
+    if times is None:
+        S = int(math.floor(t_apex[-1] / dt + 1e-9)) + 1
+        t = np.arange(S) * dt
+    else:
+        t = np.clip(np.asarray(times, float), 0.0, t_apex[-1])
+        S = t.size
     pos = np.zeros((S, 2))
     vel = np.zeros((S, 2))
     force = np.zeros((S, 2))

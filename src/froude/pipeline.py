@@ -1,0 +1,512 @@
+"""fit → modify → synthesise → correct, as plain functions: the one place the CLI, studio and batch call.
+
+    prep = prepare("run.bvh")                                   # load, body model, gait, §4 fit, cycle
+    out = scale(prep, character="child", speed=0.7, strides=4)  # §5.1 + §5.2 + §6
+    out = accelerate(prep, to_speed=0.5, steps=8)               # §5.3 + §6
+    write_result(out, "child.bvh")                              # BVH + child.report.json, atomically
+
+The output stands on the floor y = 0, starts where the reference's COM starts (horizontally) and runs in
+the reference's direction of travel.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from .body import BodyModel
+from .characters import Character, Retarget, apply_character, character_from_numbers, load_character
+from .constants import GRAVITY, UP_AXIS
+from .errors import FroudeError
+from .gait import Gait, GaitSummary, detect_gait, require_running, summarize
+from .metrics import Report, physics_report, write_report
+from .motion import Motion
+from .synthesis import ReferenceCycle, extract_cycle, min_jerk, sample_cycle
+
+#: Speed factors outside this range leave what a reference clip supports: a warning, not an error.
+SUPPORTED_SPEED_RANGE = (0.6, 1.6)
+#: IK weights [1/m²]: the COM and loaded feet are held hard, swing feet guide the leg gently.
+COM_WEIGHT = 1e5
+STANCE_MARKER_WEIGHT = 1e5
+SWING_MARKER_WEIGHT = 1e2
+#: Time [s] over which a foot's marker weight ramps between swing and stance around its events.
+WEIGHT_RAMP_S = 0.04
+
+
+# ---- 1. prepare: load, body model, gait, fit, cycle --------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class Prepared:
+    """A reference clip made ready for any number of changes (fit once, reuse for every variation)."""
+
+    motion: Motion
+    body: BodyModel
+    com: np.ndarray
+    markers: np.ndarray
+    gait: Gait
+    summary: GaitSummary
+    machine: object  # froude.machine.model.SimpleMachine
+    cycle: ReferenceCycle
+    source: str = ""
+
+
+def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, length_scale=None) -> Prepared:
+    """Load (if given a path), model, check it is running, fit the simple machine and build the cycle."""
+    from .io.bvh import load_bvh
+    from .machine.fit import fit_machine
+
+    if isinstance(clip, Motion):
+        motion, source = clip, str(clip.meta.get("source", "motion"))
+    else:
+        motion, source = load_bvh(clip, length_scale=length_scale), str(clip)
+    body = BodyModel.from_skeleton(motion.skeleton, mass=mass, sex=sex, joint_map=joint_map)
+    com, markers = body.com_and_markers(motion)
+    gait = detect_gait(motion, body, markers)
+    summary = summarize(motion, body, com, gait)
+    require_running(summary, source)
+    machine = fit_machine(motion, body=body, mass=mass)
+    cycle = extract_cycle(motion, body, gait, com, markers, events=_fit_events(machine, motion))
+    return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source)
+
+
+def _fit_events(machine, motion: Motion):
+    """The fit's force-refined touchdown/liftoff times as foot events (None: use the gait's)."""
+    from .synthesis import FootEvent
+
+    ev = []
+    for s in getattr(machine, "stances", ()):
+        foot = 0 if s.get("foot") in (0, "left") else 1
+        for key, kind in (("t_touchdown_s", "td"), ("t_liftoff_s", "lo")):
+            t = s.get(key)
+            if t is not None and np.isfinite(t) and 0 < t < motion.duration:
+                ev.append(FootEvent(t / motion.frame_time, foot, kind))
+    ev.sort(key=lambda e: e.frame)
+    # events must alternate td/lo per foot and the feet alternate; otherwise trust the gait
+    for a, b in zip(ev[:-1], ev[1:]):
+        if a.kind == b.kind:
+            return None
+    return ev or None
+
+
+# ---- 2. the machine's trajectory in the world ----------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class MachinePath:
+    """The simple machine's motion in world coordinates at the output frame rate (SI).
+
+    times: (T,) [s]; com: (T, 3) [m]; force: (T, 3) ground force on the COM [N]; psi: (T,) unwrapped stride
+    phase (0 at the first touchdown of foot A); stance: (T, 2) bool; foot_of_step: (n,) 0/1;
+    t_touchdown, t_liftoff: (n,) [s]; contacts: (n, 3) contact points [m]; apex_speed: (n+1,) [m/s];
+    U: (n+1,) dimensionless apex speeds; frame: (3, 3) heading frame rows; l0 [m]; mass [kg].
+    """
+
+    times: np.ndarray
+    com: np.ndarray
+    force: np.ndarray
+    psi: np.ndarray
+    stance: np.ndarray
+    foot_of_step: np.ndarray
+    t_touchdown: np.ndarray
+    t_liftoff: np.ndarray
+    contacts: np.ndarray
+    apex_speed: np.ndarray
+    U: np.ndarray
+    frame: np.ndarray
+    l0: float
+    mass: float
+
+    @property
+    def frame_time(self) -> float:
+        return float(self.times[1] - self.times[0]) if len(self.times) > 1 else 0.0
+
+
+def machine_path(
+    prep: Prepared,
+    retarget: Retarget,
+    *,
+    speed: float = 1.0,
+    n_steps: int,
+    fps: float,
+    theta0=None,
+    controls=None,
+    start_state: tuple[float, float] | None = None,
+) -> MachinePath:
+    """Simulate the (scaled) machine for n_steps steps and place it in the world.
+
+    speed: §5.2 horizontal stretch factor s (vertical motion and timing unchanged).
+    theta0: per-step touchdown angles (n_steps,) [rad] (default: the cycle's); controls: per-step Controls;
+    start_state: apex (U, H) to start from (default: the periodic cycle's).
+    """
+    m = prep.machine.scaled(retarget.L, retarget.M)
+    T_unit = m.time_unit
+    dt = 1.0 / fps / T_unit
+    if theta0 is None and controls is None and start_state is None:
+        tr = _periodic_trajectory(m, n_steps, dt)
+    else:
+        from .machine.dynamics import simulate
+
+        th = np.full(n_steps, m.theta0) if theta0 is None else np.asarray(theta0, float)
+        U0, H0 = (m.U, m.H) if start_state is None else start_state
+        tr = simulate(U0, H0, th, m.control if controls is None else controls, dt)
+    cyc = prep.cycle
+    Rh = cyc.frame
+    fwd, up, lat = Rh
+    L = retarget.L
+    l0 = m.l0
+    t = tr.t * T_unit
+    A = cyc.first_foot
+    feet = np.where(np.arange(n_steps) % 2 == 0, A, 1 - A)
+    t_td = tr.t_touchdown * T_unit
+    t_lo = tr.t_liftoff * T_unit
+    psi = _stride_phase(t, t_td, t_lo, feet, A, cyc.phase_events, tr, T_unit)
+    phi = np.mod(psi, 1.0)
+    _, data = sample_cycle(cyc, phi, rotations=False)
+    origin = prep.com[0].copy()
+    origin[UP_AXIS] = 0.0
+    com = (origin + np.outer(speed * tr.pos[:, 0] * l0, fwd) + np.outer(tr.pos[:, 1] * l0, up)
+           + np.outer(L * data["com_lateral"], lat))
+    contacts = (origin + np.outer(speed * tr.contact_x * l0, fwd)
+                + np.outer(L * cyc.contact_lateral[feet], lat))
+    force = (np.outer(speed * tr.force[:, 0], fwd) + np.outer(tr.force[:, 1], up)) * m.mass * GRAVITY
+    stance = np.zeros((len(t), 2), bool)
+    for i, f in enumerate(feet):
+        stance[(t >= t_td[i]) & (t < t_lo[i]), f] = True
+    return MachinePath(
+        times=t, com=com, force=force, psi=psi, stance=stance, foot_of_step=feet, t_touchdown=t_td,
+        t_liftoff=t_lo, contacts=contacts, apex_speed=speed * tr.U_apex * m.speed_unit, U=tr.U_apex,
+        frame=Rh, l0=l0, mass=m.mass,
+    )
+
+
+@dataclass(frozen=True)
+class _Tiled:
+    """The fields of machine.dynamics.Trajectory that machine_path uses (dimensionless)."""
+
+    t: np.ndarray
+    pos: np.ndarray
+    force: np.ndarray
+    t_touchdown: np.ndarray
+    t_liftoff: np.ndarray
+    contact_x: np.ndarray
+    U_apex: np.ndarray
+    t_apex: np.ndarray
+
+
+def _periodic_trajectory(m, n_steps: int, dt: float) -> _Tiled:
+    """n_steps of the periodic cycle: one stride simulated at the output times modulo the stride, tiled.
+
+    The cycle is periodic to 1e-9, so this equals simulating every step while costing one stride.
+    """
+    from .machine.dynamics import simulate
+
+    T2, dx = 2.0 * m.step_time, 2.0 * m.step_length
+    n_frames = int(math.floor(n_steps * m.step_time / dt + 1e-9)) + 1
+    t = np.arange(n_frames) * dt
+    k = np.floor(t / T2 + 1e-12)
+    tau = t - k * T2
+    one = simulate(m.U, m.H, np.full(2, m.theta0), m.control, dt, times=tau)
+    pos = one.pos.copy()
+    pos[:, 0] += k * dx
+    i = np.arange(n_steps)
+    shift = (i // 2) * T2
+    return _Tiled(
+        t=t, pos=pos, force=one.force, t_touchdown=one.t_touchdown[i % 2] + shift,
+        t_liftoff=one.t_liftoff[i % 2] + shift, contact_x=one.contact_x[i % 2] + (i // 2) * dx,
+        U_apex=np.full(n_steps + 1, m.U), t_apex=np.arange(n_steps + 1) * m.step_time,
+    )
+
+
+def _stride_phase(t, t_td, t_lo, feet, A, phase_events, tr, T_unit) -> np.ndarray:
+    """Unwrapped reference stride phase of each output time: stance→stance, flight→flight, linearly."""
+    p = {(A, "td"): 0.0, (A, "lo"): phase_events[1], (1 - A, "td"): phase_events[2], (1 - A, "lo"): phase_events[3]}
+    times, psis = [], []
+    for i, f in enumerate(feet):
+        k = i // 2
+        times += [t_td[i], t_lo[i]]
+        psis += [k + p[(f, "td")], k + p[(f, "lo")]]
+    # the flight before the first touchdown and after the last liftoff (the machine's own flight times)
+    fl_first = tr.t_touchdown[0] * T_unit + (tr.t_apex[0] * 0)  # apex at t = 0
+    flight_before = (t_td[1] - t_lo[0]) if len(t_td) > 1 else (tr.t_apex[-1] * T_unit - t_lo[-1]) * 2
+    flight_after = (t_td[-1] - t_lo[-2]) if len(t_td) > 1 else flight_before
+    last_f = feet[-1]
+    k_last = (len(feet) - 1) // 2
+    next_td_psi = k_last + (1.0 if last_f == 1 - A else phase_events[2])
+    times = [t_td[0] - flight_before] + times + [t_lo[-1] + flight_after]
+    psis = [p[(1 - A, "lo")] - 1.0] + psis + [next_td_psi]
+    del fl_first
+    return np.interp(t, times, psis)
+
+
+# ---- 3. synthesise: time-warped reference on the target skeleton, IK targets ------------------------------
+@dataclass(frozen=True, eq=False)
+class Targets:
+    """Initial motion (reference angles, root from the machine COM) and the IK targets and weights."""
+
+    initial: Motion
+    com: np.ndarray  # (T, 3) [m]
+    markers: np.ndarray  # (T, 2, 3, 3) [m]
+    marker_weight: np.ndarray  # (T, 2)
+    com_weight: np.ndarray  # (T,)
+
+
+def build_targets(prep: Prepared, path: MachinePath, retarget: Retarget) -> Targets:
+    """Time-warp the reference cycle onto the machine's steps and set the COM and foot targets."""
+    cyc = prep.cycle
+    L = retarget.L
+    Rh = path.frame
+    phi = np.mod(path.psi, 1.0)
+    rot, data = sample_cycle(cyc, phi)
+    T = len(path.times)
+    anchors = _foot_anchors(path)
+    rel_world = np.einsum("fpki,ij->fpkj", L * data["marker_rel"], Rh)  # heading frame -> world
+    markers = anchors[:, :, None, :] + rel_world
+    root = path.com + (L * data["root_from_com"]) @ Rh
+    meta = {"source": prep.source, "length_scale": float(prep.motion.meta.get("length_scale", 1.0))}
+    initial = Motion(retarget.skeleton, root, rot, float(path.frame_time), None, meta)
+    weight = _marker_weights(path)
+    return Targets(initial, path.com, markers, weight, np.full(T, COM_WEIGHT))
+
+
+def _foot_anchors(path: MachinePath) -> np.ndarray:
+    """(T, 2, 3) each foot's anchor: its contact point in stance, a min-jerk blend between contacts in swing."""
+    T = len(path.times)
+    t = path.times
+    out = np.zeros((T, 2, 3))
+    n = len(path.foot_of_step)
+    for foot in range(2):
+        idx = np.flatnonzero(path.foot_of_step == foot)
+        if idx.size == 0:
+            continue
+        c = path.contacts[idx]
+        td = path.t_touchdown[idx]
+        lo = path.t_liftoff[idx]
+        psi_td = np.interp(td, t, path.psi, left=np.nan, right=np.nan)
+        # virtual contacts one stride before the first and after the last (periodic extension)
+        stride = c[1] - c[0] if len(c) > 1 else (path.contacts[-1] - path.contacts[0]) * 2 / max(n - 1, 1)
+        c_ext = np.concatenate([c[:1] - stride, c, c[-1:] + stride])
+        lo_ext = np.concatenate([[td[0] - (td[1] - lo[0]) if len(td) > 1 else td[0] - 0.5], lo, [np.inf]])
+        td_ext = np.concatenate([[-np.inf], td, [lo[-1] + (td[1] - lo[0]) if len(td) > 1 else lo[-1] + 0.5]])
+        # for each frame: the last touchdown at or before it (index into *_ext)
+        k = np.searchsorted(td_ext, t, side="right") - 1
+        in_stance = t < lo_ext[k]
+        out[in_stance, foot] = c_ext[k[in_stance]]
+        sw = ~in_stance
+        k_sw = k[sw]
+        t0, t1 = lo_ext[k_sw], td_ext[k_sw + 1]
+        # progress in stride phase between liftoff and next touchdown (same measure as the reference)
+        p = np.interp(t[sw], t, path.psi)
+        p0 = _psi_at(path, t0)
+        p1 = _psi_at(path, t1)
+        u = (p - p0) / np.maximum(p1 - p0, 1e-9)
+        w = min_jerk(u)[:, None]
+        out[sw, foot] = c_ext[k_sw] * (1 - w) + c_ext[k_sw + 1] * w
+        del psi_td
+    return out
+
+
+def _psi_at(path: MachinePath, times: np.ndarray) -> np.ndarray:
+    """Stride phase at arbitrary times, extrapolated linearly beyond the path."""
+    t, psi = path.times, path.psi
+    rate = (psi[-1] - psi[0]) / max(t[-1] - t[0], 1e-9)
+    out = np.interp(times, t, psi)
+    out = np.where(times < t[0], psi[0] + (times - t[0]) * rate, out)
+    return np.where(times > t[-1], psi[-1] + (times - t[-1]) * rate, out)
+
+
+def _marker_weights(path: MachinePath) -> np.ndarray:
+    """(T, 2) foot marker weights: stance high, swing low, ramped smoothly around every event."""
+    t = path.times[:, None]
+    w = np.zeros((len(path.times), 2))
+    a = path.t_touchdown[None, :]
+    b = path.t_liftoff[None, :]
+    # 1 inside each stance, min-jerk ramps over WEIGHT_RAMP_S before touchdown and after liftoff
+    u = np.clip(np.minimum(t - (a - WEIGHT_RAMP_S), (b + WEIGHT_RAMP_S) - t) / WEIGHT_RAMP_S, 0.0, 1.0)
+    for foot in range(2):
+        cols = path.foot_of_step == foot
+        if cols.any():
+            w[:, foot] = u[:, cols].max(axis=1)
+    return SWING_MARKER_WEIGHT + (STANCE_MARKER_WEIGHT - SWING_MARKER_WEIGHT) * min_jerk(w)
+
+
+# ---- 4. correct (IK) and report ----------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class Result:
+    """An output motion with its machine path, targets and physics report."""
+
+    motion: Motion
+    report: Report
+    path: MachinePath | None
+    targets: Targets | None
+    retarget: Retarget
+    method: str
+    speed_factor: float
+    notes: tuple[str, ...] = field(default=())
+    plan: object = None
+
+    def summary_rows(self) -> list[tuple[str, str]]:
+        r = self.report
+        rows = [
+            ("character", f"{self.retarget.character.name} (L = {self.retarget.L:.3f}, M = {self.retarget.M:.3f})"),
+            ("method", self.method),
+            ("speed", f"{r.mean_speed_m_s:.3f} m/s (x{self.speed_factor:g})"),
+            ("Froude number U", f"{r.froude_U:.3f}"),
+            ("step frequency", f"{r.step_frequency_hz:.3f} Hz"),
+            ("stance / flight", f"{_mean(r.stance_times_s):.3f} s / {_mean(r.flight_times_s):.3f} s"),
+            ("flight gravity", f"{r.flight_gravity_m_s2:.2f} m/s^2"),
+            ("COM tracking", f"RMS {r.com_tracking_rms_mm:.2f} mm, max {r.com_tracking_max_mm:.2f} mm"),
+            ("foot skate / penetration", f"{r.foot_skate_mm:.2f} mm / {r.penetration_mm:.2f} mm"),
+            ("joint jump", f"{r.max_joint_jump_deg:.1f} deg (reference {r.reference_max_joint_jump_deg:.1f})"),
+        ]
+        return rows
+
+
+def _mean(x) -> float:
+    return float(np.mean(x)) if len(x) else float("nan")
+
+
+def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
+    """§6: whole-body IK toward the machine COM and the foot targets, pulled toward the reference pose."""
+    from .ik import ComTask, MarkerTask, solve_ik
+
+    tasks = [
+        ComTask(body, targets.com, targets.com_weight),
+        MarkerTask.feet(body, targets.markers, targets.marker_weight),
+    ]
+    return solve_ik(targets.initial, tasks, body=body, on_failure=on_failure)
+
+
+def resolve_character(character=None, *, height=None, mass=None, leg_scale=None, arm_scale=None,
+                      head_scale=None, trunk_scale=None) -> Character:
+    """A Character from a preset name / file / Character plus optional numbers (numbers win)."""
+    base = character if isinstance(character, Character) else (load_character(character) if character else None)
+    if base is None and all(v is None for v in (height, mass, leg_scale, arm_scale, head_scale, trunk_scale)):
+        return Character(name="same")
+    return character_from_numbers(base, height, mass, leg_scale, arm_scale, head_scale, trunk_scale)
+
+
+def scale(
+    prep: Prepared,
+    character=None,
+    *,
+    speed: float = 1.0,
+    target_speed: float | None = None,
+    strides: int | None = 4,
+    duration: float | None = None,
+    fps: float | None = None,
+    method: str = "physical",
+    **character_numbers,
+) -> Result:
+    """§5.1, §5.2, §6: the reference run on another character, at another speed, for any number of strides.
+
+    character: preset name, YAML/BVH path or Character (None: the reference's own body);
+    speed: factor s on the dynamically scaled speed; target_speed: absolute speed [m/s] (overrides speed);
+    strides / duration [s]: output length; fps: output frame rate (default: the input's);
+    method: "physical" (froude) or "naive" (engines: angles copied, root × L, timing unchanged).
+    """
+    char = resolve_character(character, **character_numbers)
+    retarget = apply_character(char, prep.body)
+    fps = prep.motion.fps if fps is None else float(fps)
+    if not (np.isfinite(fps) and fps > 0):
+        raise FroudeError(f"fps must be > 0, got {fps}")
+    notes = []
+    m_scaled = prep.machine.scaled(retarget.L, retarget.M)
+    base_speed = m_scaled.mean_speed * m_scaled.speed_unit
+    if target_speed is not None:
+        if not (np.isfinite(target_speed) and target_speed > 0):
+            raise FroudeError(f"target speed must be > 0 m/s, got {target_speed}")
+        speed = target_speed / base_speed
+    if not (np.isfinite(speed) and speed > 0):
+        raise FroudeError(f"speed factor must be > 0, got {speed}")
+    lo, hi = SUPPORTED_SPEED_RANGE
+    if not lo <= speed <= hi:
+        notes.append(
+            f"speed factor {speed:.2f} is outside {lo}-{hi}, the range a single reference clip supports well "
+            "(stance time does not change with speed in the vertical-force model, paper §5.2)"
+        )
+    step_time = m_scaled.step_time * m_scaled.time_unit
+    if duration is not None:
+        if not (np.isfinite(duration) and duration > 0):
+            raise FroudeError(f"duration must be > 0 s, got {duration}")
+        n_steps = max(2, int(math.ceil(duration / step_time)))
+    else:
+        if strides is None or strides < 1:
+            raise FroudeError(f"strides must be >= 1, got {strides}")
+        n_steps = 2 * int(strides)
+    if method == "naive":
+        return _naive(prep, retarget, speed, n_steps, fps, notes)
+    if method != "physical":
+        raise FroudeError(f"unknown method '{method}' (physical or naive)")
+    path = machine_path(prep, retarget, speed=speed, n_steps=n_steps, fps=fps)
+    return finish(prep, path, retarget, speed, notes, "physical")
+
+
+def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, notes, method: str, plan=None) -> Result:
+    """Targets → IK → report: the common tail of scale and accelerate."""
+    targets = build_targets(prep, path, retarget)
+    ik = correct(targets, retarget.body)
+    if not ik.ok:
+        bad = np.flatnonzero(ik.failed)
+        notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]
+    motion = ik.motion
+    report = physics_report(
+        motion, retarget.body, ground_height=0.0, machine_com=path.com, marker_targets=_stance_only(targets, path),
+        reference_pose=targets.initial, reference_max_joint_jump_deg=prep.cycle.max_joint_jump_deg,
+    )
+    report.extras.update({"character": retarget.character.name, "L": retarget.L, "M": retarget.M,
+                          "speed_factor": speed, "method": method, "notes": list(notes),
+                          "machine_apex_speed_m_s": path.apex_speed.tolist()})
+    return Result(motion, report, path, targets, retarget, method, speed, tuple(notes), plan)
+
+
+def _stance_only(targets: Targets, path: MachinePath) -> np.ndarray:
+    """Foot marker targets where the foot is in stance (NaN elsewhere): the ones that must be met."""
+    out = targets.markers.copy()
+    out[~path.stance] = np.nan
+    return out
+
+
+def _naive(prep: Prepared, retarget: Retarget, speed: float, n_steps: int, fps: float, notes) -> Result:
+    """What engines do: joint angles copied, root translation × L, timing unchanged (× 1/s for speed)."""
+    cyc = prep.cycle
+    L = retarget.L
+    T_stride = cyc.stride_time / speed
+    duration = n_steps / 2 * T_stride
+    t = np.arange(int(math.floor(duration * fps + 1e-9)) + 1) / fps
+    psi = t / T_stride
+    rot, data = sample_cycle(cyc, np.mod(psi, 1.0))
+    fwd, up, lat = cyc.frame
+    origin = prep.com[0].copy()
+    origin[UP_AXIS] = 0.0
+    # the reference COM path (uniform speed + oscillation) and root offset, all lengths × L
+    com = (origin + np.outer(L * (cyc.speed * psi * cyc.stride_time + data["com_forward"]), fwd)
+           + np.outer(L * data["com_height"], up) + np.outer(L * data["com_lateral"], lat))
+    root = com + (L * data["root_from_com"]) @ cyc.frame
+    meta = {"source": prep.source, "length_scale": float(prep.motion.meta.get("length_scale", 1.0))}
+    motion = Motion(retarget.skeleton, root, rot, 1.0 / fps, None, meta)
+    report = physics_report(motion, retarget.body, reference_max_joint_jump_deg=prep.cycle.max_joint_jump_deg)
+    report.extras.update({"character": retarget.character.name, "L": L, "M": retarget.M, "speed_factor": speed,
+                          "method": "naive", "notes": list(notes)})
+    return Result(motion, report, None, None, retarget, "naive", speed, tuple(notes))
+
+
+# ---- 5. write ----------------------------------------------------------------------------------------
+def report_path(out_path) -> Path:
+    p = Path(out_path)
+    return p.with_name(p.stem + ".report.json")
+
+
+def write_result(result: Result, out_path) -> tuple[Path, Path]:
+    """Write OUT.bvh and OUT.report.json atomically; returns both paths."""
+    from .io.bvh import save_bvh
+
+    out_path = Path(out_path)
+    if out_path.suffix.lower() != ".bvh":
+        raise FroudeError(f"{out_path}: the output must be a .bvh file")
+    rp = report_path(out_path)
+    save_bvh(result.motion, out_path)
+    write_report(result.report, rp)
+    return out_path, rp
+
+
+_ = (os, replace)

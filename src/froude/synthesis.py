@@ -1,0 +1,419 @@
+"""From a machine trajectory back to a whole body: the reference stride cycle, time warping and IK targets.
+
+The reference clip (1.5-2 strides) is turned into one seamless stride cycle: every frame gets a stride
+phase ψ from its foot events (touchdown of foot A at ψ = 0, liftoff of A, touchdown of B, liftoff of B,
+touchdown of A at ψ = 1), and each quantity of the cycle at phase φ is the weighted mean of all the
+clip's occurrences of that phase (φ, φ + 1, …), with a linear loop-closure correction so that the end
+joins the start exactly. Output frames are mapped to phases stance→stance and flight→flight with the
+machine's own durations (the paper's time warp), so any number of strides can be synthesised.
+
+Coordinates of the cycle are expressed in the *heading frame* (forward, up, lateral) so that the machine,
+which lives in the sagittal plane, can be placed back in the world.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import quat
+from .body import BodyModel
+from .constants import UP, UP_AXIS
+from .errors import FitError
+from .gait import Gait
+from .motion import Motion
+
+#: Stride-phase samples of the cycle (per stride). 240 keeps interpolation error far below a millimetre.
+CYCLE_SAMPLES = 240
+
+
+def heading_frame(heading: np.ndarray) -> np.ndarray:
+    """(3, 3) rows = forward, up, lateral unit vectors (world) for a horizontal travel direction."""
+    fwd = np.asarray(heading, float).copy()
+    fwd[UP_AXIS] = 0.0
+    fwd /= np.linalg.norm(fwd)
+    lat = np.cross(fwd, UP)
+    return np.stack([fwd, UP, lat])
+
+
+def min_jerk(u: np.ndarray) -> np.ndarray:
+    """Minimum-jerk progress 10u³ − 15u⁴ + 6u⁵ on [0, 1] (zero velocity and acceleration at both ends)."""
+    u = np.clip(u, 0.0, 1.0)
+    return u**3 * (10.0 - 15.0 * u + 6.0 * u**2)
+
+
+@dataclass(frozen=True)
+class FootEvent:
+    """A foot event in reference frames (fractional allowed): kind 'td' (touchdown) or 'lo' (liftoff)."""
+
+    frame: float
+    foot: int
+    kind: str
+
+
+def events_from_gait(gait: Gait) -> list[FootEvent]:
+    """Touchdowns and liftoffs of a gait, in time order (edges of partial stances omitted)."""
+    F = len(gait.contact)
+    ev = []
+    for s in gait.stances:
+        if s.start > 0:
+            ev.append(FootEvent(float(s.start), s.foot, "td"))
+        if s.stop < F:
+            ev.append(FootEvent(float(s.stop), s.foot, "lo"))
+    return sorted(ev, key=lambda e: e.frame)
+
+
+@dataclass(frozen=True)
+class ReferenceCycle:
+    """One seamless stride of the reference, sampled at K = CYCLE_SAMPLES stride phases φ = k / K.
+
+    first_foot: foot A (0 left, 1 right) whose touchdown is φ = 0; foot B = 1 − A.
+    phase_events: (4,) φ of [touchdown A, liftoff A, touchdown B, liftoff B] = [0, φ1, φ2, φ3].
+    durations: (4,) reference durations [s] of stance A, flight after A, stance B, flight after B.
+    frame: (3, 3) heading frame rows (forward, up, lateral) in world coordinates.
+    rotations: (K, J, 4) local joint rotations (root orientation in world).
+    root_from_com: (K, 3) root − COM [m], heading frame.
+    com_height: (K,) COM height above the ground [m]; com_forward: (K,) COM forward position minus
+        uniform motion at the mean speed [m]; com_lateral: (K,) lateral COM sway about the mean line [m].
+    marker_rel: (K, 2, 3, 3) foot markers relative to each foot's anchor [m], heading frame (the anchor is
+        the stance's contact point on the ground, or in swing a minimum-jerk blend of the previous and next
+        contact points), with sliding of loaded markers removed.
+    contact_lateral: (2,) lateral offset of each foot's contacts from the COM line [m].
+    speed: mean forward speed [m/s]; stride_time [s]; leg_length [m]; ground [m].
+    max_joint_jump_deg: the reference clip's own largest frame-to-frame joint rotation [deg].
+    """
+
+    first_foot: int
+    phase_events: np.ndarray
+    durations: np.ndarray
+    frame: np.ndarray
+    rotations: np.ndarray
+    root_from_com: np.ndarray
+    com_height: np.ndarray
+    com_forward: np.ndarray
+    com_lateral: np.ndarray
+    marker_rel: np.ndarray
+    contact_lateral: np.ndarray
+    speed: float
+    stride_time: float
+    leg_length: float
+    ground: float
+    max_joint_jump_deg: float
+
+    @property
+    def n_samples(self) -> int:
+        return self.rotations.shape[0]
+
+    def foot_in_stance(self, phi: np.ndarray) -> np.ndarray:
+        """(…, 2) bool: which feet are on the ground at stride phases phi (…)."""
+        p = np.mod(phi, 1.0)[..., None]
+        e = self.phase_events
+        a = self.first_foot
+        st = np.zeros(p.shape[:-1] + (2,), bool)
+        st[..., a] = (p[..., 0] < e[1])
+        st[..., 1 - a] = (p[..., 0] >= e[2]) & (p[..., 0] < e[3])
+        return st
+
+
+def _phase_of_events(events: list[FootEvent], first_foot: int, fractions: np.ndarray) -> np.ndarray:
+    """Unwrapped stride phase ψ of each event (ψ increases by 1 per stride; first A touchdown = 0)."""
+    base = {(first_foot, "td"): 0.0, (first_foot, "lo"): fractions[0],
+            (1 - first_foot, "td"): fractions[1], (1 - first_foot, "lo"): fractions[2]}
+    psi = []
+    for e in events:
+        p = base[(e.foot, e.kind)]
+        if psi:
+            prev = psi[-1]
+            p = p + np.ceil(prev - p + 1e-9)  # smallest value ≡ p (mod 1) after prev
+        psi.append(p)
+    psi = np.array(psi)
+    first_a_td = next(i for i, e in enumerate(events) if e.foot == first_foot and e.kind == "td")
+    return psi - np.floor(psi[first_a_td] + 1e-9)
+
+
+def _durations(events: list[FootEvent], first_foot: int, frame_time: float) -> np.ndarray:
+    """Mean reference durations [s] of (stance A, flight after A, stance B, flight after B)."""
+    sums = {k: [] for k in range(4)}
+    for e0, e1 in zip(events[:-1], events[1:]):
+        dt = (e1.frame - e0.frame) * frame_time
+        if e0.kind == "td" and e1.kind == "lo" and e0.foot == e1.foot:
+            sums[0 if e0.foot == first_foot else 2].append(dt)
+        elif e0.kind == "lo" and e1.kind == "td" and e0.foot != e1.foot:
+            sums[1 if e0.foot == first_foot else 3].append(dt)
+    out = np.full(4, np.nan)
+    for k, v in sums.items():
+        if v:
+            out[k] = np.mean(v)
+    # a phase seen only for one foot stands in for the other foot's
+    for k, twin in ((0, 2), (1, 3), (2, 0), (3, 1)):
+        if np.isnan(out[k]):
+            out[k] = out[twin]
+    if np.any(np.isnan(out)) or np.any(out <= 0):
+        raise FitError("cannot find a stance and a flight phase to build a stride cycle from")
+    return out
+
+
+def extract_cycle(
+    motion: Motion,
+    body: BodyModel,
+    gait: Gait,
+    com: np.ndarray,
+    markers: np.ndarray,
+    events: list[FootEvent] | None = None,
+    n_samples: int = CYCLE_SAMPLES,
+) -> ReferenceCycle:
+    """Build the seamless reference stride cycle of a running clip.
+
+    com: (F, 3) [m]; markers: (F, 2, 3, 3) [m]; events: foot events (default: from the gait; the fit's
+    force-refined events are more precise).
+    """
+    F = motion.n_frames
+    dt = motion.frame_time
+    if events is None:
+        events = events_from_gait(gait)
+    tds = [e for e in events if e.kind == "td"]
+    if len(tds) < 2 or len({e.foot for e in tds}) < 2:
+        raise FitError("a stride cycle needs touchdowns of both feet in the clip")
+    first_foot = tds[0].foot
+    dur = _durations(events, first_foot, dt)
+    T = float(dur.sum())
+    fr = np.cumsum(dur)[:3] / T  # phases of liftoff A, touchdown B, liftoff B
+    phase_events = np.concatenate([[0.0], fr])
+    ev_frames = np.array([e.frame for e in events])
+    ev_psi = _phase_of_events(events, first_foot, fr)
+
+    # Phase of every frame: linear between events, extrapolated at the nominal rate beyond them
+    # (never past the neighbouring event's phase).
+    frames = np.arange(F, dtype=float)
+    psi = np.interp(frames, ev_frames, ev_psi)
+    rate = 1.0 / (T / dt)  # phase per frame at nominal timing
+    before = frames < ev_frames[0]
+    psi[before] = ev_psi[0] - (ev_frames[0] - frames[before]) * rate
+    after = frames > ev_frames[-1]
+    psi[after] = ev_psi[-1] + (frames[after] - ev_frames[-1]) * rate
+
+    # Heading frame, mean speed, COM line
+    disp = com[-1] - com[0]
+    heading = disp.copy()
+    heading[UP_AXIS] = 0.0
+    Rh = heading_frame(heading)
+    com_h = com @ Rh.T  # (F, 3) forward, up, lateral
+    t = frames * dt
+    speed = float(np.polyfit(t, com_h[:, 0], 1)[0])
+    lat_line = np.polyval(np.polyfit(t, com_h[:, 2], 1), t)
+    stance_ground = np.full((F, 2), np.nan)
+    for s in gait.stances:
+        stance_ground[s.start : s.stop, s.foot] = s.ground
+
+    # Per-frame anchors of each foot: stance contact point or a min-jerk blend between contacts.
+    anchors, anchor_ok = _anchors(gait, psi, phase_events, first_foot, F)
+    rel = np.einsum("ij,fpkj->fpki", Rh, markers - anchors[:, :, None, :])  # heading frame
+    root_from_com = (motion.root_positions - com) @ Rh.T
+    contact_lat = np.zeros(2)
+    for foot in range(2):
+        c = [s.contact_point @ Rh[2] - np.interp((s.start + s.stop) / 2 * dt, t, lat_line)
+             for s in gait.stances if s.foot == foot]
+        contact_lat[foot] = np.mean(c) if c else 0.0
+
+    # Sample every phase of one stride at every occurrence in the clip and average.
+    K = n_samples
+    grid = np.arange(K + 1) / K  # include φ = 1 for the loop closure
+    n_lo, n_hi = int(np.floor(psi.min())) - 1, int(np.ceil(psi.max())) + 1
+    taper = max(1.0, 0.04 / dt)  # frames over which occurrences near the clip's edges fade in
+    occ_frames, occ_w = [], []
+    for n in range(n_lo, n_hi + 1):
+        target = grid + n
+        inside = (target >= psi[0]) & (target <= psi[-1])
+        f = np.interp(target, psi, frames)
+        w = np.clip(np.minimum(f, F - 1 - f) / taper, 0.0, 1.0) * inside
+        if np.any(w > 0):
+            occ_frames.append(f)
+            occ_w.append(w)
+    occ_frames = np.array(occ_frames)  # (N, K+1)
+    occ_w = np.array(occ_w)
+    if np.any(occ_w.sum(axis=0) <= 0):
+        raise FitError("the clip does not cover a whole stride: every phase must be seen at least once")
+
+    def lin(x, f):  # linear interpolation of per-frame data x (F, ...) at fractional frames f
+        i0 = np.clip(np.floor(f).astype(int), 0, F - 2)
+        w = (f - i0).reshape(f.shape + (1,) * (x.ndim - 1))
+        return x[i0] * (1 - w) + x[i0 + 1] * w
+
+    def average(x):  # weighted mean over occurrences of linear data (F, ...) -> (K+1, ...)
+        vals = np.stack([lin(x, f) for f in occ_frames])
+        w = occ_w.reshape(occ_w.shape + (1,) * (vals.ndim - 2))
+        return np.sum(vals * w, axis=0) / np.sum(w, axis=0)
+
+    rots = quat.make_continuous(motion.rotations)
+    q_occ = np.stack([_slerp_frames(rots, f) for f in occ_frames])  # (N, K+1, J, 4)
+    ref = q_occ[np.argmax(occ_w, axis=0), np.arange(K + 1)]  # sign reference per sample
+    sign = np.where(np.sum(q_occ * ref[None], axis=-1) < 0, -1.0, 1.0)
+    q_avg = quat.normalize(np.sum(q_occ * sign[..., None] * occ_w[:, :, None, None], axis=0))
+    rotations = _close_loop_quat(q_avg)
+
+    com_height = _close_loop_linear(average(com_h[:, 1] - np.nanmedian(stance_ground)))
+    uniform = speed * t
+    com_forward = _close_loop_linear(average(com_h[:, 0] - uniform))
+    com_lateral = _close_loop_linear(average(com_h[:, 2] - lat_line))
+    root_rel = _close_loop_linear(average(root_from_com))
+
+    # Markers: only occurrences whose anchors are known count.
+    rel_vals = np.stack([lin(rel, f) for f in occ_frames])  # (N, K+1, 2, 3, 3)
+    ok_vals = np.stack([lin(anchor_ok.astype(float), f) for f in occ_frames]) > 0.999  # (N, K+1, 2)
+    w = occ_w[:, :, None] * ok_vals
+    wsum = w.sum(axis=0)
+    if np.any(wsum <= 0):
+        # a foot phase never seen with both neighbouring contacts: fall back to every occurrence
+        w = np.where(wsum[None] <= 0, occ_w[:, :, None], w)
+        wsum = w.sum(axis=0)
+    marker_rel = np.sum(rel_vals * w[..., None, None], axis=0) / wsum[..., None, None]
+    marker_rel = _close_loop_linear(marker_rel)
+    stance_mask = _stance_mask(np.arange(K) / K, phase_events, first_foot)
+    marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=0.025 * body.leg_length)
+
+    from .metrics import max_joint_jump_deg
+
+    return ReferenceCycle(
+        first_foot=first_foot, phase_events=phase_events, durations=dur, frame=Rh,
+        rotations=rotations, root_from_com=root_rel, com_height=com_height, com_forward=com_forward,
+        com_lateral=com_lateral, marker_rel=marker_rel, contact_lateral=contact_lat, speed=speed,
+        stride_time=T, leg_length=body.leg_length, ground=float(np.nanmedian(stance_ground)),
+        max_joint_jump_deg=max_joint_jump_deg(motion),
+    )
+
+
+def _slerp_frames(rots: np.ndarray, f: np.ndarray) -> np.ndarray:
+    F = rots.shape[0]
+    i0 = np.clip(np.floor(f).astype(int), 0, F - 2)
+    w = np.broadcast_to((f - i0)[:, None], (len(f), rots.shape[1]))
+    return quat.slerp(rots[i0], rots[i0 + 1], w)
+
+
+def _close_loop_linear(x: np.ndarray) -> np.ndarray:
+    """(K+1, …) samples over φ ∈ [0, 1] → (K, …) periodic samples: the end mismatch spread linearly."""
+    K = x.shape[0] - 1
+    ramp = (np.arange(K + 1) / K).reshape((K + 1,) + (1,) * (x.ndim - 1))
+    return (x - ramp * (x[-1] - x[0]))[:K]
+
+
+def _close_loop_quat(q: np.ndarray) -> np.ndarray:
+    """(K+1, J, 4) → (K, J, 4) periodic: the rotation from end to start spread linearly over the stride."""
+    K = q.shape[0] - 1
+    delta = quat.to_rotvec(quat.mul(quat.conj(q[-1]), q[0]))  # end -> start, local
+    ramp = (np.arange(K + 1) / K)[:, None, None]
+    return quat.normalize(quat.mul(q, quat.from_rotvec(ramp * delta[None])))[:K]
+
+
+def _stance_mask(phi: np.ndarray, phase_events: np.ndarray, first_foot: int) -> np.ndarray:
+    """(K, 2) bool stance of each foot at phases phi."""
+    st = np.zeros((len(phi), 2), bool)
+    st[:, first_foot] = phi < phase_events[1]
+    st[:, 1 - first_foot] = (phi >= phase_events[2]) & (phi < phase_events[3])
+    return st
+
+
+def _anchors(gait: Gait, psi: np.ndarray, phase_events: np.ndarray, first_foot: int, F: int):
+    """Anchor point of each foot per frame (F, 2, 3) [m] and whether it is known (F, 2).
+
+    In stance the anchor is the stance's contact point (on its ground); in swing it moves from the
+    previous contact to the next one with min-jerk progress in stride phase.
+    """
+    anchors = np.full((F, 2, 3), np.nan)
+    ok = np.zeros((F, 2), bool)
+    for foot in range(2):
+        st = [s for s in gait.stances if s.foot == foot]
+        pts = []
+        for s in st:
+            c = s.contact_point.copy()
+            c[UP_AXIS] = s.ground
+            pts.append(c)
+            anchors[s.start : s.stop, foot] = c
+            ok[s.start : s.stop, foot] = True
+        for s0, s1, c0, c1 in zip(st[:-1], st[1:], pts[:-1], pts[1:]):
+            a, b = s0.stop, s1.start
+            if b <= a:
+                continue
+            p0, p1 = psi[a - 1] if a > 0 else psi[a], psi[b]
+            u = (psi[a:b] - p0) / max(p1 - p0, 1e-9)
+            w = min_jerk(u)[:, None]
+            anchors[a:b, foot] = c0 * (1 - w) + c1 * w
+            ok[a:b, foot] = True
+    anchors = np.where(np.isnan(anchors), 0.0, anchors)
+    return anchors, ok
+
+
+def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float) -> np.ndarray:
+    """Hold each loaded stance marker still (horizontally) and keep the rest continuous.
+
+    rel: (K, 2, 3, 3) marker offsets from the anchor (heading frame: forward, up, lateral).
+    A marker is loaded while it is within contact_tol of the ground during stance. While loaded its
+    horizontal offset is held at its value when loading began; afterwards it follows the reference's
+    relative motion from where it was held (so there is no jump). Heights are clamped to ≥ 0.
+    """
+    out = rel.copy()
+    K = rel.shape[0]
+    for foot in range(2):
+        idx = np.flatnonzero(stance[:, foot])
+        if idx.size == 0:
+            continue
+        # the stance may wrap around φ = 0: order its samples in time
+        if stance[0, foot] and stance[-1, foot]:
+            gap = np.flatnonzero(np.diff(idx) > 1)
+            if gap.size:
+                idx = np.concatenate([idx[gap[0] + 1 :], idx[: gap[0] + 1]])
+        for k in range(rel.shape[2]):
+            offset = np.zeros(2)
+            held = None
+            for i in idx:
+                loaded = rel[i, foot, k, 1] <= contact_tol
+                h = rel[i, foot, k, [0, 2]]
+                if loaded:
+                    if held is None:
+                        held = h + offset
+                    out[i, foot, k, [0, 2]] = held
+                else:
+                    if held is not None:
+                        offset = held - h
+                        held = None
+                    out[i, foot, k, [0, 2]] = h + offset
+            # after stance, fade the remaining offset out over the swing so the loop stays closed
+            if np.any(offset != 0):
+                swing = np.flatnonzero(~stance[:, foot])
+                if swing.size:
+                    start = (idx[-1] + 1) % K
+                    order = (np.arange(swing.size) + np.searchsorted(swing, start)) % swing.size
+                    sw = swing[order]
+                    fade = 1.0 - min_jerk(np.linspace(0, 1, sw.size))
+                    out[sw, foot, k][:, [0, 2]] += offset[None] * fade[:, None]
+    out[..., 1] = np.maximum(out[..., 1], 0.0)
+    return out
+
+
+def sample_cycle(cycle: ReferenceCycle, phi: np.ndarray, rotations: bool = True):
+    """Cycle quantities at stride phases phi (T,): rotations (T, J, 4) (None if not asked) and a dict of
+    linear arrays. Rotations use normalised linear interpolation: neighbouring cycle samples are a few
+    degrees apart at most, where nlerp and slerp differ by < 1e-4 rad, at a third of the cost.
+    """
+    K = cycle.n_samples
+    x = np.mod(phi, 1.0) * K
+    i0 = np.floor(x).astype(int) % K
+    i1 = (i0 + 1) % K
+    w = x - np.floor(x)
+    rot = None
+    if rotations:
+        q0, q1 = cycle.rotations[i0], cycle.rotations[i1]
+        w_ = w[:, None, None]
+        sign = np.where(np.sum(q0 * q1, axis=-1, keepdims=True) < 0, -1.0, 1.0)
+        rot = quat.normalize(q0 * (1.0 - w_) + q1 * (sign * w_))
+
+    def lin(a):
+        ww = w.reshape((-1,) + (1,) * (a.ndim - 1))
+        return a[i0] * (1 - ww) + a[i1] * ww
+
+    return rot, {
+        "root_from_com": lin(cycle.root_from_com),
+        "com_height": lin(cycle.com_height),
+        "com_forward": lin(cycle.com_forward),
+        "com_lateral": lin(cycle.com_lateral),
+        "marker_rel": lin(cycle.marker_rel),
+    }

@@ -135,23 +135,32 @@ def flight_gravity(com: np.ndarray, frame_time: float, flights, min_frames: int 
 
 
 def foot_skate_mm(markers: np.ndarray, gait: Gait, contact_tol: float) -> float:
-    """Largest sliding of a foot marker while it bears load [mm].
+    """Largest sliding of a foot marker while it stays in ground contact [mm].
 
     markers: (F, 2, 3, 3) [m]. For each stance and each marker of the stance foot, the frames in which
-    the marker is within ``contact_tol`` [m] of that stance's ground count as loaded; skate is the
-    largest horizontal distance of the marker from where it was first loaded. Rolling from heel to toe
-    changes which marker is loaded, which is not sliding.
+    the marker is within ``contact_tol`` [m] of that stance's ground are its contact frames. A contact
+    lasts until the marker lifts clearly off (above 1.5 × contact_tol: hysteresis, so noise around the
+    threshold does not split a contact); skate is the largest horizontal distance of the marker from
+    where its contact began. Rolling from heel to toe, or a toe tip that lifts and touches down again,
+    is not sliding.
     """
     worst = 0.0
     for s in gait.stances:
         seg = markers[s.start : s.stop, s.foot]  # (n, 3 markers, 3)
-        loaded = seg[..., UP_AXIS] <= s.ground + contact_tol
+        height = seg[..., UP_AXIS] - s.ground
         for k in range(seg.shape[1]):
-            idx = np.flatnonzero(loaded[:, k])
+            on = height[:, k] <= contact_tol
+            idx = np.flatnonzero(on)
             if idx.size < 2:
                 continue
-            p = seg[idx, k][:, _HORIZONTAL]
-            worst = max(worst, float(np.max(np.linalg.norm(p - p[0], axis=1))))
+            # split into contacts where the marker rose above the hysteresis band in between
+            lifted = np.array([height[a + 1 : b, k].max(initial=-np.inf) > 1.5 * contact_tol
+                               for a, b in zip(idx[:-1], idx[1:])])
+            starts = np.concatenate([[0], np.flatnonzero(lifted) + 1])
+            stops = np.concatenate([np.flatnonzero(lifted) + 1, [idx.size]])
+            for a, b in zip(starts, stops):
+                p = seg[idx[a:b], k][:, _HORIZONTAL]
+                worst = max(worst, float(np.max(np.linalg.norm(p - p[0], axis=1))))
     return 1000.0 * worst
 
 

@@ -367,13 +367,16 @@ def _mean(x) -> float:
 
 def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
     """§6: whole-body IK toward the machine COM and the foot targets, pulled toward the reference pose."""
-    from .ik import ComTask, MarkerTask, solve_ik
+    from .ik import ComTask, MarkerTask, default_frozen_joints, solve_ik
 
     tasks = [
         ComTask(body, targets.com, targets.com_weight),
         MarkerTask.feet(body, targets.markers, targets.marker_weight),
     ]
-    return solve_ik(targets.initial, tasks, body=body, on_failure=on_failure)
+    # Toes keep the reference's (time-warped) motion: the toe-end marker then fixes the foot's pitch
+    # through the ankle instead of flicking the toe joint when a loaded marker is held still.
+    frozen = sorted(set(default_frozen_joints(body)) | {body.roles["left_toe"], body.roles["right_toe"]})
+    return solve_ik(targets.initial, tasks, body=body, freeze="auto", on_failure=on_failure)
 
 
 def resolve_character(character=None, *, height=None, mass=None, leg_scale=None, arm_scale=None,
@@ -439,6 +442,66 @@ def scale(
         raise FroudeError(f"unknown method '{method}' (physical or naive)")
     path = machine_path(prep, retarget, speed=speed, n_steps=n_steps, fps=fps)
     return finish(prep, path, retarget, speed, notes, "physical")
+
+
+def accelerate(
+    prep: Prepared,
+    character=None,
+    *,
+    to_speed: float | None = None,
+    to_factor: float | None = None,
+    steps: int | None = 8,
+    within: float | None = None,
+    lead_steps: int = 2,
+    hold_steps: int = 4,
+    fps: float | None = None,
+    energy: str = "auto",
+    policy: str = "ease",
+    **character_numbers,
+) -> Result:
+    """§5.3 + §6: speed up or slow down to ``to_speed`` [m/s] or ``to_factor`` × the start speed.
+
+    steps: the change takes this many steps (a step = one stance and the flight after it), or
+    within: ... this many seconds; lead_steps / hold_steps: steady steps before / after the change.
+    The plan is dimensionless, so it is the same for every dynamically similar character.
+    """
+    from .machine.planner import plan_speed_change
+
+    char = resolve_character(character, **character_numbers)
+    retarget = apply_character(char, prep.body)
+    m = prep.machine.scaled(retarget.L, retarget.M)
+    v_unit = m.speed_unit
+    start_speed = m.U * v_unit  # apex speed of the cycle [m/s]
+    if (to_speed is None) == (to_factor is None):
+        raise FroudeError("give exactly one goal: a target speed [m/s] or a factor of the start speed")
+    target = to_speed if to_speed is not None else to_factor * start_speed
+    if not (np.isfinite(target) and target > 0):
+        raise FroudeError(f"target speed must be > 0 m/s, got {target:g} (to stop, end the motion instead)")
+    if steps is not None and within is None and not (isinstance(steps, int) and steps >= 1):
+        raise FroudeError(f"steps must be a whole number >= 1, got {steps}")
+    if within is not None and not (np.isfinite(within) and within > 0):
+        raise FroudeError(f"--within must be > 0 s, got {within}")
+    plan = plan_speed_change(
+        m, target / v_unit, n_steps=None if within is not None else steps,
+        within_time=None if within is None else within / m.time_unit, energy=energy, policy=policy,
+        lead_steps=lead_steps, hold_steps=hold_steps,
+    )
+    fps = prep.motion.fps if fps is None else float(fps)
+    path = machine_path(prep, retarget, n_steps=plan.n_steps, fps=fps, theta0=plan.theta0,
+                        controls=plan.controls, start_state=(float(plan.U[0]), float(plan.H[0])))
+    notes = list(plan.notes)
+    res = finish(prep, path, retarget, 1.0, notes, "physical", plan=plan)
+    res.report.extras.update({
+        "plan": {
+            "start_speed_m_s": start_speed, "target_speed_m_s": target,
+            "apex_speed_m_s": (plan.U * v_unit).tolist(), "apex_U": plan.U.tolist(),
+            "apex_time_s": (plan.t_apex * m.time_unit).tolist(),
+            "theta0_deg": np.degrees(plan.theta0).tolist(), "b": plan.b.tolist(),
+            "phase": ["lead" if p == 0 else "change" if p == 1 else "hold" for p in plan.phase],
+            "mode": plan.mode, "policy": plan.policy,
+        }
+    })
+    return res
 
 
 def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, notes, method: str, plan=None) -> Result:

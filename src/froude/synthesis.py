@@ -343,12 +343,14 @@ def _anchors(gait: Gait, psi: np.ndarray, phase_events: np.ndarray, first_foot: 
 
 
 def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float) -> np.ndarray:
-    """Hold each loaded stance marker still (horizontally) and keep the rest continuous.
+    """Remove the reference's foot sliding in stance by translating each foot rigidly.
 
     rel: (K, 2, 3, 3) marker offsets from the anchor (heading frame: forward, up, lateral).
-    A marker is loaded while it is within contact_tol of the ground during stance. While loaded its
-    horizontal offset is held at its value when loading began; afterwards it follows the reference's
-    relative motion from where it was held (so there is no jump). Heights are clamped to ≥ 0.
+    A marker is loaded while it is within contact_tol of the ground during stance. The three markers of
+    a foot move together by one horizontal correction δ(φ) (so the foot keeps the reference's shape and
+    orientation, which IK can then meet exactly), chosen so that every loaded marker stays where it was
+    when its loading began; when no marker that was already loaded stays loaded, δ is held. After the
+    stance δ fades out over the swing (min-jerk), so the cycle still closes. Heights are clamped to ≥ 0.
     """
     out = rel.copy()
     K = rel.shape[0]
@@ -361,30 +363,30 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float) -> 
             gap = np.flatnonzero(np.diff(idx) > 1)
             if gap.size:
                 idx = np.concatenate([idx[gap[0] + 1 :], idx[: gap[0] + 1]])
-        for k in range(rel.shape[2]):
-            offset = np.zeros(2)
-            held = None
-            for i in idx:
-                loaded = rel[i, foot, k, 1] <= contact_tol
-                h = rel[i, foot, k, [0, 2]]
-                if loaded:
-                    if held is None:
-                        held = h + offset
-                    out[i, foot, k, [0, 2]] = held
-                else:
-                    if held is not None:
-                        offset = held - h
-                        held = None
-                    out[i, foot, k, [0, 2]] = h + offset
-            # after stance, fade the remaining offset out over the swing so the loop stays closed
-            if np.any(offset != 0):
-                swing = np.flatnonzero(~stance[:, foot])
-                if swing.size:
-                    start = (idx[-1] + 1) % K
-                    order = (np.arange(swing.size) + np.searchsorted(swing, start)) % swing.size
-                    sw = swing[order]
-                    fade = 1.0 - min_jerk(np.linspace(0, 1, sw.size))
-                    out[sw, foot, k][:, [0, 2]] += offset[None] * fade[:, None]
+        h = rel[idx, foot][:, :, [0, 2]]  # (n, 3 markers, 2) horizontal offsets
+        loaded = rel[idx, foot, :, 1] <= contact_tol  # (n, 3)
+        delta = np.zeros((idx.size, 2))
+        d = np.zeros(2)
+        held = np.full((3, 2), np.nan)
+        for i in range(idx.size):  # a loop over the ~50 samples of one stance, not over frames
+            keep = loaded[i] & ~np.isnan(held[:, 0])
+            if keep.any():
+                d = np.mean(held[keep] - h[i, keep], axis=0)
+            new = loaded[i] & np.isnan(held[:, 0])
+            held[new] = h[i, new] + d
+            held[~loaded[i]] = np.nan
+            delta[i] = d
+        out[idx, foot, :, 0] += delta[:, None, 0]
+        out[idx, foot, :, 2] += delta[:, None, 1]
+        if np.any(d != 0):
+            swing = np.flatnonzero(~stance[:, foot])
+            if swing.size:
+                start = (idx[-1] + 1) % K
+                order = (np.arange(swing.size) + np.searchsorted(swing, start)) % swing.size
+                sw = swing[order]
+                fade = 1.0 - min_jerk(np.linspace(0, 1, sw.size))
+                out[sw, foot, :, 0] += d[0] * fade[:, None]
+                out[sw, foot, :, 2] += d[1] * fade[:, None]
     out[..., 1] = np.maximum(out[..., 1], 0.0)
     return out
 

@@ -1,0 +1,68 @@
+"""``froude fit CLIP.bvh -o MACHINE.json [--plot FIT.png] [--mass KG]``: §4, the simple machine of a clip."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from ..body import BodyModel
+from ..machine.fit import fit_machine_detailed
+from .common import add_load_options, load_clip, say
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "fit", help="fit the simple running machine (point mass on a spring leg) to a running clip",
+        description="Fit Pollard's simple running machine (1999, section 4) to a running clip: ground force from "
+        "the COM (eq. 1), per-stance leg geometry and control fits (eq. 2), and a periodic running cycle that "
+        "matches the measured stance time, flight time and speed. Prints a table; writes the machine as JSON.",
+    )
+    p.add_argument("clip", help="BVH file of a running motion")
+    p.add_argument("-o", "--output", required=True, help="machine JSON to write (schema froude.machine/1)")
+    p.add_argument("--plot", default=None, metavar="PNG", help="also write Figure 2 of the paper for this clip")
+    p.add_argument("--mass", type=float, default=70.0, help="body mass [kg] (default 70)")
+    add_load_options(p)
+    p.set_defaults(func=run)
+
+
+def fit_table(res) -> str:
+    """The per-stance and cycle table printed by ``froude fit``."""
+    m = res.machine
+    T = m.time_unit
+    lines = ["stance  foot   t_td [s]  dur [s]  l0 [m]  θtd [°]  θlo [°]  drop [cm]  Fz pk [BW]      K       a       b"
+             "       c     r²"]
+    for i, (sg, ft) in enumerate(zip(res.stances, res.stance_fits)):
+        fit = "      (partial: not fitted)" if ft is None else (
+            f" {ft.K:6.1f} {ft.a:+7.3f} {ft.b:+7.3f} {ft.c:+7.3f} {ft.r2:6.3f}")
+        lines.append(f"{i:>6}  {('left', 'right')[sg.foot]:<5} {sg.t_touchdown:9.3f} {sg.duration:8.3f} {sg.l0:7.3f} "
+                     f"{math.degrees(sg.theta_touchdown):8.1f} {math.degrees(sg.theta_liftoff):8.1f} "
+                     f"{100 * sg.com_drop:10.1f} {sg.peak_vertical_force / (m.mass * m.g):11.2f}{fit}")
+    ref, q = m.reference, m.quality
+    lines += [
+        "",
+        f"cycle   U = {m.U:.4f}  H = {m.H:.4f}  θ0 = {math.degrees(m.theta0):.2f}°  K = {m.K:.2f}  "
+        f"a = {m.a:+.4f}  b = {m.b:+.4f}  c = {m.c:+.4f}  T_c = {m.T_c:.4f}   (l0 = {m.l0:.3f} m, m = {m.mass:g} kg)",
+        f"        k = {m.k / 1000:.2f} kN/m, periodic to {m.periodicity:.1e} ({m.iterations} simulator calls), "
+        f"peak leg force {m.peak_force:.2f} BW",
+        f"        stance {m.t_stance * T:.3f} s (measured {ref['stance_time_s']:.3f}, {100 * q['stance_time_error']:+.1f}%)"
+        f"  flight {m.t_flight * T:.3f} s (measured {ref['flight_time_s']:.3f}, {100 * q['flight_time_error']:+.1f}%)",
+        f"        mean speed {m.mean_speed * m.speed_unit:.3f} m/s (measured {ref['mean_speed_m_s']:.3f}, "
+        f"{100 * q['mean_speed_error']:+.1f}%)  COM height RMS vs reference over a stride {100 * q['com_rms_m']:.2f} cm",
+        f"forces  flight residual {ref['flight_residual_bw']:.3f} BW RMS; share of stance force captured: "
+        f"along the leg {100 * ref['shares']['leg']:.0f}%, vertical only {100 * ref['shares']['vertical']:.0f}%",
+    ]
+    return "\n".join(lines)
+
+
+def run(args) -> int:
+    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames)
+    body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
+    res = fit_machine_detailed(motion, body, source=Path(args.clip).name)
+    print(fit_table(res))
+    if args.plot:
+        from ..viz.fit_plot import plot_fit
+
+        plot_fit(res, args.plot, title=Path(args.clip).name)
+        say(f"wrote {args.plot}")
+    res.machine.save(args.output)
+    say(f"wrote {args.output}")
+    return 0

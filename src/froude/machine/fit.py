@@ -1,0 +1,422 @@
+"""§4 end to end: fit the simple running machine to a reference motion (``froude fit``).
+
+    motion → body COM + foot markers → gait (marker contacts) → zero-lag filtered COM → eq. 1 forces
+    → force-refined touchdown / liftoff → per-stance leg geometry and eq. 2 control fits
+    → stance-averaged control + measured priors → periodic cycle search → SimpleMachine
+
+Control fit (eq. 2, per stance, dimensionless: l/l0, f/(m g)). The plain four-parameter least squares
+in (k, k a, k b, k c) is ill-conditioned on capture data: the leg compression l0 − l(τ) over a
+stance is itself close to a quadratic in τ, so k trades against b and c (it returns K ≈ 40-55 with
+l_d dipping by 10 % of l0 on these clips). We therefore fit **spring first**: K (and an offset) by
+least squares of f_leg against the compression alone — McMahon & Cheng's leg spring — then a, b, c by
+least squares of the remaining force with K held (still linear). The four-parameter fit is kept in the
+per-stance report as ``fit_free`` for comparison.
+
+Cycle search: the variables z = (U, H, θ0, K, a, b, c) (T_c held at the measured mean stance time)
+must make the step map periodic (U' = U, H' = H) *and* reproduce the measured stance time, flight
+time and mean speed (step length / step time): five equations in seven unknowns. Newton iterations
+take the minimum-norm step in coordinates scaled by ``CYCLE_SCALES`` from the measured priors z0
+(so the solution is the periodic machine nearest the data), with a forward-difference Jacobian whose
+seven perturbed rows are evaluated in the **same** vectorised step() call as the iterate itself:
+one simulator call per iteration, an extra one only on a rejected step.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..body import BodyModel
+from ..constants import GRAVITY, UP_AXIS
+from ..errors import FitError, NotARunningMotion
+from ..gait import detect_gait, require_running, summarize
+from ..motion import Motion
+from .control_fit import fit_leg_control
+from .dynamics import N_PER_STANCE, REASONS, Control, simulate, step
+from .forces import (CUTOFF_HZ, EVENT_THRESHOLD_BW, StanceGeometry, flight_residual, force_shares,
+                     ground_force, refine_events, sagittal_frame, smooth_com, stance_geometry)
+from .model import SimpleMachine
+
+__all__ = ["StanceFit", "FitResult", "fit_stance_control", "fit_machine", "fit_machine_detailed",
+           "CYCLE_SCALES", "SWAY_SAMPLES"]
+
+#: Scales of the cycle variables for the minimum-norm search (K relative to its prior).
+CYCLE_SCALES = {"U": 0.05, "H": 0.02, "theta0": 0.03, "K": 0.1, "a": 0.01, "b": 0.02, "c": 0.02}
+_VARS = ("U", "H", "theta0", "K", "a", "b", "c")
+#: Samples of the lateral sway profile over one stride.
+SWAY_SAMPLES = 32
+
+
+@dataclass(frozen=True)
+class StanceFit:
+    """Eq. 2 fitted to one stance (dimensionless: l0 = 1, forces in m g).
+
+    K, a, b, c: spring-first fit; r2: coefficient of determination of f_leg; rms: RMS residual [m g];
+    K_free, a_free, b_free, c_free, r2_free: the plain four-parameter least squares, for comparison.
+    """
+
+    K: float
+    a: float
+    b: float
+    c: float
+    r2: float
+    rms: float
+    K_free: float
+    a_free: float
+    b_free: float
+    c_free: float
+    r2_free: float
+
+    def desired_length(self, tau):
+        """l_d(τ)/l0 = 1 + a + b τ + c τ²."""
+        tau = np.asarray(tau, float)
+        return 1.0 + self.a + tau * (self.b + self.c * tau)
+
+    def force(self, tau, l):
+        """Model leg force K (l_d(τ) − l) [m g] for l in units of l0."""
+        return self.K * (self.desired_length(tau) - np.asarray(l, float))
+
+
+def fit_stance_control(tau, l, f_leg) -> StanceFit:
+    """Spring-first least-squares fit of eq. 2 (see module doc), dimensionless.
+
+    tau: (N,) stance phase [-]; l: (N,) leg length / l0 [-]; f_leg: (N,) leg force / (m g) [-].
+    Several stances may be pooled (concatenate; each with its own l0 normalisation).
+    """
+    tau = np.asarray(tau, float)
+    l = np.asarray(l, float)
+    f = np.asarray(f_leg, float)
+    if tau.size < 6:
+        raise FitError(f"need at least 6 stance samples to fit the control, got {tau.size}")
+    comp = 1.0 - l
+    A = np.stack([comp, np.ones_like(comp)], axis=1)
+    (K, _), *_ = np.linalg.lstsq(A, f, rcond=None)
+    if not K > 0:
+        raise FitError(f"the leg does not act as a spring in this stance (fitted K = {K:.3g})")
+    B = np.stack([np.ones_like(tau), tau, tau * tau], axis=1)
+    coef, *_ = np.linalg.lstsq(B, f - K * comp, rcond=None)
+    a, b, c = coef / K
+    resid = f - K * comp - B @ coef
+    ss_tot = float(np.sum((f - f.mean()) ** 2))
+    r2 = 1.0 - float(np.sum(resid ** 2)) / ss_tot if ss_tot > 0 else float("nan")
+    try:
+        free = fit_leg_control(tau, l, f, 1.0)
+        K_free, a_f, b_f, c_f, r2_f = free.k, free.a, free.b, free.c, free.r2
+    except FitError:
+        K_free = a_f = b_f = c_f = r2_f = float("nan")
+    return StanceFit(float(K), float(a), float(b), float(c), float(r2), float(np.sqrt(np.mean(resid ** 2))),
+                     float(K_free), float(a_f), float(b_f), float(c_f), float(r2_f))
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """Everything ``fit_machine`` computed, for reports and plots (SI unless stated).
+
+    machine: the SimpleMachine. times (F,) [s]; p_world_com (F, 3) smoothed COM [m]; f_world (F, 3)
+    eq. 1 force [N]; stances: tuple of StanceGeometry; stance_fits: tuple (StanceFit | None per stance);
+    pooled: StanceFit of all full stances; stride_events (5,) reference event times [s];
+    stride_kinds: 'TD'/'LO' per event; machine_event_times (5,) the matching machine times [s];
+    t_ref (N,) reference frame times in the stride [s], h_ref (N,) reference COM height above the
+    ground [m], h_machine (N,) machine COM height at the phase-matched times [m];
+    traj: the machine's dense one-step Trajectory (dimensionless).
+    """
+
+    machine: SimpleMachine
+    times: np.ndarray
+    p_world_com: np.ndarray
+    f_world: np.ndarray
+    stances: tuple
+    stance_fits: tuple
+    pooled: StanceFit
+    stride_events: np.ndarray
+    stride_kinds: tuple
+    machine_event_times: np.ndarray
+    t_ref: np.ndarray
+    h_ref: np.ndarray
+    h_machine: np.ndarray
+    traj: object
+
+
+def fit_machine(motion: Motion, body: BodyModel | None = None, mass: float = 70.0, **kw) -> SimpleMachine:
+    """Fit the simple running machine to a running motion (§4). See :func:`fit_machine_detailed`."""
+    return fit_machine_detailed(motion, body, mass, **kw).machine
+
+
+def _events(stances_geo, gait_stances, n_frames):
+    """Valid in-clip events as (time [s], kind 'TD'/'LO', stance index), sorted."""
+    ev = []
+    for i, (sg, st) in enumerate(zip(stances_geo, gait_stances)):
+        if st.start > 0:
+            ev.append((sg.t_touchdown, "TD", i))
+        if st.stop < n_frames:
+            ev.append((sg.t_liftoff, "LO", i))
+    ev.sort()
+    return ev
+
+
+def _stride_window(ev):
+    """Five consecutive alternating events spanning one stride; prefer one starting at a touchdown."""
+    best = None
+    for j in range(len(ev) - 4):
+        w = ev[j:j + 5]
+        kinds = [k for _, k, _ in w]
+        if kinds not in (["TD", "LO", "TD", "LO", "TD"], ["LO", "TD", "LO", "TD", "LO"]):
+            continue
+        # each TD→LO pair must be the same stance, consecutive stances otherwise
+        idx = [i for _, _, i in w]
+        ok = all((idx[q + 1] == idx[q]) if kinds[q] == "TD" else (idx[q + 1] == idx[q] + 1) for q in range(4))
+        if ok and (best is None or (kinds[0] == "TD" and best[0][1] != "TD")):
+            best = w
+    return best
+
+
+def _cycle_search(z0, T_c, targets, n_per_stance, tol=1e-10, max_iter=30, n_coarse=16):
+    """Minimum-norm Newton for the periodic cycle matching targets (see module doc).
+
+    z0: (7,) priors (U, H, θ0, K, a, b, c); T_c: held nominal stance time; targets: (t_stance, t_flight,
+    mean_speed), all dimensionless. Two phases keep the simulator calls cheap: Newton with a batched
+    forward-difference Jacobian on a coarse stance grid (``n_coarse`` RK4 steps) down to 1e-7, then
+    chord iterations at full resolution (``n_per_stance``) that reuse the last Jacobian and need only
+    the single-row step per iteration (a fresh full-resolution Jacobian only if the chord stalls).
+    Returns (z, StepResult row dict, simulator calls, residual vector).
+    """
+    s = np.array([CYCLE_SCALES[v] for v in _VARS])
+    s[3] *= abs(z0[3])
+    h = 1e-7 * np.maximum(np.abs(z0), 1.0)
+    tgt = np.asarray(targets, float)
+    wt = 1.0 / np.maximum(np.abs(tgt), 1e-3)  # target rows are relative errors
+
+    def evaluate(Z, n):
+        ctl = Control(K=Z[:, 3], a=Z[:, 4], b=Z[:, 5], c=Z[:, 6], T_c=T_c)
+        r = step(Z[:, 0], Z[:, 1], Z[:, 2], ctl, n_per_stance=n)
+        t_step = r.t_fall + r.t_stance + r.t_rise
+        R = np.stack([r.U_next - Z[:, 0], r.H_next - Z[:, 1],
+                      (r.t_stance - tgt[0]) * wt[0], (r.t_rise + r.t_fall - tgt[1]) * wt[1],
+                      (r.apex_dx / t_step - tgt[2]) * wt[2]], axis=1)
+        return R, r
+
+    def newton_target(z, J, R0):
+        Js = J * s[None, :]
+        y = (z - z0) / s
+        y_new, *_ = np.linalg.lstsq(Js, Js @ y - R0, rcond=1e-12)
+        return z0 + s * y_new
+
+    z = z0.copy()
+    z_prev, nrm_prev, J = None, np.inf, None
+    calls = 0
+    fine = False
+    nrm = np.inf
+    R = r = None
+    for _ in range(max_iter):
+        n = n_per_stance if fine else n_coarse
+        need_jac = (not fine) or J is None
+        Z = np.repeat(z[None, :], 8 if need_jac else 1, axis=0)
+        if need_jac:
+            Z[1 + np.arange(7), np.arange(7)] += h
+        R, r = evaluate(Z, n)
+        calls += 1
+        nrm = float(np.max(np.abs(R[0]))) if r.valid[0] else np.inf
+        if z_prev is not None and not nrm < nrm_prev:
+            if fine and not need_jac:
+                J = None  # the chord stalled: take a fresh full-resolution Jacobian here
+                z, z_prev, nrm_prev = z_prev, None, np.inf
+            else:
+                z = z_prev + 0.5 * (z - z_prev)  # rejected Newton step: halve it
+            continue
+        if fine and nrm <= tol:
+            break
+        if not fine and nrm <= 1e-7:
+            fine, z_prev, nrm_prev = True, None, np.inf  # coarse fixed point found; J kept for the chord
+            continue
+        if need_jac:
+            if not np.all(r.valid):
+                raise FitError("no running cycle found: the search left the feasible region "
+                               f"({REASONS[int(r.reason[~r.valid][0])]})")
+            J = ((R[1:] - R[0]) / h[:, None]).T  # (5, 7)
+        z_prev, nrm_prev = z, nrm
+        z = newton_target(z, J, R[0])
+    if not (fine and nrm <= tol):
+        raise FitError(f"no periodic running cycle found within {max_iter} simulator calls (residual {nrm:.2g})")
+    row = {f: np.asarray(getattr(r, f))[0] for f in ("t_fall", "t_stance", "t_rise", "apex_dx", "peak_force",
+                                                    "U_next", "H_next")}
+    return z, row, calls, R[0]
+
+
+def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: float = 70.0, *,
+                         cutoff_hz: float = CUTOFF_HZ, n_per_stance: int = N_PER_STANCE,
+                         source: str | None = None) -> FitResult:
+    """Fit the simple running machine to a running motion, with everything needed to report on it.
+
+    motion: the reference (SI); body: its BodyModel (built from the skeleton with ``mass`` if None);
+    mass: body mass [kg]; cutoff_hz: COM low-pass cutoff [Hz]; n_per_stance: simulator resolution.
+    Raises NotARunningMotion (walks, jumps in place, < 2 full stances) or FitError.
+    """
+    src = source or str(motion.meta.get("source") or "motion")
+    if body is None:
+        body = BodyModel.from_skeleton(motion.skeleton, mass=mass)
+    mass = body.total_mass
+    mg = mass * GRAVITY
+    com, markers = body.com_and_markers(motion)
+    gait = detect_gait(motion, body, markers)
+    summary = summarize(motion, body, com, gait)
+    require_running(summary, src)
+    if sum(not st.partial for st in gait.stances) < 2:
+        raise NotARunningMotion(
+            f"{src}: only {sum(not st.partial for st in gait.stances)} complete stance phase(s) (of {len(gait.stances)} contacts); "
+            "the fit needs two consecutive full stances (one step) and a stride of events")
+    dt = motion.frame_time
+    F = motion.n_frames
+    times = np.arange(F) * dt
+    p, v, acc = smooth_com(com, dt, cutoff_hz)
+    f = ground_force(acc, mass)
+    fy_bw = f[:, UP_AXIS] / mg
+    heading, lateral = sagittal_frame(summary.heading)
+
+    # Lateral COM line (least squares over the clip): sway and foot offsets are measured from it.
+    lat = p @ lateral
+    line = np.polyfit(times, lat, 1)
+
+    geo = []
+    stances = []
+    for st in gait.stances:
+        td, lo, _, _ = refine_events(fy_bw, st.start, st.stop, dt, st.partial)
+        if st.partial and lo - td < 4:
+            continue  # a sliver of a contact at the clip's edge: nothing to measure
+        stances.append(st)
+        t_mid = 0.5 * (td + lo) * dt
+        geo.append(stance_geometry(st, td, lo, p, f, markers, heading, lateral, dt, float(np.polyval(line, t_mid))))
+    full = [sg for sg in geo if not sg.partial]
+
+    # Per-stance and pooled control fits (dimensionless).
+    fits = []
+    for sg in geo:
+        fits.append(None if sg.partial else fit_stance_control(sg.tau, sg.l / sg.l0, sg.f_leg / mg))
+    pooled = fit_stance_control(np.concatenate([s.tau for s in full]),
+                                np.concatenate([s.l / s.l0 for s in full]),
+                                np.concatenate([s.f_leg / mg for s in full]))
+
+    # Measured figures.
+    ev = _events(geo, stances, F)
+    flights = [(geo[i].t_liftoff, geo[i + 1].t_touchdown) for i in range(len(geo) - 1)
+               if stances[i].stop < F and stances[i + 1].start > 0]
+    if not flights:
+        raise NotARunningMotion(f"{src}: no complete flight phase between two contacts")
+    stance_time = float(np.mean([s.duration for s in full]))
+    flight_time = float(np.mean([b - a for a, b in flights]))
+    win = _stride_window(ev)
+    if win is None:
+        raise NotARunningMotion(f"{src}: no complete stride (touchdown, liftoff, touchdown, liftoff, touchdown "
+                                "or the same from a liftoff) inside the clip")
+    e = np.array([t for t, _, _ in win])
+    kinds = tuple(k for _, k, _ in win)
+    x_fwd = p @ heading
+    mean_speed = float((np.interp(e[4], times, x_fwd) - np.interp(e[0], times, x_fwd)) / (e[4] - e[0]))
+
+    def ground_at(t):
+        """Ground height under the runner at times t: the stance's during stance, interpolated in flight."""
+        tk = np.array([0.5 * (s.t_touchdown + s.t_liftoff) for s in geo])
+        gk = np.array([s.ground for s in geo])
+        g_t = np.interp(t, tk, gk)
+        for s in geo:
+            g_t = np.where((t >= s.t_touchdown) & (t <= s.t_liftoff), s.ground, g_t)
+        return g_t
+
+    apex_h, apex_u = [], []
+    for a, b in flights:
+        m = (times >= a) & (times <= b)
+        if m.sum() >= 2:
+            apex_h.append(float(np.max(p[m, UP_AXIS] - ground_at(times[m]))))
+            apex_u.append(float(np.mean(v[m] @ heading)))
+    in_stance = np.zeros(F, bool)
+    for s in geo:
+        in_stance[s.frames] = True
+    marker_flight = np.zeros(F, bool)
+    for a, b in gait.flights:
+        marker_flight[a:b] = True
+    flight_mask = marker_flight & ~in_stance
+    residual_bw = flight_residual(f, mass, flight_mask)
+    shares = force_shares(full)
+
+    # Priors (dimensionless, l0 = mean touchdown leg length of the full stances).
+    l0 = float(np.mean([s.l0 for s in full]))
+    T = math.sqrt(l0 / GRAVITY)
+    V = math.sqrt(GRAVITY * l0)
+    theta0 = float(np.mean([s.theta_touchdown for s in full]))
+    U0 = (np.mean(apex_u) if apex_u else summary.mean_speed) / V
+    H0 = (np.mean(apex_h) if apex_h else l0) / l0
+    H0 = max(H0, math.cos(theta0) + 1e-3)
+    z0 = np.array([U0, H0, theta0, pooled.K, pooled.a, pooled.b, pooled.c])
+    T_c = stance_time / T
+    z, row, iters, res = _cycle_search(z0, T_c, (stance_time / T, flight_time / T, mean_speed / V), n_per_stance)
+    U, H, th, K, a, b, c = map(float, z)
+    ctl = Control(K=K, a=a, b=b, c=c, T_c=T_c)
+    t_fall, t_st, t_rise = float(row["t_fall"]), float(row["t_stance"]), float(row["t_rise"])
+    step_time = t_fall + t_st + t_rise
+    periodicity = float(max(abs(row["U_next"] - U), abs(row["H_next"] - H)))
+
+    # Machine COM height over the stride, phase-matched segment by segment (stance→stance, flight→flight).
+    traj = simulate(U, H, th, ctl, dt / T / 2.0, n_steps=1, n_per_stance=n_per_stance)
+    m_td = t_fall  # machine touchdown time within its step (from the apex)
+    seg_m = np.array([0.0, t_st, t_st + (t_rise + t_fall), 2 * t_st + (t_rise + t_fall), 2 * (step_time)])
+    if kinds[0] == "LO":
+        seg_m = np.array([0.0, t_rise + t_fall, step_time, step_time + t_rise + t_fall, 2 * step_time])
+        m_td = t_fall + t_st
+    sel = (times >= e[0]) & (times <= e[4])
+    t_ref = times[sel]
+    s_m = np.interp(t_ref, e, seg_m)  # machine time since the stride's first event
+    t_sim = (m_td + s_m) % step_time
+    h_mach = np.interp(t_sim, traj.t, traj.pos[:, 1]) * l0
+    h_ref = p[sel, UP_AXIS] - ground_at(t_ref)
+    com_rms = float(np.sqrt(np.mean((h_mach - h_ref) ** 2)))
+
+    # Lateral sway over the stride (uniform phase) and lateral foot offsets.
+    phase = np.arange(SWAY_SAMPLES) / SWAY_SAMPLES
+    t_sw = e[0] + phase * (e[4] - e[0])
+    sway = np.interp(t_sw, times, lat) - np.polyval(line, t_sw)
+    foot_off = np.array([np.mean([s.lateral_offset for s in geo if s.foot == k] or [np.nan]) for k in (0, 1)])
+
+    def stance_dict(sg, ft):
+        d = {"foot": ("left", "right")[sg.foot], "partial": sg.partial, "t_touchdown_s": sg.t_touchdown,
+             "t_liftoff_s": sg.t_liftoff, "duration_s": sg.duration, "l0_m": sg.l0,
+             "theta_touchdown_rad": sg.theta_touchdown, "theta_liftoff_rad": sg.theta_liftoff,
+             "com_drop_m": sg.com_drop, "peak_vertical_force_bw": sg.peak_vertical_force / mg,
+             "contact_m": sg.p_world_contact, "ground_m": sg.ground, "lateral_offset_m": sg.lateral_offset,
+             "fit": None, "fit_free": None}
+        if ft is not None:
+            d["fit"] = {"K": ft.K, "a": ft.a, "b": ft.b, "c": ft.c, "r2": ft.r2, "rms_bw": ft.rms}
+            d["fit_free"] = {"K": ft.K_free, "a": ft.a_free, "b": ft.b_free, "c": ft.c_free, "r2": ft.r2_free}
+        return d
+
+    stride_feet = [("left", "right")[geo[i].foot] for _, _, i in win]
+    reference = {
+        "stance_time_s": stance_time, "flight_time_s": flight_time, "mean_speed_m_s": mean_speed,
+        "apex_height_m": float(np.mean(apex_h)) if apex_h else None,
+        "apex_speed_m_s": float(np.mean(apex_u)) if apex_u else None,
+        "frame_time_s": dt,
+        "stride": {"first_event": kinds[0], "kinds": list(kinds), "t_events_s": e, "feet": stride_feet,
+                   "frames": np.round(e / dt, 3)},
+        "flight_residual_bw": residual_bw, "shares": shares,
+        "pooled_fit": {"K": pooled.K, "a": pooled.a, "b": pooled.b, "c": pooled.c, "r2": pooled.r2,
+                       "rms_bw": pooled.rms},
+        "filter": {"kind": "butterworth forward-backward, quadratic edge extension", "cutoff_hz": cutoff_hz,
+                   "event_threshold_bw": EVENT_THRESHOLD_BW},
+    }
+    quality = {
+        "com_rms_m": com_rms,
+        "stance_time_error": t_st * T / stance_time - 1.0,
+        "flight_time_error": (t_rise + t_fall) * T / flight_time - 1.0,
+        "mean_speed_error": float(row["apex_dx"]) / step_time * V / mean_speed - 1.0,
+    }
+    machine = SimpleMachine(
+        U=U, H=H, theta0=th, K=K, a=a, b=b, c=c, T_c=T_c, t_stance=t_st, t_flight=t_rise + t_fall,
+        t_fall=t_fall, t_rise=t_rise, step_length=float(row["apex_dx"]), step_time=step_time,
+        mean_speed=float(row["apex_dx"]) / step_time, peak_force=float(row["peak_force"]),
+        periodicity=periodicity, iterations=iters, mass=mass, l0=l0, g=GRAVITY, source=src,
+        heading=heading, lateral=lateral, up=np.eye(3)[UP_AXIS], ground=float(gait.ground),
+        lateral_foot_offset=foot_off, lateral_sway=sway, lateral_sway_phase=phase,
+        reference=reference, stances=tuple(stance_dict(sg, ft) for sg, ft in zip(geo, fits)), quality=quality,
+    )
+    return FitResult(machine=machine, times=times, p_world_com=p, f_world=f, stances=tuple(geo),
+                     stance_fits=tuple(fits), pooled=pooled, stride_events=e, stride_kinds=kinds,
+                     machine_event_times=seg_m * T, t_ref=t_ref, h_ref=h_ref, h_machine=h_mach, traj=traj)

@@ -1,0 +1,870 @@
+"""§5.3: plan acceleration and deceleration of the simple machine, step by step (dimensionless).
+
+A *step* is one stance and the flight after it, apex → apex; a stride is two steps. The state at
+each apex is (U, H) (speed [√(g l0)], height [l0]); per step the planner chooses the touchdown angle
+θ0 — the paper's control input (eq. 5) — and, only where θ0 alone cannot do the job, a small change
+δb of the control's linear leg-extension coefficient b ("push harder / softer").
+
+Why b and not a. At a running cycle the step map nearly conserves the apex energy E = ½U² + H
+whatever θ0 is (measured: |∂E'/∂θ0| ≈ 0.03 per rad, the fitted controls inject and remove about
+the same work): a steeper or flatter leg only trades speed for height. Halving U = 1.2 with θ0 alone
+would lift the apex by ½(1.2² − 0.6²) = 0.54 l0, a bound rather than a run, and U × 1.3 would need
+an apex below the touchdown height. Energy must be added or removed in stance. Of the control's
+coefficients, a (length offset) acts like θ0 (it trades U for H, ∂E'/∂a ≈ 0.1), while b (desired
+length growing by b l0 over the stance) changes the actuator work ∫ f dl_d almost purely: ∂E'/∂b ≈
+2.5, ∂U'/∂b ≈ 0.04. So δb is the runner extending the leg more (accelerating) or less (braking)
+during the push; the planner keeps |δb| within ``Comfort.b_band``.
+
+Policy (documented in :func:`plan_speed_change`):
+
+* reference speeds: U_ref(k) = U0 + (U_t − U0) s(k/n) for the n change steps, with s the
+  ``"ease"`` (smoothstep 3x² − 2x³: zero acceleration at both ends, peak change 1.5× the mean) or
+  ``"even"`` (s(x) = x: equal ΔU per step) profile; monotone, so apex speeds never overshoot;
+* reference heights: H_ref(k) = H0 + (H_t − H0) s(k/n), where (U_t, H_t) is the *target cycle*:
+  a periodic orbit of the machine at U_t found by :func:`target_cycle` (θ0, H free; b too if the
+  fitted control has no orbit there);
+* each step solves for its inputs with the exact simulator :func:`~froude.machine.dynamics.step`:
+  ``energy="theta"`` — θ0 only (b stays the fitted one), U' = U_ref exactly, H' goes where the
+  physics takes it; ``energy="b"`` — θ0 and δb, (U', H') = (U_ref, H_ref) exactly (2 × 2 Newton);
+  ``energy="auto"`` (default) — θ0 only if that plan meets every comfort bound and ends within
+  ``Comfort.settle_H`` of a periodic orbit at U_t, else θ0 + δb;
+* the initial θ0 comes from the transition table (``theta_for_speed``) when one is given, else
+  from one batched scan of the simulator over the θ0 band; Newton iterations then run on the
+  simulator itself (finite-difference Jacobian rows batched into one call), so every planned apex
+  state is the simulator's own output: the plan is exact against
+  :func:`~froude.machine.dynamics.simulate`, not an interpolant;
+* lead steps (before) and hold steps (after) track the start and target cycles' fixed points.
+
+Everything is dimensionless (l0 = g = m = 1); nothing here depends on a character's size or mass,
+so one plan serves every dynamically similar character. SI appears only in :meth:`SpeedPlan.to_si`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+
+from froude.errors import PlanError
+from froude.machine.cycle import LimitCycle, step_map_eigenvalues
+from froude.machine.dynamics import REASONS, Control, StepResult, Trajectory, fall_time, simulate, step
+
+__all__ = ["Comfort", "SpeedPlan", "plan_speed_change", "plan_speed_profile", "target_cycle",
+           "one_step_range", "sustainable_range", "speed_fraction_at", "POLICIES", "ENERGY_MODES"]
+
+POLICIES = ("ease", "even")
+ENERGY_MODES = ("auto", "theta", "b")
+LEAD, CHANGE, HOLD = 0, 1, 2
+_PHASE_NAMES = {LEAD: "lead", CHANGE: "change", HOLD: "hold"}
+
+#: Newton tolerance on the reference hit, max(|U' − U_ref|, |H' − H_ref|).
+_TOL = 1e-11
+
+
+@dataclass(frozen=True)
+class Comfort:
+    """Feasibility and comfort bounds of a plan (dimensionless; relative to the start cycle).
+
+    theta_band:  |θ0 − θ0_cycle| ≤ theta_band [rad] (default 20°)
+    H_band:      apex height within H_cycle + (lo, hi) [l0]
+    b_band:      |b − b_cycle| ≤ b_band [l0 per stance]; 0 forbids the energy knob
+    max_stance:  t_stance ≤ max_stance × the cycle's t_stance
+    max_peak_force: peak leg force ≤ max_peak_force × the cycle's peak force
+    settle_H:    θ0-only plans must end within settle_H [l0] of a periodic orbit at the target
+    """
+
+    theta_band: float = math.radians(20.0)
+    H_band: tuple = (-0.10, 0.15)
+    b_band: float = 0.08
+    max_stance: float = 2.0
+    max_peak_force: float = 1.6
+    settle_H: float = 0.01
+
+
+@dataclass(frozen=True)
+class SpeedPlan:
+    """A planned sequence of n steps (dimensionless: l0, √(l0/g), √(g l0), m g; angles rad).
+
+    Per step i (apex i → apex i+1), shape (n,):
+      theta0:      touchdown angle [rad]
+      b:           the control's b used [l0 per stance] (= the cycle's unless δb was needed)
+      controls:    tuple of n :class:`Control` — pass to ``simulate`` as is
+      t_fall, t_stance, t_rise: apex → touchdown, stance, liftoff → next apex [√(l0/g)]
+      t_flight:    liftoff → next touchdown (t_rise + next step's fall; the last step assumes its own θ0)
+      step_length: this contact → next contact [l0] (last step: the next contact at its own θ0)
+      x_contact:   contact point x [l0] (x = 0 at apex 0)
+      peak_force:  [m g]
+      phase:       int8: 0 lead, 1 change, 2 hold
+    Per apex, shape (n+1,):
+      U, H:        apex speed [√(g l0)] and height [l0] (simulator output, exact)
+      U_ref:       the speed the planner aimed at (U_ref[0] = U[0])
+      t_apex, x_apex: time [√(l0/g)] and x [l0] of each apex
+    Summary: U_start, U_target; target (the target cycle's LimitCycle); mode ("theta" or "b");
+    policy; feasible (every bound met, final speed within 3 %, monotone); notes (tuple of str).
+    """
+
+    theta0: np.ndarray
+    b: np.ndarray
+    controls: tuple
+    U: np.ndarray
+    H: np.ndarray
+    U_ref: np.ndarray
+    t_apex: np.ndarray
+    x_apex: np.ndarray
+    x_contact: np.ndarray
+    t_fall: np.ndarray
+    t_stance: np.ndarray
+    t_rise: np.ndarray
+    t_flight: np.ndarray
+    step_length: np.ndarray
+    peak_force: np.ndarray
+    phase: np.ndarray
+    U_start: float
+    U_target: float
+    target: LimitCycle | None
+    mode: str
+    policy: str
+    feasible: bool
+    notes: tuple = ()
+
+    @property
+    def n_steps(self) -> int:
+        return int(self.theta0.size)
+
+    @property
+    def step_time(self) -> np.ndarray:
+        """(n,) apex → apex durations [√(l0/g)]."""
+        return np.diff(self.t_apex)
+
+    @property
+    def change_steps(self) -> np.ndarray:
+        """Indices of the change steps."""
+        return np.flatnonzero(self.phase == CHANGE)
+
+    def trajectory(self, dt: float) -> Trajectory:
+        """Dense machine trajectory of the whole plan via ``simulate`` (dt in √(l0/g))."""
+        return simulate(float(self.U[0]), float(self.H[0]), self.theta0, self.controls, dt)
+
+    def speed_at(self, t) -> np.ndarray:
+        """Running speed at time t [√(l0/g)]: apex speeds interpolated linearly over apex times
+        (clamped at the ends). The COM's instantaneous horizontal speed also dips in each stance;
+        this is the speed a viewer reads off stride by stride."""
+        return np.interp(np.asarray(t, float), self.t_apex, self.U)
+
+    def to_si(self, l0_m: float, g: float = 9.81) -> dict:
+        """SI views for one character of touchdown leg length l0 [m]: apex speeds [m/s], apex
+        heights and contact x [m], apex times and durations [s], touchdown angles [deg]."""
+        T, V = math.sqrt(l0_m / g), math.sqrt(g * l0_m)
+        return {"U_m_s": self.U * V, "H_m": self.H * l0_m, "t_apex_s": self.t_apex * T,
+                "x_contact_m": self.x_contact * l0_m, "t_stance_s": self.t_stance * T,
+                "t_flight_s": self.t_flight * T, "step_length_m": self.step_length * l0_m,
+                "theta0_deg": np.degrees(self.theta0)}
+
+    def summary(self) -> str:
+        """One line per step: phase, θ0 [deg], δb, U, H, times."""
+        rows = [f"{'i':>3} {'phase':>6} {'theta0':>8} {'b':>8} {'U':>7} {'H':>7} {'t_st':>6} {'t_fl':>6}"]
+        for i in range(self.n_steps):
+            rows.append(f"{i:>3} {_PHASE_NAMES[int(self.phase[i])]:>6} {math.degrees(self.theta0[i]):8.3f} "
+                        f"{self.b[i]:8.4f} {self.U[i + 1]:7.4f} {self.H[i + 1]:7.4f} "
+                        f"{self.t_stance[i]:6.3f} {self.t_flight[i]:6.3f}")
+        return "\n".join(rows)
+
+
+def speed_fraction_at(plan: SpeedPlan, t) -> np.ndarray:
+    """Running speed at time t [√(l0/g)] (see :meth:`SpeedPlan.speed_at`) as a fraction of the
+    start speed. For a character of leg length l0 [m], t = t_s / √(l0/g)."""
+    return plan.speed_at(t) / plan.U_start
+
+
+# --- the cycle, in whatever form ----------------------------------------------------------------
+@dataclass(frozen=True)
+class _Cycle:
+    U: float
+    H: float
+    theta0: float
+    control: Control
+    t_stance: float
+    peak_force: float
+    step_time: float
+    source: object = field(default=None, compare=False)
+
+
+def _as_cycle(cycle) -> _Cycle:
+    """A LimitCycle, a fitted SimpleMachine or anything with U, H, theta0, control, t_stance,
+    peak_force (dimensionless)."""
+    if isinstance(cycle, _Cycle):
+        return cycle
+    try:
+        c = cycle.control
+        ctl = Control(*(float(v) for v in c.as_tuple()))
+        U, H, th = float(cycle.U), float(cycle.H), float(cycle.theta0)
+    except (AttributeError, TypeError, ValueError) as e:
+        raise PlanError(f"not a running cycle (needs U, H, theta0, control): {e}") from None
+    if not all(math.isfinite(v) for v in (U, H, th, *ctl.as_tuple())) or U <= 0:
+        raise PlanError(f"the start cycle is not a valid running cycle (U={U}, H={H})")
+    # durations and peak force from the simulator itself (one source of truth for the bounds)
+    r = step(U, H, th, ctl)
+    if not bool(r.valid):
+        raise PlanError(f"the start cycle's step is invalid: {REASONS[int(r.reason)]}")
+    return _Cycle(U, H, th, ctl, float(r.t_stance), float(r.peak_force),
+                  float(r.t_fall + r.t_stance + r.t_rise), cycle)
+
+
+def _bounds(cyc: _Cycle, comfort: Comfort, energy: str):
+    """((θ_lo, θ_hi), (b_lo, b_hi)) of the inputs."""
+    th = (cyc.theta0 - comfort.theta_band, cyc.theta0 + comfort.theta_band)
+    bb = comfort.b_band if energy == "b" else 0.0
+    return th, (cyc.control.b - bb, cyc.control.b + bb)
+
+
+def _step_ok(r, cyc: _Cycle, comfort: Comfort):
+    """(N,) bool: valid step inside the comfort bounds (stance length, peak force, apex height)."""
+    H_lo, H_hi = cyc.H + comfort.H_band[0], cyc.H + comfort.H_band[1]
+    with np.errstate(invalid="ignore"):
+        return (r.valid & (r.t_stance <= comfort.max_stance * cyc.t_stance)
+                & (r.peak_force <= comfort.max_peak_force * cyc.peak_force)
+                & (r.H_next >= H_lo - 1e-9) & (r.H_next <= H_hi + 1e-9))
+
+
+def _why_not(r, i, cyc: _Cycle, comfort: Comfort) -> str:
+    """Reason text for row i of a StepResult failing :func:`_step_ok`."""
+    if not r.valid[i]:
+        return REASONS[int(r.reason[i])]
+    if r.t_stance[i] > comfort.max_stance * cyc.t_stance:
+        return f"stance {r.t_stance[i]:.3g} > {comfort.max_stance:g}x the cycle's"
+    if r.peak_force[i] > comfort.max_peak_force * cyc.peak_force:
+        return f"peak force {r.peak_force[i]:.3g} m g > {comfort.max_peak_force:g}x the cycle's"
+    return f"apex height H' = {r.H_next[i]:.3g} outside the band"
+
+
+# --- exact evaluation and Newton ---------------------------------------------------------------------
+#: Rows up to this count go one by one through the simulator's scalar path: measured ≈ 0.5 ms per
+#: row against ≈ 10 ms for *any* small vectorised batch (NumPy call overhead on ~100 RK4 nodes).
+_SMALL = 24
+_STEP_FIELDS = tuple(f.name for f in fields(StepResult))
+
+
+def _steps(U, H, theta0, b, control: Control) -> StepResult:
+    """step() on rows (m,) of apex U, H, touchdown angle θ0 and control b (broadcast), the rest of
+    the control fixed. Results are the simulator's own (scalar and batched paths agree to 1e-12)."""
+    U, H, th, bb = np.broadcast_arrays(*(np.atleast_1d(np.asarray(v, float)) for v in (U, H, theta0, b)))
+    if U.size > _SMALL:
+        return step(U, H, th, replace(control, b=bb))
+    rows = [step(float(u), float(h), float(t), replace(control, b=float(v)))
+            for u, h, t, v in zip(U, H, th, bb)]
+    return StepResult(**{f: np.array([getattr(r, f) for r in rows]).reshape(U.shape)
+                         for f in _STEP_FIELDS})
+
+
+def _newton(resid, x0, lo, hi, free, *, tol=_TOL, max_iter=25, h=1e-7):
+    """Drive resid(x) → 0 over the ``free`` coordinates of x, kept inside the box [lo, hi].
+
+    resid(X (m, d)) → (R (m, r), valid (m,) bool). Forward-difference Jacobian (one extra row per free
+    coordinate, stepping inward at the box's upper edge or where a row is invalid), minimum-norm
+    least-squares Newton step, halved up to 8 times until max|R| decreases.
+    Returns (x (d,), R (r,) or None, converged bool).
+    """
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    x = np.clip(np.asarray(x0, float), lo, hi)
+    R, v = resid(x[None])
+    if not v[0]:
+        return x, None, False
+    R = R[0]
+    for _ in range(max_iter):
+        nrm = float(np.max(np.abs(R)))
+        if nrm <= tol:
+            return x, R, True
+        hs = np.where(x[free] + h <= hi[free], h, -h)
+        X = np.repeat(x[None], len(free), axis=0)
+        X[np.arange(len(free)), free] += hs
+        RJ, vJ = resid(X)
+        if not vJ.all():
+            X[~vJ, free[~vJ]] -= 2 * hs[~vJ]
+            hs = np.where(vJ, hs, -hs)
+            RJ2, vJ2 = resid(X[~vJ])
+            RJ[~vJ], vJ[~vJ] = RJ2, vJ2
+            if not vJ.all():
+                return x, R, False
+        J = ((RJ - R[None]) / hs[:, None]).T  # (r, nf)
+        dx = np.linalg.lstsq(J, -R, rcond=1e-12)[0]
+        for alpha in 0.5 ** np.arange(9):
+            xt = x.copy()
+            xt[free] += alpha * dx
+            xt = np.clip(xt, lo, hi)
+            Rt, vt = resid(xt[None])
+            if vt[0] and float(np.max(np.abs(Rt[0]))) < nrm:
+                x, R = xt, Rt[0]
+                break
+        else:
+            return x, R, False
+    return x, R, float(np.max(np.abs(R))) <= tol
+
+
+# --- target cycle ---------------------------------------------------------------------------------
+def _cycle_from(U, H, th, ctl, residual, iterations=0, eigenvalues=True) -> LimitCycle:
+    """LimitCycle record of a periodic orbit found by the planner."""
+    r = step(U, H, th, ctl)
+    t_fall, t_rise, t_st = float(r.t_fall), float(r.t_rise), float(r.t_stance)
+    eig = step_map_eigenvalues(U, H, th, ctl) if eigenvalues else np.full(2, np.nan + 0j)
+    return LimitCycle(U=U, H=H, theta0=th, control=ctl, t_stance=t_st, t_fall=t_fall, t_rise=t_rise,
+                      t_flight=t_fall + t_rise, step_length=float(r.apex_dx),
+                      step_time=t_fall + t_st + t_rise, peak_force=float(r.peak_force),
+                      iterations=iterations, residual=float(residual), eigenvalues=eig)
+
+
+def _orbit(cyc: "_Cycle", U_t, prior, energy, comfort):
+    """Periodic orbit at apex speed U_t from prior (H, θ0, b): energy "b" holds H at the start
+    cycle's height and solves (θ0, b); "theta" keeps b and solves (θ0, H) (minimum-norm from the
+    prior H). Returns (LimitCycle or None, problems list)."""
+    H_p, th_p, b_p = prior
+    th_b, b_b = _bounds(cyc, comfort, energy)
+    ctl = cyc.control
+    if energy == "b":
+        def resid(X):
+            r = _steps(U_t, cyc.H, X[:, 0], X[:, 1], ctl)
+            return np.stack([r.U_next - U_t, r.H_next - cyc.H], 1), r.valid
+        x, R, ok = _newton(resid, (th_p, b_p), (th_b[0], b_b[0]), (th_b[1], b_b[1]), np.array([0, 1]))
+        H, th, b = cyc.H, x[0], x[1]
+    else:
+        def resid(X):
+            r = _steps(U_t, X[:, 1], X[:, 0], ctl.b, ctl)
+            return np.stack([r.U_next - U_t, r.H_next - X[:, 1]], 1), r.valid
+        H_lo, H_hi = cyc.H + comfort.H_band[0], cyc.H + comfort.H_band[1]
+        x, R, ok = _newton(resid, (th_p, H_p), (th_b[0], H_lo), (th_b[1], H_hi), np.array([0, 1]))
+        H, th, b = x[1], x[0], ctl.b
+    if not ok:
+        why = "the search left the valid region" if R is None else f"residual {np.max(np.abs(R)):.2g}"
+        return None, [f"no periodic orbit within the bounds ({why})"]
+    lc = _cycle_from(float(U_t), float(H), float(th), replace(ctl, b=float(b)), np.max(np.abs(R)),
+                     eigenvalues=False)
+    return lc, _orbit_problems(lc, cyc, comfort)
+
+
+def _orbit_problems(lc, cyc: "_Cycle", comfort: Comfort) -> list:
+    """Comfort violations of an orbit (stance length, peak force), relative to the start cycle."""
+    probs = []
+    if lc.t_stance > comfort.max_stance * cyc.t_stance:
+        probs.append(f"its stance {lc.t_stance:.3g} is > {comfort.max_stance:g}x the cycle's")
+    if lc.peak_force > comfort.max_peak_force * cyc.peak_force:
+        probs.append(f"its peak force {lc.peak_force:.3g} m g is > {comfort.max_peak_force:g}x the cycle's")
+    return probs
+
+
+def _orbits(cyc: "_Cycle", U_nodes, energy: str, comfort: Comfort):
+    """Continuation of periodic orbits through U_nodes from the start cycle; yields
+    (U, LimitCycle or None, problems) and stops after the first failure."""
+    prior = (cyc.H, cyc.theta0, cyc.control.b)
+    for Un in U_nodes:
+        lc, probs = _orbit(cyc, float(Un), prior, energy, comfort)
+        yield float(Un), lc, probs
+        if lc is None or probs:
+            return
+        prior = (lc.H, lc.theta0, lc.control.b)
+
+
+def target_cycle(cycle, U_target: float, *, energy: str = "b", comfort: Comfort = Comfort()) -> LimitCycle:
+    """The periodic orbit of the machine at apex speed U_target that a plan ends on (dimensionless).
+
+    energy "b": apex height held at the start cycle's H, θ0 and the control's b solved (the runner
+    keeps its bounce height; b supplies or removes the energy the fitted control lacks at U_target).
+    energy "theta": b stays the fitted one, θ0 and H solved (minimum-norm from the cycle's H). K, a,
+    c and T_c always stay the fitted ones. Tried directly, then by continuation in speed
+    increments of at most 10 %. Raises PlanError when no orbit exists within the comfort bounds.
+    """
+    cyc = _as_cycle(cycle)
+    U_target = float(U_target)
+    if not (math.isfinite(U_target) and U_target > 0):
+        raise PlanError(f"target speed must be a finite U > 0, got {U_target}")
+    n = max(1, int(math.ceil(abs(math.log(U_target / cyc.U)) / math.log(1.10))))
+    last = None
+    for nodes in ([U_target], cyc.U * (U_target / cyc.U) ** (np.arange(1, n + 1) / n)):
+        for last in _orbits(cyc, nodes, energy, comfort):
+            pass
+        if last[1] is not None and not last[2] and last[0] == U_target:
+            lc = last[1]
+            return replace(lc, eigenvalues=step_map_eigenvalues(lc.U, lc.H, lc.theta0, lc.control))
+        if n == 1:
+            break
+    Un, lc, probs = last
+    free = "theta0 and b" if energy == "b" else "theta0 and H"
+    raise PlanError(f"no comfortable periodic running orbit at U = {Un:.4g} ({free} free): "
+                    + "; ".join(probs))
+
+
+def sustainable_range(cycle, *, energy: str = "b", comfort: Comfort = Comfort(), factor: float = 1.05,
+                      limits=(0.1, 4.0)) -> tuple:
+    """(U_min, U_max): the speeds with a comfortable periodic orbit (see :func:`target_cycle`),
+    by continuation from the cycle in factors of ``factor`` (resolution ≈ factor − 1) within
+    limits × U. Dimensionless."""
+    cyc = _as_cycle(cycle)
+    out = []
+    for lim in limits:
+        m = int(math.floor(abs(math.log(lim)) / math.log(factor)))
+        nodes = cyc.U * (factor if lim > 1 else 1.0 / factor) ** np.arange(1, m + 1)
+        U_ok = cyc.U
+        for Un, lc, probs in _orbits(cyc, nodes, energy, comfort):
+            if lc is None or probs:
+                break
+            U_ok = Un
+        out.append(U_ok)
+    return out[0], out[1]
+
+
+# --- one step ---------------------------------------------------------------------------------------
+def one_step_range(U, H, cycle, *, energy: str = "b", comfort: Comfort = Comfort(), n_theta: int = 81):
+    """(U'_min, U'_max) reachable in one comfortable step from apex (U, H), by one batched
+    simulator scan over the θ0 band (× {b − band, b, b + band} when energy="b").
+    (nan, nan) if no comfortable step exists."""
+    cyc = _as_cycle(cycle)
+    th_b, b_b = _bounds(cyc, comfort, energy)
+    th = np.linspace(th_b[0], th_b[1], n_theta)
+    bs = np.unique(np.array([b_b[0], cyc.control.b, b_b[1]]))
+    TH, BB = np.meshgrid(th, bs, indexing="ij")
+    r = step(U, H, TH, replace(cyc.control, b=BB))
+    ok = _step_ok(r, cyc, comfort)
+    if not ok.any():
+        return math.nan, math.nan
+    return float(np.min(r.U_next[ok])), float(np.max(r.U_next[ok]))
+
+
+def _theta_scan(U, H, U_r, b, cyc, th_b, theta_prev):
+    """θ0 in the band whose step from (U, H) gives U' = U_r, by one batched scan (41 angles, linear
+    interpolation between sign changes; nearest to theta_prev), or the valid angle nearest it."""
+    th = np.linspace(th_b[0], th_b[1], 41)
+    r = step(U, H, th, replace(cyc.control, b=b))
+    f = r.U_next - U_r
+    with np.errstate(invalid="ignore"):
+        good = r.valid[:-1] & r.valid[1:] & (np.sign(f[:-1]) != np.sign(f[1:]))
+    if not good.any():
+        if not r.valid.any():
+            return theta_prev
+        return float(th[int(np.argmin(np.where(r.valid, np.abs(f), np.inf)))])
+    k = np.flatnonzero(good)
+    roots = th[k] + f[k] / (f[k] - f[k + 1]) * (th[1] - th[0])
+    return float(roots[np.argmin(np.abs(roots - theta_prev))])
+
+
+def _solve_step(U, H, t0, ref, th_guess, b_guess, cyc, mode, th_b, b_b):
+    """Inputs (θ0, b) for one step from apex (U, H) at time t0 meeting ref(t_next) → (U_ref, H_ref).
+
+    mode "theta": U' = U_ref with b fixed at b_guess; "b": (U', H') = (U_ref, H_ref).
+    Newton on the exact simulator. Returns (θ0, b, converged).
+    """
+    ctl = cyc.control
+
+    def resid(X):
+        r = _steps(U, H, X[:, 0], X[:, 1], ctl)
+        Ur, Hr = ref(t0 + r.t_fall + r.t_stance + r.t_rise)
+        R = np.stack([r.U_next - Ur, r.H_next - Hr], 1)
+        return (R[:, :1] if mode == "theta" else R), r.valid
+    free = np.array([0]) if mode == "theta" else np.array([0, 1])
+    lo, hi = (th_b[0], b_b[0]), (th_b[1], b_b[1])
+    x, R, ok = _newton(resid, (th_guess, b_guess), lo, hi, free)
+    return float(x[0]), float(x[1]), ok
+
+
+# --- planning core ----------------------------------------------------------------------------------
+def _ease(s, policy):
+    s = np.clip(np.asarray(s, float), 0.0, 1.0)
+    if policy == "even":
+        return s
+    return s * s * (3.0 - 2.0 * s)
+
+
+class _StepFail(Exception):
+    """A step could not meet its reference within the bounds (internal; becomes PlanError)."""
+
+    def __init__(self, i, U, H, U_ref, why):
+        super().__init__(why)
+        self.i, self.U, self.H, self.U_ref, self.why = i, U, H, U_ref, why
+
+
+_OUT_KEYS = ("theta0", "b", "U", "H", "U_ref", "t_apex", "x_apex", "x_contact", "t_fall", "t_stance",
+             "t_rise", "peak_force", "phase")
+
+
+def _new_out(U, H, b):
+    out = {k: [] for k in _OUT_KEYS}
+    out.update(U=[U], H=[H], U_ref=[U], t_apex=[0.0], x_apex=[0.0])
+    out["_b"] = b
+    return out
+
+
+def _run(cyc, out, phase, n, ref_k, done, comfort, mode, table):
+    """Append steps to ``out`` (continuing from its last apex) until n steps (or done(t) is true).
+
+    ref_k(k, t_next) → (U_ref, H_ref) for the k-th step of this segment, whose next apex is at time
+    t_next. Bounds are relative to the start cycle ``cyc``. Raises _StepFail.
+    """
+    th_b, b_b = _bounds(cyc, comfort, mode)
+    solve_mode = "b" if mode == "b" else "theta"
+    k = 0
+    while (k < n) if n is not None else not done(out["t_apex"][-1]):
+        U, H, t = out["U"][-1], out["H"][-1], out["t_apex"][-1]
+        theta_prev = out["theta0"][-1] if out["theta0"] else cyc.theta0
+
+        def ref(t_next, k=k):
+            return ref_k(k, t_next)
+        U_guess = float(ref(t + cyc.step_time)[0])
+        th0 = theta_prev
+        if table is not None and out["_b"] == cyc.control.b:
+            tt, ok = table.theta_for_speed(U, H, U_guess, theta_ref=theta_prev)
+            if bool(ok) and th_b[0] <= float(tt) <= th_b[1]:
+                th0 = float(tt)
+        th, b, conv = _solve_step(U, H, t, ref, th0, out["_b"], cyc, solve_mode, th_b, b_b)
+        if not conv:  # a poor start: scan the band once for a better one
+            th0 = _theta_scan(U, H, U_guess, out["_b"], cyc, th_b, theta_prev)
+            th, b, conv = _solve_step(U, H, t, ref, th0, out["_b"], cyc, solve_mode, th_b, b_b)
+        x = (th, b)
+        r = _steps(U, H, th, b, cyc.control)
+        ok = bool(_step_ok(r, cyc, comfort)[0])
+        if not (conv and ok):
+            why = _why_not(r, 0, cyc, comfort) if not ok else "the reference is out of reach"
+            raise _StepFail(len(out["theta0"]), U, H, U_guess, why)
+        out["theta0"].append(float(x[0]))
+        out["b"].append(float(x[1]))
+        out["_b"] = float(x[1])
+        out["x_contact"].append(out["x_apex"][-1] + float(r.x_contact[0]))
+        for f in ("t_fall", "t_stance", "t_rise", "peak_force"):
+            out[f].append(float(getattr(r, f)[0]))
+        t_next = t + float(r.t_fall[0] + r.t_stance[0] + r.t_rise[0])
+        out["U"].append(float(r.U_next[0]))
+        out["H"].append(float(r.H_next[0]))
+        out["U_ref"].append(float(ref(t_next)[0]))
+        out["t_apex"].append(t_next)
+        out["x_apex"].append(out["x_apex"][-1] + float(r.apex_dx[0]))
+        out["phase"].append(phase)
+        k += 1
+        if len(out["theta0"]) > 10000:
+            raise PlanError("plan longer than 10000 steps")
+    return out
+
+
+def _finish(cyc, out, U_target, target, mode, policy, notes):
+    """Assemble the SpeedPlan: flight times and step lengths use the next step's θ0."""
+    th = np.array(out["theta0"])
+    U, H = np.array(out["U"]), np.array(out["H"])
+    th_next = np.append(th[1:], th[-1])
+    t_rise = np.array(out["t_rise"])
+    t_fall_next = fall_time(H[1:], th_next)
+    t_flight = t_rise + t_fall_next
+    x_apex = np.array(out["x_apex"])
+    x_contact = np.array(out["x_contact"])
+    step_length = x_apex[1:] + U[1:] * t_fall_next + np.sin(th_next) - x_contact
+    b = np.array(out["b"])
+    controls = tuple(replace(cyc.control, b=float(v)) for v in b)
+    phase = np.array(out["phase"], np.int8)
+    idx = np.flatnonzero(phase == CHANGE)
+    notes = list(notes)
+    monotone = True
+    if idx.size and U_target != cyc.U:
+        Uc = U[idx[0]:idx[-1] + 2]
+        monotone = bool(np.all(np.diff(Uc) * np.sign(U_target - Uc[0]) >= -1e-9))
+    final_ok = abs(U[-1] - U_target) <= 0.03 * U_target
+    finite = all(np.all(np.isfinite(v)) for v in (th, U, H, t_flight, step_length, x_contact, b))
+    if not monotone:
+        notes.append("apex speeds are not monotone over the change")
+    if not final_ok:
+        notes.append(f"final speed {U[-1]:.4g} is not within 3 % of {U_target:.4g}")
+    if not finite:
+        notes.append("non-finite values in the plan (the last step cannot be followed by another)")
+    return SpeedPlan(theta0=th, b=b, controls=controls, U=U, H=H, U_ref=np.array(out["U_ref"]),
+                     t_apex=np.array(out["t_apex"]), x_apex=x_apex, x_contact=x_contact,
+                     t_fall=np.array(out["t_fall"]), t_stance=np.array(out["t_stance"]), t_rise=t_rise,
+                     t_flight=t_flight, step_length=step_length,
+                     peak_force=np.array(out["peak_force"]), phase=phase, U_start=cyc.U,
+                     U_target=float(U_target), target=target, mode=mode, policy=policy,
+                     feasible=monotone and final_ok and finite, notes=tuple(notes))
+
+
+def _check_common(policy, energy, lead_steps, hold_steps):
+    if policy not in POLICIES:
+        raise PlanError(f"unknown policy {policy!r}; known: {', '.join(POLICIES)}")
+    if energy not in ENERGY_MODES:
+        raise PlanError(f"unknown energy mode {energy!r}; known: {', '.join(ENERGY_MODES)}")
+    for name, v in (("lead_steps", lead_steps), ("hold_steps", hold_steps)):
+        if not isinstance(v, (int, np.integer)) or v < 0:
+            raise PlanError(f"{name} must be an integer >= 0, got {v!r}")
+
+
+def _table_ok(table, cyc):
+    if table is None:
+        return None
+    if tuple(map(float, table.control.as_tuple())) != tuple(map(float, cyc.control.as_tuple())):
+        raise PlanError(f"the transition table was built for {table.control}, the cycle runs "
+                        f"{cyc.control}; build it with the cycle's control")
+    return table
+
+
+def _unreachable(cyc, U_target, n, fail, comfort, energy, what):
+    """PlanError text naming what is reachable: one step from the start, the sustainable range."""
+    e = "theta" if energy == "theta" else "b"
+    lo1, hi1 = one_step_range(cyc.U, cyc.H, cyc, energy=e, comfort=comfort)
+    smin, smax = sustainable_range(cyc, energy=e, comfort=comfort)
+    faster = U_target > cyc.U
+    if math.isfinite(lo1):
+        one = f"the {'fastest' if faster else 'slowest'} reachable in 1 step is U = {hi1 if faster else lo1:.3g}"
+    else:
+        one = "no comfortable step exists from the start state"
+    sus = f"max sustainable U ≈ {smax:.3g}" if faster else f"min sustainable U ≈ {smin:.3g}"
+    if not smin <= U_target <= smax:
+        rng = f"; reaching U = {U_target:.3g} is outside the machine's range ({sus}, start U = {cyc.U:.3g})"
+    else:
+        rng = f" (sustainable U ≈ {smin:.3g}..{smax:.3g})"
+        per = (hi1 - cyc.U) if faster else (cyc.U - lo1)
+        if math.isfinite(per) and per > 0 and n is not None:
+            n_min = int(math.ceil(1.5 * abs(U_target - cyc.U) / per))  # "ease" peaks at 1.5x the mean
+            if n_min > n:
+                rng += f"; try at least {n_min} steps"
+    where = ""
+    if fail is not None:
+        where = (f" [failed at step {fail.i + 1}, from U = {fail.U:.4g}, H = {fail.H:.4g} toward "
+                 f"U = {fail.U_ref:.4g}: {fail.why}]")
+    return f"cannot reach U = {U_target:.3g} {what}: {one}{rng}{where}"
+
+
+def _as_target(target_U):
+    try:
+        U_t = float(target_U)
+    except (TypeError, ValueError):
+        raise PlanError(f"target speed must be a number, got {target_U!r}") from None
+    return U_t
+
+
+def plan_speed_change(cycle, target_U: float, *, n_steps: int | None = None,
+                      within_time: float | None = None, table=None, comfort: Comfort = Comfort(),
+                      policy: str = "ease", energy: str = "auto", lead_steps: int = 0,
+                      hold_steps: int = 0) -> SpeedPlan:
+    """Plan touchdown angles (and, if needed, small δb) taking apex speed from the cycle's U to
+    ``target_U`` (dimensionless, √(g l0)) and holding it.
+
+    cycle:       the start running cycle: a :class:`LimitCycle`, or a fitted ``SimpleMachine``
+                 (anything with U, H, theta0 and a ``control``)
+    target_U:    target apex speed (Froude number U = u/√(g l0)); e.g. 0.5 * cycle.U
+    n_steps:     the change takes exactly this many steps, or
+    within_time: the change ends by this time [√(l0/g)] after its first apex: the plan uses the most
+                 change steps whose duration is ≤ within_time (the gentlest change that fits)
+    table:       optional :class:`~froude.machine.table.TransitionTable` of the cycle's control;
+                 gives each step's initial θ0 (refined on the simulator afterwards)
+    comfort:     :class:`Comfort` bounds (relative to the start cycle)
+    policy:      "ease" (smoothstep: U_ref(k) = U0 + ΔU (3x² − 2x³), x = k/n) or "even" (equal ΔU)
+    energy:      "auto" | "theta" (θ0 only, the paper's control) | "b" (θ0 and δb)
+    lead_steps:  steady steps at the start cycle before the change
+    hold_steps:  steady steps at the target cycle after the change
+
+    The change steps' apex speeds equal U_ref exactly (monotone, no overshoot, the last one is
+    target_U); with energy "b" the apex heights equal H_ref exactly and the change ends on the
+    target cycle's fixed point, which the hold steps keep. Returns a :class:`SpeedPlan`. Raises
+    PlanError naming what is reachable when the goal is impossible (target ≤ 0, outside the
+    machine's sustainable range, a change too fast for n steps).
+    """
+    cyc = _as_cycle(cycle)
+    _check_common(policy, energy, lead_steps, hold_steps)
+    table = _table_ok(table, cyc)
+    U_t = _as_target(target_U)
+    if not math.isfinite(U_t) or U_t <= 0:
+        raise PlanError(f"cannot plan a change to U = {U_t:g}: a running machine needs a speed > 0 "
+                        f"(the start cycle runs at U = {cyc.U:.4g}; to stop, end the motion instead)")
+    if (n_steps is None) == (within_time is None):
+        raise PlanError("give exactly one of n_steps or within_time")
+    if within_time is not None:
+        if not (isinstance(within_time, (int, float)) and math.isfinite(within_time) and within_time > 0):
+            raise PlanError(f"within_time must be a time > 0 [sqrt(l0/g)], got {within_time!r}")
+        return _within_time(cyc, U_t, float(within_time), table=table, comfort=comfort, policy=policy,
+                            energy=energy, lead_steps=lead_steps, hold_steps=hold_steps)
+    if not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
+        raise PlanError(f"n_steps must be an integer >= 1, got {n_steps!r}")
+    return _plan_n(cyc, U_t, int(n_steps), table, comfort, policy, energy, lead_steps, hold_steps)
+
+
+def _plan_n(cyc, U_t, n, table, comfort, policy, energy, lead_steps, hold_steps):
+    modes = ("theta", "b") if energy == "auto" else (energy,)
+    tried = []
+    fail = None
+    for mode in modes:
+        try:
+            plan = _plan_change(cyc, U_t, n, table, comfort, policy, mode, lead_steps, hold_steps)
+            return replace(plan, notes=tuple(tried) + plan.notes)
+        except _StepFail as f:
+            fail = f
+            tried.append(f"{mode}: step {f.i + 1} failed ({f.why})")
+        except PlanError as e:
+            tried.append(f"{mode}: {e}")
+    msg = _unreachable(cyc, U_t, n, fail, comfort, energy, f"in {n} step{'s' if n != 1 else ''}")
+    if fail is None:
+        msg += " [" + "; ".join(tried) + "]"
+    raise PlanError(msg)
+
+
+def _plan_change(cyc, U_t, n, table, comfort, policy, mode, lead_steps, hold_steps):
+    """One planning attempt in one energy mode (raises _StepFail / PlanError)."""
+    notes = []
+    U0, H0 = cyc.U, cyc.H
+    if mode == "b":
+        target = target_cycle(cyc, U_t, energy="b", comfort=comfort)
+    else:
+        # θ0 barely changes the apex energy E = ½U² + H: the end height is about E0 − ½U_t²
+        H_pred = H0 + 0.5 * (U0 * U0 - U_t * U_t)
+        lo, hi = H0 + comfort.H_band[0], H0 + comfort.H_band[1]
+        if not lo - 0.02 <= H_pred <= hi + 0.02:
+            raise PlanError(f"theta0 alone keeps the apex energy, so U = {U_t:.3g} would need an apex "
+                            f"height H ≈ {H_pred:.3g} (band {lo:.3g}..{hi:.3g})")
+        target = None
+    H_t = target.H if target is not None else H0
+    def frac(k):  # progress after change step k (0-based) of n
+        return float(_ease((k + 1) / n, policy))
+
+    out = _new_out(U0, H0, cyc.control.b)
+    _run(cyc, out, LEAD, int(lead_steps), lambda k, t: (U0, H0), None, comfort, mode, table)
+    _run(cyc, out, CHANGE, n, lambda k, t: (U0 + (U_t - U0) * frac(k), H0 + (H_t - H0) * frac(k)),
+         None, comfort, mode, table)
+    if mode == "theta":
+        H_end = out["H"][-1]
+        target, probs = _orbit(cyc, U_t, (H_end, out["theta0"][-1], cyc.control.b), "theta", comfort)
+        if target is None or probs or abs(H_end - target.H) > comfort.settle_H:
+            have = (f"H = {target.H:.4g}" if target is not None and not probs
+                    else "there is none within the bounds")
+            raise PlanError(f"theta0 alone ends at H = {H_end:.4g}, not near a periodic orbit at "
+                            f"U = {U_t:.4g} ({have})")
+        notes.append("theta0-only control (the paper's): the fitted control in every step")
+    else:
+        db = np.max(np.abs(np.array(out["b"]) - cyc.control.b)) if out["b"] else 0.0
+        notes.append(f"theta0 + delta-b control (theta0 alone cannot keep the apex height at the "
+                     f"target speed); max |delta b| = {db:.4f}")
+    H_hold = H_t if mode == "b" else out["H"][-1]
+    _run(cyc, out, HOLD, int(hold_steps), lambda k, t: (U_t, H_hold), None, comfort, mode, table)
+    return _finish(cyc, out, U_t, target, mode, policy, notes)
+
+
+def _within_time(cyc, U_t, T, *, table, comfort, policy, energy, lead_steps, hold_steps):
+    """The most change steps whose change duration is ≤ T."""
+
+    def dur(p):
+        idx = p.change_steps
+        return float(p.t_apex[idx[-1] + 1] - p.t_apex[idx[0]])
+
+    plans, errs = {}, {}
+
+    def attempt(k):
+        if k not in plans and k not in errs:
+            try:
+                plans[k] = _plan_n(cyc, U_t, k, table, comfort, policy, energy, lead_steps, hold_steps)
+            except PlanError as e:
+                errs[k] = e
+        return plans.get(k)
+
+    n = max(1, int(T // cyc.step_time))
+    p = attempt(n)
+    while p is not None and dur(p) > T and n > 1:  # too long: fewer steps
+        n -= 1
+        p = attempt(n)
+    if p is not None and dur(p) <= T:
+        while True:  # fits: try one more (gentler)
+            q = attempt(n + 1)
+            if q is None or dur(q) > T:
+                break
+            n, p = n + 1, q
+    if p is None or dur(p) > T:
+        why = errs.get(n)
+        msg = (f"cannot reach U = {U_t:.3g} within t = {T:.4g} [sqrt(l0/g)] (one step at the start "
+               f"cycle takes {cyc.step_time:.3g})")
+        raise PlanError(msg + (f": {why}" if why is not None else ""))
+    return replace(p, notes=p.notes + (f"within_time {T:.4g}: {n} change steps lasting {dur(p):.4g}",))
+
+
+def plan_speed_profile(cycle, profile, *, duration: float | None = None, table=None,
+                       comfort: Comfort = Comfort(), energy: str = "auto", lead_steps: int = 0,
+                       hold_steps: int = 0) -> SpeedPlan:
+    """Follow a speed profile U(t) (dimensionless) at the apexes.
+
+    profile:   a callable t → U (t [√(l0/g)] from the first change apex; ``duration`` required) or
+               a pair of arrays (t (m,), U (m,)) interpolated linearly (duration = t[-1] unless
+               given). Beyond the profile's end its last value holds.
+    Each step picks its inputs so that the speed at its *next apex* equals U(t_next); the apex time
+    depends on the inputs and is part of the Newton solve. With energy "b" apex heights follow the
+    periodic orbits' heights interpolated by speed; with "theta" they are left free. Steps
+    continue until an apex reaches t ≥ duration, then ``hold_steps`` at the end speed. PlanError if
+    a step cannot follow the profile, naming the one-step reachable range there.
+    """
+    cyc = _as_cycle(cycle)
+    _check_common("even", energy, lead_steps, hold_steps)
+    table = _table_ok(table, cyc)
+    if callable(profile):
+        fn = profile
+        if duration is None:
+            raise PlanError("a callable speed profile needs a duration")
+    else:
+        try:
+            tp, Up = (np.asarray(v, float) for v in profile)
+        except (TypeError, ValueError):
+            raise PlanError("profile must be a callable or a pair of arrays (t, U)") from None
+        if tp.ndim != 1 or tp.shape != Up.shape or tp.size < 2 or np.any(np.diff(tp) <= 0):
+            raise PlanError("profile arrays must be 1-D, of equal length >= 2, with increasing t")
+
+        def fn(t):
+            return np.interp(t, tp, Up)
+        duration = float(tp[-1]) if duration is None else duration
+    if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
+        raise PlanError(f"duration must be > 0, got {duration!r}")
+    ts = np.linspace(0.0, duration, 65)
+    Us = np.asarray(fn(ts), float) * np.ones_like(ts)
+    if not np.all(np.isfinite(Us)) or np.any(Us <= 0):
+        raise PlanError(f"the profile must give finite speeds > 0 on [0, {duration:g}]")
+    U_end = float(Us[-1])
+
+    modes = ("theta", "b") if energy == "auto" else (energy,)
+    tried, fail = [], None
+    for mode in modes:
+        try:
+            plan = _plan_profile(cyc, fn, duration, U_end, Us, table, comfort, mode, lead_steps, hold_steps)
+            return replace(plan, notes=tuple(tried) + plan.notes)
+        except _StepFail as f:
+            fail = f
+            tried.append(f"{mode}: step {f.i + 1} failed ({f.why})")
+        except PlanError as e:
+            tried.append(f"{mode}: {e}")
+    if fail is None:
+        raise PlanError("cannot follow the speed profile: " + "; ".join(tried))
+    lo, hi = one_step_range(fail.U, fail.H, cyc, energy="theta" if energy == "theta" else "b",
+                            comfort=comfort)
+    raise PlanError(f"cannot follow the speed profile: at step {fail.i + 1} (U = {fail.U:.4g}, "
+                    f"H = {fail.H:.4g}) it asks for U = {fail.U_ref:.4g} but one comfortable step "
+                    f"reaches U = {lo:.4g}..{hi:.4g} ({fail.why})")
+
+
+def _plan_profile(cyc, fn, duration, U_end, Us, table, comfort, mode, lead_steps, hold_steps):
+    notes = ["profile followed at the apexes: U(apex) = profile(t_apex - t_start)"]
+    U0, H0 = cyc.U, cyc.H
+    if mode == "b":
+        # apex heights: periodic orbits at the profile's extreme and end speeds, interpolated by speed
+        nodes = np.unique(np.r_[np.min(Us), np.max(Us), U_end, U0])
+        Hn = np.array([H0 if abs(u - U0) <= 1e-12 * U0 else
+                       target_cycle(cyc, float(u), energy="b", comfort=comfort).H for u in nodes])
+
+        def H_of(u):
+            return float(np.interp(u, nodes, Hn))
+    else:
+        def H_of(u):
+            return 0.0  # unused: θ0-only steps solve for U' alone
+    target = None
+    if abs(U_end - U0) > 1e-12 * U0:
+        try:
+            target = target_cycle(cyc, U_end, energy=mode, comfort=comfort)
+        except PlanError:
+            if mode == "b":
+                raise
+    H_t = target.H if target is not None else H0
+
+    out = _new_out(U0, H0, cyc.control.b)
+    _run(cyc, out, LEAD, int(lead_steps), lambda k, t: (U0, H0), None, comfort, mode, table)
+    t_start = out["t_apex"][-1]
+
+    def ref(k, t):
+        u = float(fn(min(t - t_start, duration)))
+        return u, H_of(u)
+    _run(cyc, out, CHANGE, None, ref, lambda t: t - t_start >= duration - 1e-9, comfort, mode, table)
+    H_hold = H_t if mode == "b" else out["H"][-1]
+    _run(cyc, out, HOLD, int(hold_steps), lambda k, t: (U_end, H_hold), None, comfort, mode, table)
+    if mode == "theta":
+        notes.append("theta0-only control: apex heights are left free")
+    return _finish(cyc, out, U_end, target, mode, "profile", notes)

@@ -44,6 +44,8 @@ __all__ = ["StanceFit", "FitResult", "fit_stance_control", "fit_machine", "fit_m
 #: Scales of the cycle variables for the minimum-norm search (K relative to its prior).
 CYCLE_SCALES = {"U": 0.05, "H": 0.02, "theta0": 0.03, "K": 0.1, "a": 0.01, "b": 0.02, "c": 0.02}
 _VARS = ("U", "H", "theta0", "K", "a", "b", "c")
+#: Frames left out at each end of a flight when measuring the flight force residual (filter edge).
+RESIDUAL_GUARD_FRAMES = 2
 #: Samples of the lateral sway profile over one stride.
 SWAY_SAMPLES = 32
 
@@ -331,9 +333,11 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     in_stance = np.zeros(F, bool)
     for s in geo:
         in_stance[s.frames] = True
+    # Flight frames for the residual: marker flights less a guard of RESIDUAL_GUARD_FRAMES at each end,
+    # where the zero-lag filter necessarily spreads the landing impact (its smoothing half-width)
     marker_flight = np.zeros(F, bool)
     for a, b in gait.flights:
-        marker_flight[a:b] = True
+        marker_flight[a + RESIDUAL_GUARD_FRAMES : b - RESIDUAL_GUARD_FRAMES] = True
     flight_mask = marker_flight & ~in_stance
     residual_bw = flight_residual(f, mass, flight_mask)
     shares = force_shares(full)

@@ -17,7 +17,7 @@ Differentiation (documented choice, see docs/force_shares.md):
 
 Events: the marker-threshold contacts of :mod:`froude.gait` are ±1–2 frames rough. Each touchdown
 and liftoff is refined to the (linearly interpolated) time at which the filtered vertical force
-crosses ``EVENT_THRESHOLD_BW`` = 0.2 body weights nearest the marker event (within
+crosses ``EVENT_THRESHOLD_BW`` = 0.5 body weights nearest the marker event (within
 ``EVENT_SEARCH_S``); if no crossing is found there, the marker event is kept.
 
 Frames: the machine is sagittal. The sagittal plane is spanned by the travel direction ``heading``
@@ -49,7 +49,7 @@ EDGE_PAD_S = 0.5
 #: Length of the clip's edge used to fit that extension [s].
 EDGE_FIT_S = 0.1
 #: Vertical-force threshold for touchdown / liftoff [body weights].
-EVENT_THRESHOLD_BW = 0.2
+EVENT_THRESHOLD_BW = 0.5
 #: How far from a marker event the force crossing is searched [s].
 EVENT_SEARCH_S = 0.1
 

@@ -96,8 +96,10 @@ class MachinePath:
     """The simple machine's motion in world coordinates at the output frame rate (SI).
 
     times: (T,) [s]; com: (T, 3) [m]; force: (T, 3) ground force on the COM [N]; psi: (T,) unwrapped stride
-    phase (0 at the first touchdown of foot A); stance: (T, 2) bool; foot_of_step: (n,) 0/1;
-    t_touchdown, t_liftoff: (n,) [s]; contacts: (n, 3) contact points [m]; apex_speed: (n+1,) [m/s];
+    phase (0 at the first touchdown of foot A); stance: (T, 2) bool (the machine's force-based stance);
+    contact: (T, 2) bool, the foot on the ground (the reference's marker contact through the time warp,
+    a little wider than the stance); foot_of_step: (n,) 0/1; t_touchdown, t_liftoff: (n,) [s];
+    contact_on, contact_off: (n,) [s]; contacts: (n, 3) contact points [m]; apex_speed: (n+1,) [m/s];
     U: (n+1,) dimensionless apex speeds; frame: (3, 3) heading frame rows; l0 [m]; mass [kg].
     """
 
@@ -106,9 +108,12 @@ class MachinePath:
     force: np.ndarray
     psi: np.ndarray
     stance: np.ndarray
+    contact: np.ndarray
     foot_of_step: np.ndarray
     t_touchdown: np.ndarray
     t_liftoff: np.ndarray
+    contact_on: np.ndarray
+    contact_off: np.ndarray
     contacts: np.ndarray
     apex_speed: np.ndarray
     U: np.ndarray
@@ -159,7 +164,17 @@ def machine_path(
     feet = np.where(np.arange(n_steps) % 2 == 0, A, 1 - A)
     t_td = tr.t_touchdown * T_unit
     t_lo = tr.t_liftoff * T_unit
-    psi = _stride_phase(t, t_td, t_lo, feet, A, cyc.phase_events, tr, T_unit)
+    psi, knot_t, knot_psi = _stride_phase(t, t_td, t_lo, feet, A, cyc.phase_events, tr, T_unit)
+    # the feet's ground contact (marker contact of the reference, mapped through the time warp)
+    ev = cyc.phase_events
+    p_td = np.where(feet == A, 0.0, ev[2])
+    p_lo = np.where(feet == A, ev[1], ev[3])
+    k = np.arange(n_steps) // 2
+    on_psi = k + cyc.contact_phase[feet, 0]
+    off_psi = k + p_lo + (cyc.contact_phase[feet, 1] - p_lo)
+    del p_td
+    contact_on = _interp_extrap(on_psi, knot_psi, knot_t)
+    contact_off = _interp_extrap(off_psi, knot_psi, knot_t)
     phi = np.mod(psi, 1.0)
     _, data = sample_cycle(cyc, phi, rotations=False)
     origin = prep.com[0].copy()
@@ -170,11 +185,13 @@ def machine_path(
                 + np.outer(L * cyc.contact_lateral[feet], lat))
     force = (np.outer(speed * tr.force[:, 0], fwd) + np.outer(tr.force[:, 1], up)) * m.mass * GRAVITY
     stance = np.zeros((len(t), 2), bool)
+    contact = np.zeros((len(t), 2), bool)
     for i, f in enumerate(feet):
         stance[(t >= t_td[i]) & (t < t_lo[i]), f] = True
+        contact[(t >= contact_on[i]) & (t < contact_off[i]), f] = True
     return MachinePath(
-        times=t, com=com, force=force, psi=psi, stance=stance, foot_of_step=feet, t_touchdown=t_td,
-        t_liftoff=t_lo, contacts=contacts, apex_speed=speed * tr.U_apex * m.speed_unit, U=tr.U_apex,
+        times=t, com=com, force=force, psi=psi, stance=stance, contact=contact, foot_of_step=feet,
+        t_touchdown=t_td, t_liftoff=t_lo, contact_on=contact_on, contact_off=contact_off, contacts=contacts, apex_speed=speed * tr.U_apex * m.speed_unit, U=tr.U_apex,
         frame=Rh, l0=l0, mass=m.mass,
     )
 
@@ -226,16 +243,23 @@ def _stride_phase(t, t_td, t_lo, feet, A, phase_events, tr, T_unit) -> np.ndarra
         times += [t_td[i], t_lo[i]]
         psis += [k + p[(f, "td")], k + p[(f, "lo")]]
     # the flight before the first touchdown and after the last liftoff (the machine's own flight times)
-    fl_first = tr.t_touchdown[0] * T_unit + (tr.t_apex[0] * 0)  # apex at t = 0
     flight_before = (t_td[1] - t_lo[0]) if len(t_td) > 1 else (tr.t_apex[-1] * T_unit - t_lo[-1]) * 2
     flight_after = (t_td[-1] - t_lo[-2]) if len(t_td) > 1 else flight_before
     last_f = feet[-1]
     k_last = (len(feet) - 1) // 2
     next_td_psi = k_last + (1.0 if last_f == 1 - A else phase_events[2])
-    times = [t_td[0] - flight_before] + times + [t_lo[-1] + flight_after]
-    psis = [p[(1 - A, "lo")] - 1.0] + psis + [next_td_psi]
-    del fl_first
-    return np.interp(t, times, psis)
+    times = np.array([t_td[0] - flight_before] + times + [t_lo[-1] + flight_after])
+    psis = np.array([p[(1 - A, "lo")] - 1.0] + psis + [next_td_psi])
+    return np.interp(t, times, psis), times, psis
+
+
+def _interp_extrap(x, xp, fp):
+    """np.interp with linear extrapolation beyond both ends (xp increasing)."""
+    y = np.interp(x, xp, fp)
+    lo_slope = (fp[1] - fp[0]) / (xp[1] - xp[0])
+    hi_slope = (fp[-1] - fp[-2]) / (xp[-1] - xp[-2])
+    y = np.where(x < xp[0], fp[0] + (x - xp[0]) * lo_slope, y)
+    return np.where(x > xp[-1], fp[-1] + (x - xp[-1]) * hi_slope, y)
 
 
 # ---- 3. synthesise: time-warped reference on the target skeleton, IK targets ------------------------------
@@ -279,9 +303,8 @@ def _foot_anchors(path: MachinePath) -> np.ndarray:
         if idx.size == 0:
             continue
         c = path.contacts[idx]
-        td = path.t_touchdown[idx]
-        lo = path.t_liftoff[idx]
-        psi_td = np.interp(td, t, path.psi, left=np.nan, right=np.nan)
+        td = path.contact_on[idx]
+        lo = path.contact_off[idx]
         # virtual contacts one stride before the first and after the last (periodic extension)
         stride = c[1] - c[0] if len(c) > 1 else (path.contacts[-1] - path.contacts[0]) * 2 / max(n - 1, 1)
         c_ext = np.concatenate([c[:1] - stride, c, c[-1:] + stride])
@@ -301,7 +324,6 @@ def _foot_anchors(path: MachinePath) -> np.ndarray:
         u = (p - p0) / np.maximum(p1 - p0, 1e-9)
         w = min_jerk(u)[:, None]
         out[sw, foot] = c_ext[k_sw] * (1 - w) + c_ext[k_sw + 1] * w
-        del psi_td
     return out
 
 
@@ -315,11 +337,11 @@ def _psi_at(path: MachinePath, times: np.ndarray) -> np.ndarray:
 
 
 def _marker_weights(path: MachinePath) -> np.ndarray:
-    """(T, 2) foot marker weights: stance high, swing low, ramped smoothly around every event."""
+    """(T, 2) foot marker weights: on the ground high, swing low, ramped smoothly around every contact."""
     t = path.times[:, None]
     w = np.zeros((len(path.times), 2))
-    a = path.t_touchdown[None, :]
-    b = path.t_liftoff[None, :]
+    a = path.contact_on[None, :]
+    b = path.contact_off[None, :]
     # 1 inside each stance, min-jerk ramps over WEIGHT_RAMP_S before touchdown and after liftoff
     u = np.clip(np.minimum(t - (a - WEIGHT_RAMP_S), (b + WEIGHT_RAMP_S) - t) / WEIGHT_RAMP_S, 0.0, 1.0)
     for foot in range(2):
@@ -525,7 +547,7 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
 def _stance_only(targets: Targets, path: MachinePath) -> np.ndarray:
     """Foot marker targets where the foot is in stance (NaN elsewhere): the ones that must be met."""
     out = targets.markers.copy()
-    out[~path.stance] = np.nan
+    out[~path.contact] = np.nan
     return out
 
 

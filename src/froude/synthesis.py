@@ -68,7 +68,10 @@ class ReferenceCycle:
     """One seamless stride of the reference, sampled at K = CYCLE_SAMPLES stride phases φ = k / K.
 
     first_foot: foot A (0 left, 1 right) whose touchdown is φ = 0; foot B = 1 − A.
-    phase_events: (4,) φ of [touchdown A, liftoff A, touchdown B, liftoff B] = [0, φ1, φ2, φ3].
+    phase_events: (4,) φ of [touchdown A, liftoff A, touchdown B, liftoff B] = [0, φ1, φ2, φ3] (the
+        machine's force-based events).
+    contact_phase: (2, 2) stride phases [on, off] of each foot's ground contact as the markers see it
+        (left, right); slightly wider than the force-based stance, unwrapped so that on < off.
     durations: (4,) reference durations [s] of stance A, flight after A, stance B, flight after B.
     frame: (3, 3) heading frame rows (forward, up, lateral) in world coordinates.
     rotations: (K, J, 4) local joint rotations (root orientation in world).
@@ -85,6 +88,7 @@ class ReferenceCycle:
 
     first_foot: int
     phase_events: np.ndarray
+    contact_phase: np.ndarray
     durations: np.ndarray
     frame: np.ndarray
     rotations: np.ndarray
@@ -104,15 +108,9 @@ class ReferenceCycle:
     def n_samples(self) -> int:
         return self.rotations.shape[0]
 
-    def foot_in_stance(self, phi: np.ndarray) -> np.ndarray:
-        """(…, 2) bool: which feet are on the ground at stride phases phi (…)."""
-        p = np.mod(phi, 1.0)[..., None]
-        e = self.phase_events
-        a = self.first_foot
-        st = np.zeros(p.shape[:-1] + (2,), bool)
-        st[..., a] = (p[..., 0] < e[1])
-        st[..., 1 - a] = (p[..., 0] >= e[2]) & (p[..., 0] < e[3])
-        return st
+    def foot_on_ground(self, phi: np.ndarray) -> np.ndarray:
+        """(…, 2) bool: which feet touch the ground (marker contact) at stride phases phi (…)."""
+        return _contact_mask(np.asarray(phi, float), self.contact_phase)
 
 
 def _phase_of_events(events: list[FootEvent], first_foot: int, fractions: np.ndarray) -> np.ndarray:
@@ -268,13 +266,15 @@ def extract_cycle(
         wsum = w.sum(axis=0)
     marker_rel = np.sum(rel_vals * w[..., None, None], axis=0) / wsum[..., None, None]
     marker_rel = _close_loop_linear(marker_rel)
-    stance_mask = _stance_mask(np.arange(K) / K, phase_events, first_foot)
-    marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=0.025 * body.leg_length)
+    contact_tol = 0.025 * body.leg_length
+    contact_phase = _contact_phases(marker_rel, phase_events, first_foot, contact_tol)
+    stance_mask = _contact_mask(np.arange(K) / K, contact_phase)
+    marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=contact_tol)
 
     from .metrics import max_joint_jump_deg
 
     return ReferenceCycle(
-        first_foot=first_foot, phase_events=phase_events, durations=dur, frame=Rh,
+        first_foot=first_foot, phase_events=phase_events, contact_phase=contact_phase, durations=dur, frame=Rh,
         rotations=rotations, root_from_com=root_rel, com_height=com_height, com_forward=com_forward,
         com_lateral=com_lateral, marker_rel=marker_rel, contact_lateral=contact_lat, speed=speed,
         stride_time=T, leg_length=body.leg_length, ground=float(np.nanmedian(stance_ground)),
@@ -304,12 +304,45 @@ def _close_loop_quat(q: np.ndarray) -> np.ndarray:
     return quat.normalize(quat.mul(q, quat.from_rotvec(ramp * delta[None])))[:K]
 
 
-def _stance_mask(phi: np.ndarray, phase_events: np.ndarray, first_foot: int) -> np.ndarray:
-    """(K, 2) bool stance of each foot at phases phi."""
-    st = np.zeros((len(phi), 2), bool)
-    st[:, first_foot] = phi < phase_events[1]
-    st[:, 1 - first_foot] = (phi >= phase_events[2]) & (phi < phase_events[3])
-    return st
+def _contact_phases(marker_rel: np.ndarray, phase_events: np.ndarray, first_foot: int, contact_tol: float,
+                    max_extension: float = 0.15) -> np.ndarray:
+    """(2, 2) [on, off] stride phases of each foot's ground contact.
+
+    The machine's force-based stance, extended before touchdown and after liftoff for as long as some
+    marker of the foot stays within ``contact_tol`` of the ground in the cycle (the force crosses its
+    threshold a little after the foot lands and before the toe leaves; the foot must stay pinned for all
+    of that). marker_rel: (K, 2, 3, 3) cycle marker offsets (heading frame, heights above the ground).
+    Extensions are capped at ``max_extension`` of a stride. Unwrapped: on < off.
+    """
+    K = marker_rel.shape[0]
+    low = marker_rel[..., 1].min(axis=2) <= contact_tol  # (K, 2)
+    td = {first_foot: 0.0, 1 - first_foot: phase_events[2]}
+    lo = {first_foot: phase_events[1], 1 - first_foot: phase_events[3]}
+    cap = int(max_extension * K)
+    out = np.zeros((2, 2))
+    for foot in range(2):
+        i_on = int(np.floor(td[foot] * K))
+        i_off = int(np.ceil(lo[foot] * K))
+        n_before = 0
+        while n_before < cap and low[(i_on - n_before - 1) % K, foot]:
+            n_before += 1
+        n_after = 0
+        while n_after < cap and low[(i_off + n_after) % K, foot]:
+            n_after += 1
+        out[foot] = (td[foot] - n_before / K, lo[foot] + n_after / K)
+    return out
+
+
+def _wrap(x: float) -> float:
+    """x mod 1 into [-0.5, 0.5)."""
+    return float((x + 0.5) % 1.0 - 0.5)
+
+
+def _contact_mask(phi: np.ndarray, contact_phase: np.ndarray) -> np.ndarray:
+    """(…, 2) bool marker contact of each foot at stride phases phi (…)."""
+    p = np.mod(phi, 1.0)[..., None]
+    on, off = contact_phase[:, 0], contact_phase[:, 1]
+    return (np.mod(p - on, 1.0) < (off - on))
 
 
 def _anchors(gait: Gait, psi: np.ndarray, phase_events: np.ndarray, first_foot: int, F: int):

@@ -50,12 +50,13 @@ class Prepared:
     machine: object  # froude.machine.model.SimpleMachine
     cycle: ReferenceCycle
     source: str = ""
+    fit: object = None  # froude.machine.fit.FitResult: everything the fit measured (plots, tables)
 
 
 def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, length_scale=None) -> Prepared:
     """Load (if given a path), model, check it is running, fit the simple machine and build the cycle."""
     from .io.bvh import load_bvh
-    from .machine.fit import fit_machine
+    from .machine.fit import fit_machine_detailed
 
     if isinstance(clip, Motion):
         motion, source = clip, str(clip.meta.get("source", "motion"))
@@ -66,9 +67,10 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     gait = detect_gait(motion, body, markers)
     summary = summarize(motion, body, com, gait)
     require_running(summary, source)
-    machine = fit_machine(motion, body=body, mass=mass)
+    fit = fit_machine_detailed(motion, body, mass=mass, source=Path(source).name)
+    machine = fit.machine
     cycle = extract_cycle(motion, body, gait, com, markers, events=_fit_events(machine, motion))
-    return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source)
+    return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source, fit)
 
 
 def _fit_events(machine, motion: Motion):

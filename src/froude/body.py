@@ -66,10 +66,15 @@ _CENTRAL_WORDS = {
     "head_end": ("headtopend", "headend", "headtop", "headsite"),
     "neck": ("neck", "neck1", "neck01"),
 }
-_SIDE_PATTERNS = (
-    ("left", re.compile(r"^(left|l)(?=[a-z])|^l_|(_|\.)l$|left$")),
-    ("right", re.compile(r"^(right|r)(?=[a-z])|^r_|(_|\.)r$|right$")),
+# Side markers. Strong ones (a "left"/"right" word, or a single letter set off by "_" or ".") decide
+# alone; a bare leading letter ("LThigh", "RShin") counts only when the rest is a known joint word, so
+# that "lowerarm_l" or "ribs" are not read as left/right by their first letter.
+_STRONG_SIDE = (
+    ("left", re.compile(r"^left|^l[_.]|[_.]l$|left$")),
+    ("right", re.compile(r"^right|^r[_.]|[_.]r$|right$")),
 )
+_WEAK_SIDE = (("left", re.compile(r"^l(?=[a-z])")), ("right", re.compile(r"^r(?=[a-z])")))
+_KNOWN_CORES = {w for words in _CORE_WORDS.values() for w in words}
 
 
 def _normalize(name: str) -> str:
@@ -79,10 +84,13 @@ def _normalize(name: str) -> str:
 
 def _side_and_core(name: str) -> tuple[str | None, str]:
     n = _normalize(name)
-    for side, pat in _SIDE_PATTERNS:
+    for side, pat in _STRONG_SIDE:
         if pat.search(n):
-            core = pat.sub("", n)
-            return side, re.sub(r"[^a-z0-9]", "", core)
+            return side, re.sub(r"[^a-z0-9]", "", pat.sub("", n, count=1))
+    for side, pat in _WEAK_SIDE:
+        core = re.sub(r"[^a-z0-9]", "", pat.sub("", n, count=1))
+        if pat.search(n) and core in _KNOWN_CORES:
+            return side, core
     return None, re.sub(r"[^a-z0-9]", "", n)
 
 

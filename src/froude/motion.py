@@ -102,12 +102,18 @@ class Motion:
         or ``time_warp`` for the common cases. Times outside the clip are clamped to its ends.
         """
         t = np.clip(np.asarray(times_s, dtype=float) / self.frame_time, 0.0, self.n_frames - 1)
+        # (i * dt) / dt is not always exactly i in floating point: snap times that hit a frame, so that
+        # sampling at the frame times (an identity time-warp) reproduces the frames bit for bit.
+        nearest = np.rint(t)
+        t = np.where(np.abs(t - nearest) < 1e-9, nearest, t)
         i0 = np.minimum(np.floor(t).astype(np.int64), max(self.n_frames - 2, 0))
         i1 = np.minimum(i0 + 1, self.n_frames - 1)
         w = t - i0
         rp = self.root_positions[i0] * (1.0 - w)[:, None] + self.root_positions[i1] * w[:, None]
         rots = quat.make_continuous(self.rotations)
         r = quat.slerp(rots[i0], rots[i1], np.broadcast_to(w[:, None], (len(w), self.skeleton.n_joints)))
+        # slerp renormalises, which can change the last bit of an exact frame: take those frames as they are
+        r = np.where((w == 0.0)[:, None, None], rots[i0], np.where((w == 1.0)[:, None, None], rots[i1], r))
         tr = None
         if self.translations is not None:
             tr = self.translations[i0] * (1.0 - w)[:, None, None] + self.translations[i1] * w[:, None, None]

@@ -6,6 +6,8 @@ the order given (``"zyx"`` means R = Rz(a0) @ Ry(a1) @ Rx(a2)).
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 _AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
@@ -132,7 +134,11 @@ def to_euler(q: np.ndarray, order: str) -> np.ndarray:
     shape = q.shape[:-1]
     flat = q.reshape(-1, 4)
     rot = Rotation.from_quat(np.concatenate([flat[:, 1:], flat[:, :1]], axis=-1))
-    return rot.as_euler(order.upper()).reshape(shape + (3,))
+    with warnings.catch_warnings():
+        # At gimbal lock SciPy returns a valid decomposition (third angle 0) and warns; a pose with a
+        # joint bent exactly 90 degrees is ordinary in animation, so the warning is only noise.
+        warnings.filterwarnings("ignore", message="Gimbal lock detected")
+        return rot.as_euler(order.upper()).reshape(shape + (3,))
 
 
 def make_continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,41 +42,66 @@ class _Token:
     line: int
 
 
-def _tokenize(text: str) -> list[_Token]:
-    tokens = []
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        for word in line.split():
-            tokens.append(_Token(word, lineno))
-    return tokens
+def _split_lines(text: str) -> list[str]:
+    """Lines as editors count them: split on LF, CRLF or CR only.
+
+    (``str.splitlines`` also splits on form feeds, U+0085 … which would shift every reported line number.)
+    """
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    return text.split("\n")
+
+
+def _show(word: str, limit: int = 40) -> str:
+    """A token as it may appear in a one-line message: control characters escaped, long tokens cut."""
+    shown = word if word.isprintable() else repr(word)[1:-1]
+    return shown if len(shown) <= limit else shown[: limit - 3] + "..."
 
 
 class _Parser:
+    """Header parser. Tokens are produced lazily, line by line, so that only the HIERARCHY and the
+    MOTION header are ever tokenized; the frame rows are parsed in bulk by ``_read_rows``."""
+
     def __init__(self, path: str, text: str):
         self.path = path
-        self.lines = text.splitlines()
-        self.tokens = _tokenize(text)
-        self.pos = 0
+        self.lines = _split_lines(text)
+        self._next_line = 0  # index of the next line to tokenize
+        self._buf: deque[_Token] = deque()
+        self._last_line = 1  # line of the last token handed out
+
+    def _fill(self) -> bool:
+        while not self._buf and self._next_line < len(self.lines):
+            self._next_line += 1
+            self._buf.extend(_Token(w, self._next_line) for w in self.lines[self._next_line - 1].split())
+        return bool(self._buf)
+
+    def _last_content_line(self) -> int:
+        for i in range(len(self.lines) - 1, -1, -1):
+            if self.lines[i].strip():
+                return i + 1
+        return 1
 
     def error(self, msg: str, line: int | None = None) -> BvhError:
         if line is None:
-            line = self.tokens[min(self.pos, len(self.tokens) - 1)].line if self.tokens else 1
+            tok = self.peek()
+            line = tok.line if tok is not None else self._last_line
         return BvhError(msg, self.path, line)
 
     def peek(self) -> _Token | None:
-        return self.tokens[self.pos] if self.pos < len(self.tokens) else None
+        return self._buf[0] if self._fill() else None
 
     def next(self, what: str) -> _Token:
         tok = self.peek()
         if tok is None:
-            last = self.tokens[-1].line if self.tokens else 1
-            raise BvhError(f"file ends early: expected {what}", self.path, last)
-        self.pos += 1
+            raise BvhError(f"file ends early: expected {what}", self.path, self._last_content_line())
+        self._buf.popleft()
+        self._last_line = tok.line
         return tok
 
     def expect(self, word: str) -> _Token:
         tok = self.next(f"'{word}'")
         if tok.text.upper() != word.upper():
-            raise self.error(f"expected '{word}', found '{tok.text}'", tok.line)
+            raise self.error(f"expected '{word}', found '{_show(tok.text)}'", tok.line)
         return tok
 
     def number(self, what: str) -> float:
@@ -83,9 +109,9 @@ class _Parser:
         try:
             value = float(tok.text)
         except ValueError:
-            raise self.error(f"expected a number for {what}, found '{tok.text}'", tok.line) from None
+            raise self.error(f"expected a number for {what}, found '{_show(tok.text)}'", tok.line) from None
         if not np.isfinite(value):
-            raise self.error(f"{what} is not finite ('{tok.text}')", tok.line)
+            raise self.error(f"{what} is not finite ('{_show(tok.text)}')", tok.line)
         return value
 
     def parse_hierarchy(self):
@@ -95,9 +121,13 @@ class _Parser:
             raise BvhError("empty file: no HIERARCHY section", self.path, 1)
         self.expect("HIERARCHY")
         tok = self.next("ROOT")
+        self.root_line = tok.line
         if tok.text.upper() != "ROOT":
-            raise self.error(f"expected 'ROOT', found '{tok.text}'", tok.line)
-        self._parse_joint(-1, names, parents, offsets, channels, end_sites)
+            raise self.error(f"expected 'ROOT', found '{_show(tok.text)}'", tok.line)
+        try:
+            self._parse_joint(-1, names, parents, offsets, channels, end_sites)
+        except RecursionError:
+            raise self.error("joints nested too deeply") from None
         tok = self.peek()
         if tok is not None and tok.text.upper() == "ROOT":
             raise self.error("more than one ROOT: only single-rooted skeletons are supported", tok.line)
@@ -109,36 +139,37 @@ class _Parser:
         # Names may contain spaces in some exporters: join words up to the brace on the same line.
         while self.peek() is not None and self.peek().text != "{" and self.peek().line == name_tok.line:
             name += " " + self.next("joint name").text
+        shown = _show(name)
         if name in names:
-            raise self.error(f"duplicate joint name '{name}'", name_tok.line)
+            raise self.error(f"duplicate joint name '{shown}'", name_tok.line)
         index = len(names)
         names.append(name)
         parents.append(parent)
         self.expect("{")
         self.expect("OFFSET")
-        offsets.append([self.number(f"OFFSET of joint '{name}'") for _ in range(3)])
+        offsets.append([self.number(f"OFFSET of joint '{shown}'") for _ in range(3)])
         ch_tok = self.expect("CHANNELS")
         n_tok = self.next("channel count")
         try:
             n = int(n_tok.text)
         except ValueError:
-            raise self.error(f"expected a channel count for joint '{name}', found '{n_tok.text}'", n_tok.line) from None
+            raise self.error(f"expected a channel count for joint '{shown}', found '{_show(n_tok.text)}'", n_tok.line) from None
         if not 0 <= n <= 6:
-            raise self.error(f"joint '{name}' declares {n} channels (0-6 allowed)", n_tok.line)
+            raise self.error(f"joint '{shown}' declares {n} channels (0-6 allowed)", n_tok.line)
         chans = []
         for _ in range(n):
-            c = self.next(f"a channel name of joint '{name}'")
+            c = self.next(f"a channel name of joint '{shown}'")
             canonical = c.text[0].upper() + c.text[1:].lower() if c.text else c.text
             if canonical not in _VALID_CHANNELS:
-                raise self.error(f"unknown channel '{c.text}' in joint '{name}'", c.line)
+                raise self.error(f"unknown channel '{_show(c.text)}' in joint '{_show(name)}'", c.line)
             if canonical in chans:
-                raise self.error(f"channel '{c.text}' repeated in joint '{name}'", c.line)
+                raise self.error(f"channel '{_show(c.text)}' repeated in joint '{shown}'", c.line)
             chans.append(canonical)
         if sum(c in ROTATION_CHANNELS for c in chans) not in (0, 3):
-            raise self.error(f"joint '{name}' must have 0 or 3 rotation channels", ch_tok.line)
+            raise self.error(f"joint '{shown}' must have 0 or 3 rotation channels", ch_tok.line)
         channels.append(tuple(chans))
         while True:
-            tok = self.next(f"'}}' closing joint '{name}'")
+            tok = self.next(f"'}}' closing joint '{shown}'")
             word = tok.text.upper()
             if word == "}":
                 return
@@ -148,46 +179,46 @@ class _Parser:
                 self.expect("Site")
                 self.expect("{")
                 self.expect("OFFSET")
-                off = [self.number(f"End Site OFFSET of joint '{name}'") for _ in range(3)]
+                off = [self.number(f"End Site OFFSET of joint '{shown}'") for _ in range(3)]
                 self.expect("}")
                 end_sites.append((index, off))
             else:
-                raise self.error(f"unexpected '{tok.text}' inside joint '{name}'", tok.line)
+                raise self.error(f"unexpected '{_show(tok.text)}' inside joint '{_show(name)}'", tok.line)
 
     def parse_motion_header(self):
         tok = self.peek()
         if tok is None:
-            raise BvhError("missing MOTION section", self.path, self.tokens[-1].line if self.tokens else 1)
+            raise BvhError("missing MOTION section", self.path, self._last_content_line())
         if tok.text.upper() != "MOTION":
-            raise self.error(f"expected 'MOTION', found '{tok.text}'", tok.line)
-        self.pos += 1
+            raise self.error(f"expected 'MOTION', found '{_show(tok.text)}'", tok.line)
+        self.next("'MOTION'")
         t = self.next("'Frames:'")
         if t.text.rstrip(":").upper() != "FRAMES":
-            raise self.error(f"expected 'Frames:', found '{t.text}'", t.line)
+            raise self.error(f"expected 'Frames:', found '{_show(t.text)}'", t.line)
         if not t.text.endswith(":"):
             self.expect(":")
         n_tok = self.next("frame count")
         try:
             n_frames = int(n_tok.text)
         except ValueError:
-            raise self.error(f"expected an integer frame count, found '{n_tok.text}'", n_tok.line) from None
+            raise self.error(f"expected an integer frame count, found '{_show(n_tok.text)}'", n_tok.line) from None
         if n_frames <= 0:
             raise self.error(f"the file declares {n_frames} frames: nothing to read", n_tok.line)
         t = self.next("'Frame Time:'")
         if t.text.upper() != "FRAME":
-            raise self.error(f"expected 'Frame Time:', found '{t.text}'", t.line)
+            raise self.error(f"expected 'Frame Time:', found '{_show(t.text)}'", t.line)
         t = self.next("'Time:'")
         if t.text.rstrip(":").upper() != "TIME":
-            raise self.error(f"expected 'Time:', found '{t.text}'", t.line)
+            raise self.error(f"expected 'Time:', found '{_show(t.text)}'", t.line)
         if not t.text.endswith(":"):
             self.expect(":")
         ft_tok = self.next("frame time")
         try:
             frame_time = float(ft_tok.text)
         except ValueError:
-            raise self.error(f"expected a number for the frame time, found '{ft_tok.text}'", ft_tok.line) from None
+            raise self.error(f"expected a number for the frame time, found '{_show(ft_tok.text)}'", ft_tok.line) from None
         if not (np.isfinite(frame_time) and frame_time > 0):
-            raise self.error(f"frame time must be > 0 s, found '{ft_tok.text}'", ft_tok.line)
+            raise self.error(f"frame time must be > 0 s, found '{_show(ft_tok.text)}'", ft_tok.line)
         return n_frames, frame_time, ft_tok.line
 
 
@@ -206,13 +237,14 @@ def _read_rows(path: str, lines: list[str], first_line: int, n_frames: int, n_ch
         raise BvhError(f"more frame rows than the {n_frames} declared", path, extra)
     text_rows = [body[i] for i in row_lines]
     linenos = np.array(row_lines, dtype=np.int64) + first_line + 1
-    flat = " ".join(text_rows).split()
-    if len(flat) == n_frames * n_channels:
-        try:
-            values = np.array(flat, dtype=float).reshape(n_frames, n_channels)
+    # NumPy's C parser checks that every row has the same number of values and converts without
+    # creating a Python float per value (a 1-hour 120 Hz clip has 40 million of them).
+    try:
+        values = np.loadtxt(text_rows, dtype=float, comments=None, ndmin=2)
+        if values.shape == (n_frames, n_channels):
             return values, linenos
-        except ValueError:
-            pass  # a non-numeric token: locate it below
+    except ValueError:
+        pass  # locate the bad row below, with a message naming its line
     for k, row in enumerate(text_rows):
         words = row.split()
         if len(words) != n_channels:
@@ -220,10 +252,17 @@ def _read_rows(path: str, lines: list[str], first_line: int, n_frames: int, n_ch
         for c, w in enumerate(words):
             try:
                 float(w)
+                ok = "_" not in w  # Python accepts "1_000"; no BVH writer does
             except ValueError:
+                ok = False
+            if not ok:
                 raise BvhError(
-                    f"non-numeric value '{w}' for channel {channel_names[c]}", path, int(linenos[k])
-                ) from None
+                    f"non-numeric value '{_show(w)}' for channel {channel_names[c]}", path, int(linenos[k])
+                )
+        try:
+            np.loadtxt([row], dtype=float, comments=None, ndmin=2)
+        except ValueError:
+            raise BvhError("unreadable frame row", path, int(linenos[k])) from None
     raise BvhError("could not parse frame rows", path, first_line)  # pragma: no cover
 
 
@@ -244,7 +283,11 @@ def _pose_jump_deg(rot: np.ndarray) -> np.ndarray:
     The median, not the maximum: noisy hand channels make single-joint jumps common in real captures,
     while a synthetic pose frame moves most joints at once.
     """
-    return np.degrees(np.median(quat.angle_between(rot[1:], rot[:-1]), axis=1))
+    # one joint at a time: no (F, J, 4) temporaries on long clips
+    jumps = np.empty((rot.shape[0] - 1, rot.shape[1]))
+    for j in range(rot.shape[1]):
+        jumps[:, j] = quat.angle_between(rot[1:, j], rot[:-1, j])
+    return np.degrees(np.median(jumps, axis=1))
 
 
 def load_bvh(path: str | os.PathLike, *, length_scale: float | None = None, clean: bool = True) -> Motion:
@@ -268,47 +311,19 @@ def load_bvh(path: str | os.PathLike, *, length_scale: float | None = None, clea
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         text = raw.decode("latin-1")
-    if not text.strip():
+    del raw  # large files: keep one copy of the text at a time (see benchmarks/bench_core.py)
+    if not text or text.isspace():
         raise BvhError("empty file", path, 1)
 
     parser = _Parser(path, text)
+    del text
     names, parents, offsets, channels, end_sites = parser.parse_hierarchy()
     n_frames, frame_time, ft_line = parser.parse_motion_header()
     n_channels = sum(len(c) for c in channels)
     channel_names = [f"{names[j]}.{c}" for j in range(len(names)) for c in channels[j]]
     values, linenos = _read_rows(path, parser.lines, ft_line, n_frames, n_channels, channel_names)
-
-    notes: list[str] = []
-    finite = np.isfinite(values).all(axis=1)
-    zero = np.all(values == 0.0, axis=1)
-    valid = finite & ~zero
-    if not clean:
-        bad = np.flatnonzero(~finite)
-        if bad.size:
-            k = bad[0]
-            c = int(np.flatnonzero(~np.isfinite(values[k]))[0])
-            raise BvhError(f"non-finite value for channel {channel_names[c]}", path, int(linenos[k]))
-        keep = np.ones(n_frames, bool)
-    else:
-        if not valid.any():
-            raise BvhError("no valid frame: every row is all-zero or non-finite", path, int(linenos[0]))
-        first, last = np.flatnonzero(valid)[[0, -1]]
-        inner_bad = np.flatnonzero(~finite[first : last + 1])
-        if inner_bad.size:
-            k = first + inner_bad[0]
-            c = int(np.flatnonzero(~np.isfinite(values[k]))[0])
-            raise BvhError(
-                f"non-finite value for channel {channel_names[c]} inside the motion (frame {k})",
-                path, int(linenos[k]),
-            )
-        keep = np.zeros(n_frames, bool)
-        keep[first : last + 1] = True
-        if first > 0:
-            notes.append(f"dropped {first} invalid leading row(s) (lines {linenos[0]}-{linenos[first - 1]})")
-        if last < n_frames - 1:
-            notes.append(
-                f"dropped {n_frames - 1 - last} invalid trailing row(s) (lines {linenos[last + 1]}-{linenos[-1]})"
-            )
+    root_line = parser.root_line
+    del parser  # the text lines
 
     # Rest offsets and units
     offsets_file = np.array(offsets, dtype=float)
@@ -316,33 +331,28 @@ def load_bvh(path: str | os.PathLike, *, length_scale: float | None = None, clea
                          tuple((j, np.array(o, float)) for j, o in end_sites))
     stature_file = skel_file.standing_height()
     if length_scale is None:
-        length_scale, unit_name = detect_length_scale(stature_file)
+        try:
+            length_scale, unit_name = detect_length_scale(stature_file)
+        except BvhError as e:
+            raise BvhError(str(e), path, root_line) from None
         notes_units = f"{unit_name} detected from a rest-pose stature of {stature_file:g} file units"
     else:
         if not (np.isfinite(length_scale) and length_scale > 0):
             raise BvhError(f"length_scale must be > 0, got {length_scale}", path)
-        unit_name = "given"
         notes_units = f"length scale {length_scale:g} m per file unit (given)"
     skeleton = skel_file.scaled(length_scale)
 
-    values = values[keep]
-    linenos = linenos[keep]
-    root_positions, rotations, translations = _channels_to_pose(skeleton, values, length_scale)
-
-    if clean and len(values) > 2:
-        # A synthetic pose frame (the CMU conversions add a T-pose as frame 0) shows up as a jump in joint
-        # rotations far larger than any other frame-to-frame change.
-        jumps = _pose_jump_deg(rotations)
-        rest = jumps[1:]
-        typical = np.percentile(rest, 99) if rest.size else 0.0
-        if jumps[0] > 5.0 and jumps[0] > 5.0 * typical:
-            notes.append(
-                f"dropped frame 0 (line {linenos[0]}): synthetic pose frame (T-pose), its joints turn by "
-                f"{jumps[0]:.0f} deg (median) to the next frame (99th percentile elsewhere {typical:.1f} deg)"
-            )
-            root_positions, rotations = root_positions[1:], rotations[1:]
-            translations = None if translations is None else translations[1:]
-            linenos = linenos[1:]
+    finite = np.isfinite(values).all(axis=1)
+    if not clean:
+        bad = np.flatnonzero(~finite)
+        if bad.size:
+            raise _non_finite_error(path, values, linenos, channel_names, int(bad[0]), "")
+        root_positions, rotations, translations = _channels_to_pose(skeleton, values, length_scale)
+        notes: list[str] = []
+    else:
+        root_positions, rotations, translations, linenos, notes = _clean(
+            path, skeleton, values, linenos, finite, channel_names, length_scale
+        )
 
     meta = {
         "source": path,
@@ -354,6 +364,66 @@ def load_bvh(path: str | os.PathLike, *, length_scale: float | None = None, clea
     return Motion(skeleton, root_positions, rotations, frame_time, translations, meta)
 
 
+def _non_finite_error(path, values, linenos, channel_names, k: int, where: str) -> BvhError:
+    c = int(np.flatnonzero(~np.isfinite(values[k]))[0])
+    return BvhError(f"non-finite value for channel {_show(channel_names[c])}{where}", path, int(linenos[k]))
+
+
+def _describe_rows(linenos: np.ndarray, values: np.ndarray, what: str) -> str:
+    """'2 invalid leading row(s) (all-zero; lines 188-189)' for the rows given."""
+    n_bad = int((~np.isfinite(values).all(axis=1)).sum())
+    kinds = ", ".join(k for k, n in (("all-zero", len(values) - n_bad), ("NaN/inf", n_bad)) if n)
+    lines = f"line {linenos[0]}" if len(linenos) == 1 else f"lines {linenos[0]}-{linenos[-1]}"
+    return f"dropped {len(values)} invalid {what} row(s) ({kinds}; {lines})"
+
+
+def _clean(path, skeleton, values, linenos, finite, channel_names, length_scale):
+    """Drop a synthetic pose first frame and invalid (all-zero or non-finite) rows before and after the
+    motion; returns (root_positions, rotations, translations, linenos, notes). A non-finite value inside
+    the motion is an error.
+
+    The synthetic pose frame is judged against the next *valid* row, so invalid rows between the pose
+    frame and the motion (a recording that starts late) are dropped with it.
+    """
+    valid = finite & np.any(values != 0.0, axis=1)
+    vidx = np.flatnonzero(valid)
+    if not vidx.size:
+        raise BvhError("no valid frame: every row is all-zero or non-finite", path, int(linenos[0]))
+    rp, rot, tr = _channels_to_pose(skeleton, values if len(vidx) == len(values) else values[vidx], length_scale)
+    notes = []
+    start, stop = int(vidx[0]), int(vidx[-1]) + 1
+    if start > 0:
+        notes.append(_describe_rows(linenos[:start], values[:start], "leading"))
+    first_valid = 0  # index into vidx of the motion's first frame
+    if len(vidx) > 2:
+        # A synthetic pose frame (the CMU conversions add a T-pose as frame 0) shows up as a jump in joint
+        # rotations far larger than any other frame-to-frame change.
+        jumps = _pose_jump_deg(rot)
+        typical = np.percentile(jumps[1:], 99)
+        if jumps[0] > 5.0 and jumps[0] > 5.0 * typical:
+            notes.append(
+                f"dropped frame {start} (line {linenos[start]}): synthetic pose frame (T-pose), its joints turn "
+                f"by {jumps[0]:.0f} deg (median) to the next frame (99th percentile elsewhere {typical:.1f} deg)"
+            )
+            first_valid = 1
+            gap = slice(start + 1, int(vidx[1]))
+            if gap.stop > gap.start:
+                notes.append(_describe_rows(linenos[gap], values[gap], "leading") + " after the pose frame")
+            start = int(vidx[1])
+    if stop < len(values):
+        notes.append(_describe_rows(linenos[stop:], values[stop:], "trailing"))
+    inner_bad = np.flatnonzero(~finite[start:stop])
+    if inner_bad.size:
+        k = start + int(inner_bad[0])
+        raise _non_finite_error(path, values, linenos, channel_names, k, f" inside the motion (frame {k})")
+    if stop - start == len(vidx) - first_valid:  # no all-zero rows inside the motion: reuse the conversion
+        sl = slice(first_valid, None)
+        rp, rot, tr = rp[sl], rot[sl], None if tr is None else tr[sl]
+    else:
+        rp, rot, tr = _channels_to_pose(skeleton, values[start:stop], length_scale)
+    return rp, rot, tr, linenos[start:stop], notes
+
+
 def _channels_to_pose(skeleton: Skeleton, values: np.ndarray, length_scale: float):
     F = values.shape[0]
     J = skeleton.n_joints
@@ -362,6 +432,7 @@ def _channels_to_pose(skeleton: Skeleton, values: np.ndarray, length_scale: floa
     if any(skeleton.has_translation_channels(j) for j in range(1, J)):
         translations = np.broadcast_to(skeleton.offsets, (F, J, 3)).copy()
     root_positions = np.broadcast_to(skeleton.offsets[0], (F, 3)).copy()
+    columns = np.ascontiguousarray(values.T)  # (C, F): each channel contiguous, not a 768-byte stride
     col = 0
     for j in range(J):
         chans = skeleton.channels[j]
@@ -370,18 +441,19 @@ def _channels_to_pose(skeleton: Skeleton, values: np.ndarray, length_scale: floa
             if c in POSITION_CHANNELS:
                 axis = POSITION_CHANNELS.index(c)
                 if j == 0:
-                    root_positions[:, axis] = values[:, col] * length_scale
+                    root_positions[:, axis] = columns[col] * length_scale
                 else:
-                    translations[:, j, axis] = values[:, col] * length_scale
+                    translations[:, j, axis] = columns[col] * length_scale
             else:
                 rot_cols.append(col)
                 rot_order += c[0].lower()
             col += 1
         if rot_cols:
-            rotations[:, j] = quat.from_euler(np.radians(values[:, rot_cols]), rot_order)
+            # continuous signs joint by joint: no (F, J, 4) temporaries on long clips
+            rotations[:, j] = quat.make_continuous(quat.from_euler(np.radians(columns[rot_cols].T), rot_order))
         else:
             rotations[:, j] = quat.identity()
-    return root_positions, quat.make_continuous(rotations), translations
+    return root_positions, rotations, translations
 
 
 def motion_to_channels(motion: Motion, length_scale: float = 1.0) -> np.ndarray:

@@ -1,0 +1,1 @@
+"""Pictures: plots (matplotlib) and renders. Optional extras, imported lazily."""

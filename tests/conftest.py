@@ -1,0 +1,157 @@
+"""Shared test helpers: where the real clips are, an independent BVH reader + SciPy FK oracle, the CLI.
+
+The oracle deliberately shares no code with ``froude``: its own tokenizer, SciPy ``Rotation`` for the
+Euler angles (intrinsic, file order) and for composing joint transforms.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from froude.cli import main as cli_main
+
+REPO = Path(__file__).resolve().parents[1]
+FIXTURES = Path(__file__).resolve().parent / "fixtures"
+
+
+def _find_mocap() -> Path | None:
+    candidates = [os.environ.get("FROUDE_MOCAP_DIR"), REPO.parent / "shared" / "data" / "mocap",
+                  Path("/work/shared/data/mocap")]
+    for c in candidates:
+        if c and Path(c, "09_01.bvh").is_file():
+            return Path(c)
+    return None
+
+
+MOCAP = _find_mocap()
+RUNNING = ("09_01", "09_02", "09_03", "09_04", "09_05", "09_06", "09_07", "09_08", "02_03")
+WALKING = ("02_01", "07_01")
+ALL_CLIPS = tuple(sorted(p.stem for p in MOCAP.glob("*.bvh"))) if MOCAP else ()
+NO_DATA = "real clips not found: set FROUDE_MOCAP_DIR to the folder holding 09_01.bvh"
+
+
+def clip(name: str) -> Path:
+    """Path of a real clip, skipping the test (with the reason) when the data folder is absent."""
+    if MOCAP is None:
+        pytest.skip(NO_DATA)
+    return MOCAP / f"{name}.bvh"
+
+
+def clip_params(names=None):
+    """pytest parameters over real clips; a single skipping parameter when the data is absent."""
+    if MOCAP is None:
+        return [pytest.param(None, marks=pytest.mark.skip(reason=NO_DATA))]
+    return list(names or ALL_CLIPS)
+
+
+# ---- an independent BVH reader and FK (the oracle) -----------------------------------------------
+@dataclass
+class OracleBvh:
+    names: list
+    parents: list
+    offsets: np.ndarray  # (J, 3) file units
+    channels: list  # per joint, channel names as written
+    end_sites: list  # (joint, (3,) offset file units)
+    frame_time: float
+    values: np.ndarray  # (F, C) file numbers
+
+
+def read_bvh_oracle(path) -> OracleBvh:
+    text = Path(path).read_text()
+    head, motion = text.split("MOTION", 1)
+    words = head.split()
+    names, parents, offsets, channels, end_sites = [], [], [], [], []
+    stack = []  # joint index per open brace; -1 for End Site braces
+    i = 0
+    pending = None
+    while i < len(words):
+        w = words[i]
+        if w in ("ROOT", "JOINT"):
+            pending = ("joint", words[i + 1])
+            i += 2
+        elif w == "End":
+            pending = ("end", None)
+            i += 2
+        elif w == "{":
+            if pending[0] == "joint":
+                names.append(pending[1])
+                parents.append(next((s for s in reversed(stack) if s >= 0), -1))
+                offsets.append(None)
+                channels.append([])
+                stack.append(len(names) - 1)
+            else:
+                stack.append(-1)
+            i += 1
+        elif w == "}":
+            stack.pop()
+            i += 1
+        elif w == "OFFSET":
+            off = [float(x) for x in words[i + 1 : i + 4]]
+            if stack[-1] >= 0:
+                offsets[stack[-1]] = off
+            else:
+                end_sites.append((next(s for s in reversed(stack) if s >= 0), np.array(off)))
+            i += 4
+        elif w == "CHANNELS":
+            n = int(words[i + 1])
+            channels[stack[-1]] = words[i + 2 : i + 2 + n]
+            i += 2 + n
+        else:
+            i += 1
+    lines = [l for l in motion.splitlines() if l.strip()]
+    frame_time = float(lines[1].split(":")[1])
+    values = np.array([[float(x) for x in l.split()] for l in lines[2:]])
+    return OracleBvh(names, parents, np.array(offsets, float), channels, end_sites, frame_time, values)
+
+
+def oracle_fk(b: OracleBvh, length_scale: float, rows=slice(None)):
+    """World joint positions (F, J, 3) [m] and end-site positions (F, E, 3) [m] with SciPy Rotation."""
+    from scipy.spatial.transform import Rotation
+
+    values = b.values[rows]
+    F, J = len(values), len(b.names)
+    p_world = np.zeros((F, J, 3))
+    R_world = [None] * J
+    col = 0
+    for j in range(J):
+        t_local = np.broadcast_to(b.offsets[j] * length_scale, (F, 3)).copy()
+        order, angles = "", []
+        for c in b.channels[j]:
+            if c.endswith("position"):
+                t_local[:, "XYZ".index(c[0])] = values[:, col] * length_scale
+            else:
+                order += c[0].upper()  # upper case = intrinsic rotations in SciPy
+                angles.append(values[:, col])
+            col += 1
+        R_local = (Rotation.from_euler(order, np.stack(angles, axis=1), degrees=True) if order
+                   else Rotation.identity(F))
+        if b.parents[j] < 0:
+            p_world[:, j] = t_local
+            R_world[j] = R_local
+        else:
+            pj = b.parents[j]
+            p_world[:, j] = p_world[:, pj] + R_world[pj].apply(t_local)
+            R_world[j] = R_world[pj] * R_local
+    ends = np.stack([p_world[:, j] + R_world[j].apply(off * length_scale) for j, off in b.end_sites], axis=1) \
+        if b.end_sites else np.zeros((F, 0, 3))
+    return p_world, ends
+
+
+# ---- the command line ----------------------------------------------------------------------------
+@pytest.fixture
+def run_cli(capsys):
+    """Run ``froude ARGS`` in-process: returns (exit status, stdout, stderr)."""
+
+    def run(*args):
+        try:
+            code = cli_main([str(a) for a in args])
+        except SystemExit as e:  # argparse errors
+            code = e.code
+        out, err = capsys.readouterr()
+        return code, out, err
+
+    return run

@@ -3,40 +3,49 @@
 A *step* is one stance and the flight after it, apex → apex; a stride is two steps. The state at
 each apex is (U, H) (speed [√(g l0)], height [l0]); per step the planner chooses the touchdown angle
 θ0 — the paper's control input (eq. 5) — and, only where θ0 alone cannot do the job, a small change
-δb of the control's linear leg-extension coefficient b ("push harder / softer").
+δb of the control's linear leg-extension coefficient b ("push harder / softer"). K, a, c and T_c
+always stay the fitted ones.
 
 Why b and not a. At a running cycle the step map nearly conserves the apex energy E = ½U² + H
-whatever θ0 is (measured: |∂E'/∂θ0| ≈ 0.03 per rad, the fitted controls inject and remove about
-the same work): a steeper or flatter leg only trades speed for height. Halving U = 1.2 with θ0 alone
-would lift the apex by ½(1.2² − 0.6²) = 0.54 l0, a bound rather than a run, and U × 1.3 would need
-an apex below the touchdown height. Energy must be added or removed in stance. Of the control's
-coefficients, a (length offset) acts like θ0 (it trades U for H, ∂E'/∂a ≈ 0.1), while b (desired
-length growing by b l0 over the stance) changes the actuator work ∫ f dl_d almost purely: ∂E'/∂b ≈
-2.5, ∂U'/∂b ≈ 0.04. So δb is the runner extending the leg more (accelerating) or less (braking)
-during the push; the planner keeps |δb| within ``Comfort.b_band``.
+whatever θ0 is (measured on a K = 17 cycle: ΔE' ≈ 0.005 for 8° of θ0): a steeper or flatter leg
+only trades speed for height. Halving U = 1.2 with θ0 alone would lift the apex by
+½(1.2² − 0.6²) = 0.54 l0, a bound rather than a run, and U × 1.3 would need an apex below the
+touchdown height. Energy must be added or removed in stance. Of the control's coefficients, a
+(length offset) acts like θ0 (measured ∂U'/∂a ≈ −2.2, ∂E'/∂a ≈ 0.1-0.3), while b (desired length
+growing by b l0 over the stance) changes the actuator work ∫ f dl_d almost alone (∂E'/∂b ≈ 2.5,
+∂U'/∂b ≈ 0.08). δb is the runner extending the leg more (accelerating) or less (braking) during
+the push; the planner keeps |δb| ≤ ``Comfort.b_band`` (0.08 l0; the real clips use ≤ 0.05).
 
-Policy (documented in :func:`plan_speed_change`):
+Policy (:func:`plan_speed_change`):
 
-* reference speeds: U_ref(k) = U0 + (U_t − U0) s(k/n) for the n change steps, with s the
-  ``"ease"`` (smoothstep 3x² − 2x³: zero acceleration at both ends, peak change 1.5× the mean) or
-  ``"even"`` (s(x) = x: equal ΔU per step) profile; monotone, so apex speeds never overshoot;
-* reference heights: H_ref(k) = H0 + (H_t − H0) s(k/n), where (U_t, H_t) is the *target cycle*:
-  a periodic orbit of the machine at U_t found by :func:`target_cycle` (θ0, H free; b too if the
-  fitted control has no orbit there);
-* each step solves for its inputs with the exact simulator :func:`~froude.machine.dynamics.step`:
-  ``energy="theta"`` — θ0 only (b stays the fitted one), U' = U_ref exactly, H' goes where the
-  physics takes it; ``energy="b"`` — θ0 and δb, (U', H') = (U_ref, H_ref) exactly (2 × 2 Newton);
-  ``energy="auto"`` (default) — θ0 only if that plan meets every comfort bound and ends within
-  ``Comfort.settle_H`` of a periodic orbit at U_t, else θ0 + δb;
-* the initial θ0 comes from the transition table (``theta_for_speed``) when one is given, else
-  from one batched scan of the simulator over the θ0 band; Newton iterations then run on the
-  simulator itself (finite-difference Jacobian rows batched into one call), so every planned apex
-  state is the simulator's own output: the plan is exact against
-  :func:`~froude.machine.dynamics.simulate`, not an interpolant;
-* lead steps (before) and hold steps (after) track the start and target cycles' fixed points.
+* target: a periodic orbit of the machine at U_t (:func:`target_cycle`), the one nearest the start
+  cycle in fall time, b and apex height (scales 0.05, 0.01, 0.02), found by continuation;
+* reference speeds: U_ref(k) = U0 + (U_t − U0) s(k/n) for the n change steps, s = ``"ease"``
+  (smoothstep 3x² − 2x³: gentle start and end, peak change 1.5× the mean) or ``"even"`` (equal ΔU);
+  monotone, so apex speeds never overshoot;
+* ``energy="b"``: θ0 and b per step; every apex speed equals U_ref exactly and the last apex is
+  the target orbit's fixed point; among the solutions the planner takes the one whose inputs
+  stay closest to the start → target interpolation (least squares, scaled);
+* ``energy="theta"`` (the paper's): θ0 only; the last apex speed is U_t exactly and the change
+  ends on a periodic orbit of the fitted control (whichever it reaches: θ0 only barely moves the
+  energy), the intermediate speeds follow U_ref in the least-squares sense and monotonically;
+* ``energy="auto"`` (default): θ0 only when that works within the comfort bounds, else θ0 + δb;
+* lead steps (before) and hold steps (after) track the start and target fixed points exactly.
 
-Everything is dimensionless (l0 = g = m = 1); nothing here depends on a character's size or mass,
-so one plan serves every dynamically similar character. SI appears only in :meth:`SpeedPlan.to_si`.
+Numerics. The change steps are solved together by constrained Gauss–Newton with *multiple
+shooting* (inputs and apex states are unknowns tied by continuity constraints; the per-step maps
+are unstable, |λ| up to ≈ 2, so single shooting compounds sensitivities) on the exact simulator
+:func:`~froude.machine.dynamics.step`, with finite-difference rows batched into one call. Inside,
+the touchdown is parametrised by the apex → touchdown fall time τ (cos θ0 = H − τ²/2): every τ ≥ 0
+is a reachable touchdown, so iterations cannot fall off the "apex below touchdown" cliff the fitted
+cycles sit next to (their apex is only ≈ 0.01-0.05 l0 above touchdown height). With a transition
+table, θ0-only plans start from a table rollout (``theta_for_speed`` + ``lookup``, the paper's
+use) and lead/hold steps take their first θ0 from it; the answer never comes from the
+interpolant: the final plan is re-simulated step by step with the simulator's scalar path (the
+one :func:`~froude.machine.dynamics.simulate` uses), so it is exact against direct simulation.
+
+Everything is dimensionless (l0 = g = m = 1); nothing depends on a character's size or mass, so one
+plan serves every dynamically similar character. SI appears only in :meth:`SpeedPlan.to_si`.
 """
 from __future__ import annotations
 
@@ -57,8 +66,11 @@ ENERGY_MODES = ("auto", "theta", "b")
 LEAD, CHANGE, HOLD = 0, 1, 2
 _PHASE_NAMES = {LEAD: "lead", CHANGE: "change", HOLD: "hold"}
 
-#: Newton tolerance on the reference hit, max(|U' − U_ref|, |H' − H_ref|).
+#: Newton tolerance on the reference hit, max(|U' − U_ref|, |H' − H_ref|) ...
 _TOL = 1e-11
+#: ... and the largest residual still accepted when iterations stall there (the RK4 step map of
+#: a passive runner conserves energy only to ~1e-9, which puts a floor under periodic orbits).
+_ACCEPT = 1e-8
 
 
 @dataclass(frozen=True)
@@ -186,6 +198,7 @@ class _Cycle:
     t_stance: float
     peak_force: float
     step_time: float
+    t_fall: float
     source: object = field(default=None, compare=False)
 
 
@@ -207,7 +220,7 @@ def _as_cycle(cycle) -> _Cycle:
     if not bool(r.valid):
         raise PlanError(f"the start cycle's step is invalid: {REASONS[int(r.reason)]}")
     return _Cycle(U, H, th, ctl, float(r.t_stance), float(r.peak_force),
-                  float(r.t_fall + r.t_stance + r.t_rise), cycle)
+                  float(r.t_fall + r.t_stance + r.t_rise), float(r.t_fall), cycle)
 
 
 def _bounds(cyc: _Cycle, comfort: Comfort, energy: str):
@@ -256,12 +269,14 @@ def _steps(U, H, theta0, b, control: Control) -> StepResult:
                          for f in _STEP_FIELDS})
 
 
-def _newton(resid, x0, lo, hi, free, *, tol=_TOL, max_iter=25, h=1e-7):
+def _newton(resid, x0, lo, hi, free, *, tol=_TOL, max_iter=40, h=1e-7):
     """Drive resid(x) → 0 over the ``free`` coordinates of x, kept inside the box [lo, hi].
 
     resid(X (m, d)) → (R (m, r), valid (m,) bool). Forward-difference Jacobian (one extra row per free
-    coordinate, stepping inward at the box's upper edge or where a row is invalid), minimum-norm
-    least-squares Newton step, halved up to 8 times until max|R| decreases.
+    coordinate, stepping inward at the box's upper edge or where a row is invalid) and
+    Levenberg–Marquardt steps (damping raised ×10 until max|R| decreases, lowered after success):
+    plain Newton when the Jacobian is well conditioned, safe when it is (near) rank deficient —
+    e.g. the passive spring-mass runner, whose energy conservation ties U' − U to H' − H.
     Returns (x (d,), R (r,) or None, converged bool).
     """
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
@@ -270,6 +285,7 @@ def _newton(resid, x0, lo, hi, free, *, tol=_TOL, max_iter=25, h=1e-7):
     if not v[0]:
         return x, None, False
     R = R[0]
+    mu = 1e-10
     for _ in range(max_iter):
         nrm = float(np.max(np.abs(R)))
         if nrm <= tol:
@@ -286,18 +302,22 @@ def _newton(resid, x0, lo, hi, free, *, tol=_TOL, max_iter=25, h=1e-7):
             if not vJ.all():
                 return x, R, False
         J = ((RJ - R[None]) / hs[:, None]).T  # (r, nf)
-        dx = np.linalg.lstsq(J, -R, rcond=1e-12)[0]
-        for alpha in 0.5 ** np.arange(9):
+        JtJ, g = J.T @ J, J.T @ R
+        scale = float(np.trace(JtJ)) / len(free) or 1.0
+        for _ in range(14):
+            dx = -np.linalg.solve(JtJ + mu * scale * np.eye(len(free)), g)
             xt = x.copy()
-            xt[free] += alpha * dx
+            xt[free] += dx
             xt = np.clip(xt, lo, hi)
             Rt, vt = resid(xt[None])
             if vt[0] and float(np.max(np.abs(Rt[0]))) < nrm:
                 x, R = xt, Rt[0]
+                mu = max(mu * 0.1, 1e-12)
                 break
+            mu *= 10.0
         else:
-            return x, R, False
-    return x, R, float(np.max(np.abs(R))) <= tol
+            break  # no decrease at any damping: a floor (integration error) or a dead end
+    return x, R, float(np.max(np.abs(R))) <= _ACCEPT
 
 
 # --- target cycle ---------------------------------------------------------------------------------
@@ -312,37 +332,54 @@ def _cycle_from(U, H, th, ctl, residual, iterations=0, eigenvalues=True) -> Limi
                       iterations=iterations, residual=float(residual), eigenvalues=eig)
 
 
+def _theta_of(H, tau):
+    """Touchdown angle [rad] for apex height H and apex → touchdown fall time τ: cos θ0 = H − τ²/2.
+    NaN where that height is above the leg length (H − τ²/2 > 1) or not positive.
+
+    The planner's internal input is τ, not θ0: every τ ≥ 0 is a reachable touchdown, so Newton
+    iterations cannot fall off the "apex below touchdown height" cliff that the fitted cycles sit
+    next to (their apex is only ≈ 0.01 l0 above the touchdown height)."""
+    y = np.asarray(H, float) - 0.5 * np.asarray(tau, float) ** 2
+    with np.errstate(invalid="ignore"):
+        return np.where((y <= 1.0) & (y > 0.0), np.arccos(np.clip(y, -1.0, 1.0)), np.nan)
+
+
+#: Scales of the orbit unknowns (τ [√(l0/g)], b [l0], H [l0]): how far each moves per unit cost.
+_ORBIT_SCALES = np.array([0.05, 0.01, 0.02])
+
+
 def _orbit(cyc: "_Cycle", U_t, prior, energy, comfort):
-    """Periodic orbit at apex speed U_t from prior (H, θ0, b): energy "b" holds H at the start
-    cycle's height and solves (θ0, b); "theta" keeps b and solves (θ0, H) (minimum-norm from the
-    prior H). Returns (LimitCycle or None, problems list)."""
-    H_p, th_p, b_p = prior
-    th_b, b_b = _bounds(cyc, comfort, energy)
+    """Periodic orbit at apex speed U_t nearest prior (τ, b, H) in the scaled norm (minimum-norm
+    Newton from the prior; scales _ORBIT_SCALES). energy "b": τ, b and H free; "theta": b fixed.
+    Returns (LimitCycle or None, problems list)."""
     ctl = cyc.control
-    if energy == "b":
-        def resid(X):
-            r = _steps(U_t, cyc.H, X[:, 0], X[:, 1], ctl)
-            return np.stack([r.U_next - U_t, r.H_next - cyc.H], 1), r.valid
-        x, R, ok = _newton(resid, (th_p, b_p), (th_b[0], b_b[0]), (th_b[1], b_b[1]), np.array([0, 1]))
-        H, th, b = cyc.H, x[0], x[1]
-    else:
-        def resid(X):
-            r = _steps(U_t, X[:, 1], X[:, 0], ctl.b, ctl)
-            return np.stack([r.U_next - U_t, r.H_next - X[:, 1]], 1), r.valid
-        H_lo, H_hi = cyc.H + comfort.H_band[0], cyc.H + comfort.H_band[1]
-        x, R, ok = _newton(resid, (th_p, H_p), (th_b[0], H_lo), (th_b[1], H_hi), np.array([0, 1]))
-        H, th, b = x[1], x[0], ctl.b
+    s = _ORBIT_SCALES
+
+    def resid(Xs):
+        X = Xs * s
+        r = _steps(U_t, X[:, 2], _theta_of(X[:, 2], X[:, 0]), X[:, 1], ctl)
+        return np.stack([r.U_next - U_t, r.H_next - X[:, 2]], 1), r.valid
+    _, b_b = _bounds(cyc, comfort, energy)
+    lo = np.array([0.0, b_b[0], cyc.H + comfort.H_band[0]]) / s
+    hi = np.array([10.0, b_b[1], cyc.H + comfort.H_band[1]]) / s
+    free = np.array([0, 1, 2]) if energy == "b" else np.array([0, 2])
+    x, R, ok = _newton(resid, np.asarray(prior, float) / s, lo, hi, free, h=1e-6)
     if not ok:
         why = "the search left the valid region" if R is None else f"residual {np.max(np.abs(R)):.2g}"
         return None, [f"no periodic orbit within the bounds ({why})"]
-    lc = _cycle_from(float(U_t), float(H), float(th), replace(ctl, b=float(b)), np.max(np.abs(R)),
-                     eigenvalues=False)
-    return lc, _orbit_problems(lc, cyc, comfort)
+    tau, b, H = x * s
+    lc = _cycle_from(float(U_t), float(H), float(_theta_of(H, tau)), replace(ctl, b=float(b)),
+                     np.max(np.abs(R)), eigenvalues=False)
+    return lc, _orbit_problems(lc, cyc, comfort, energy)
 
 
-def _orbit_problems(lc, cyc: "_Cycle", comfort: Comfort) -> list:
-    """Comfort violations of an orbit (stance length, peak force), relative to the start cycle."""
+def _orbit_problems(lc, cyc: "_Cycle", comfort: Comfort, energy: str) -> list:
+    """Comfort violations of an orbit, relative to the start cycle."""
     probs = []
+    th_b, _ = _bounds(cyc, comfort, energy)
+    if not th_b[0] - 1e-9 <= lc.theta0 <= th_b[1] + 1e-9:
+        probs.append(f"its touchdown angle {math.degrees(lc.theta0):.1f} deg is outside "
+                     f"{math.degrees(th_b[0]):.1f}..{math.degrees(th_b[1]):.1f} deg")
     if lc.t_stance > comfort.max_stance * cyc.t_stance:
         probs.append(f"its stance {lc.t_stance:.3g} is > {comfort.max_stance:g}x the cycle's")
     if lc.peak_force > comfort.max_peak_force * cyc.peak_force:
@@ -350,26 +387,29 @@ def _orbit_problems(lc, cyc: "_Cycle", comfort: Comfort) -> list:
     return probs
 
 
-def _orbits(cyc: "_Cycle", U_nodes, energy: str, comfort: Comfort):
-    """Continuation of periodic orbits through U_nodes from the start cycle; yields
-    (U, LimitCycle or None, problems) and stops after the first failure."""
-    prior = (cyc.H, cyc.theta0, cyc.control.b)
+def _orbits(cyc: "_Cycle", U_nodes, energy: str, comfort: Comfort, H_prior=None):
+    """Continuation of periodic orbits through U_nodes from the start cycle (apex height prior
+    H_prior, default the cycle's); yields (U, LimitCycle or None, problems), stops at the first
+    failure."""
+    prior = (cyc.t_fall, cyc.control.b, cyc.H if H_prior is None else H_prior)
     for Un in U_nodes:
         lc, probs = _orbit(cyc, float(Un), prior, energy, comfort)
         yield float(Un), lc, probs
         if lc is None or probs:
             return
-        prior = (lc.H, lc.theta0, lc.control.b)
+        prior = (lc.t_fall, lc.control.b, lc.H)
 
 
-def target_cycle(cycle, U_target: float, *, energy: str = "b", comfort: Comfort = Comfort()) -> LimitCycle:
+def target_cycle(cycle, U_target: float, *, energy: str = "b", comfort: Comfort = Comfort(),
+                 H_prior: float | None = None) -> LimitCycle:
     """The periodic orbit of the machine at apex speed U_target that a plan ends on (dimensionless).
 
-    energy "b": apex height held at the start cycle's H, θ0 and the control's b solved (the runner
-    keeps its bounce height; b supplies or removes the energy the fitted control lacks at U_target).
-    energy "theta": b stays the fitted one, θ0 and H solved (minimum-norm from the cycle's H). K, a,
-    c and T_c always stay the fitted ones. Tried directly, then by continuation in speed
-    increments of at most 10 %. Raises PlanError when no orbit exists within the comfort bounds.
+    The orbit nearest the start cycle in the scaled norm of (fall time τ, b, H) with scales
+    (0.05, 0.01, 0.02): energy "b" lets θ0 (via τ), H and the control's b move (b supplies or
+    removes the energy the fitted control lacks at U_target); energy "theta" keeps the fitted b.
+    K, a, c and T_c always stay the fitted ones. Tried directly, then by continuation in speed
+    increments of at most 10 %. H_prior (default the cycle's H) is the apex height the search
+    starts from and stays near. Raises PlanError when no orbit exists within the comfort bounds.
     """
     cyc = _as_cycle(cycle)
     U_target = float(U_target)
@@ -378,7 +418,7 @@ def target_cycle(cycle, U_target: float, *, energy: str = "b", comfort: Comfort 
     n = max(1, int(math.ceil(abs(math.log(U_target / cyc.U)) / math.log(1.10))))
     last = None
     for nodes in ([U_target], cyc.U * (U_target / cyc.U) ** (np.arange(1, n + 1) / n)):
-        for last in _orbits(cyc, nodes, energy, comfort):
+        for last in _orbits(cyc, nodes, energy, comfort, H_prior):
             pass
         if last[1] is not None and not last[2] and last[0] == U_target:
             lc = last[1]
@@ -386,13 +426,13 @@ def target_cycle(cycle, U_target: float, *, energy: str = "b", comfort: Comfort 
         if n == 1:
             break
     Un, lc, probs = last
-    free = "theta0 and b" if energy == "b" else "theta0 and H"
+    free = "theta0, H and b" if energy == "b" else "theta0 and H"
     raise PlanError(f"no comfortable periodic running orbit at U = {Un:.4g} ({free} free): "
                     + "; ".join(probs))
 
 
-def sustainable_range(cycle, *, energy: str = "b", comfort: Comfort = Comfort(), factor: float = 1.05,
-                      limits=(0.1, 4.0)) -> tuple:
+def sustainable_range(cycle, *, energy: str = "b", comfort: Comfort = Comfort(), factor: float = 1.1,
+                      limits=(0.25, 3.0)) -> tuple:
     """(U_min, U_max): the speeds with a comfortable periodic orbit (see :func:`target_cycle`),
     by continuation from the cycle in factors of ``factor`` (resolution ≈ factor − 1) within
     limits × U. Dimensionless."""
@@ -463,6 +503,264 @@ def _solve_step(U, H, t0, ref, th_guess, b_guess, cyc, mode, th_b, b_b):
     return float(x[0]), float(x[1]), ok
 
 
+# --- multi-step optimisation of a change (single shooting, exact chain-rule Jacobian) -------------
+def _shoot(U0, H0, t0, tau, b, ctl):
+    """Simulate steps with inputs (τ_k, b_k) from apex (U0, H0) at time t0 (scalar simulator path,
+    the one ``simulate`` uses). Returns (U (n+1,), H (n+1,), t (n+1,), θ0 (n,), results list, ok)."""
+    n = len(tau)
+    U, H, t, th = np.empty(n + 1), np.empty(n + 1), np.empty(n + 1), np.full(n, np.nan)
+    U[0], H[0], t[0] = U0, H0, t0
+    res = []
+    for k in range(n):
+        th[k] = _theta_of(H[k], tau[k])
+        r = step(U[k], H[k], th[k], replace(ctl, b=float(b[k])))
+        if not (bool(r.valid) and math.isfinite(th[k])):
+            return U, H, t, th, res, False
+        res.append(r)
+        U[k + 1], H[k + 1] = float(r.U_next), float(r.H_next)
+        t[k + 1] = t[k] + float(r.t_fall + r.t_stance + r.t_rise)
+    return U, H, t, th, res, True
+
+
+def _optimise_change(cyc, U0, H0, t0, n, U_ref, prior, H_t, mode, comfort, tau_start=None,
+                     max_iter=80):
+    """Inputs of n change steps from apex (U0, H0) at t0, by constrained Gauss–Newton on the exact
+    simulator with *multiple shooting*: the unknowns are the inputs (τ_k, b_k) and the apex states
+    (U_k, H_k, t_k), k = 1..n, tied by continuity constraints s_{k+1} = S(s_k, u_k). The per-step
+    maps are unstable (|λ| up to ≈ 2 on the fitted cycles), so single shooting compounds
+    sensitivities (∂U_8/∂τ_0 ≈ 100); multiple shooting keeps every Jacobian block local, and all
+    n steps (and their finite-difference rows) go through the simulator in one batched call.
+
+    energy "b" (2 inputs per step) — hard (to 1e-11): U_k = U_ref(k, t_k) for k = 1..n and
+    H_n = H_t; soft: τ_k, b_k near ``prior`` (start → target interpolation), H_k near the
+    interpolated height. energy "theta" (θ0 only, n inputs) — hard: U_n = U_ref(n−1, t_n) and a
+    periodic end, S(s_n, τ_h) = (U_n, H_n) with one more unknown τ_h (the change ends on whichever
+    orbit of the fitted control it reaches); soft: U_k near U_ref (σ 0.002) and monotone
+    (penalty), τ_k near the prior. Both: penalties keep H_k in the band and θ0_k in the touchdown-angle band.
+    Returns (τ (n,), b (n,), θ0 of the periodic step that follows (θ0-only; else None)); raises
+    _StepFail when the constraints cannot be met.
+    """
+    ctl = cyc.control
+    tau_p, b_p, H_p = (np.asarray(v, float) for v in prior)
+    use_b = mode == "b"
+    th_b, b_b = _bounds(cyc, comfort, mode)
+    H_lo, H_hi = cyc.H + comfort.H_band[0], cyc.H + comfort.H_band[1]
+    s_tau, s_b, s_H, s_U, s_pen = 0.05, 0.01, 0.05, 2e-3, 1e-3
+    sgn_dU = 1.0 if U_ref(n - 1, t0) >= U0 else -1.0
+    nb = n if use_b else 0
+    # z = [τ (n), b (nb), U_1..n, H_1..n, t_1..n, (θ0-only: τ_h, the fall time of the periodic
+    # step that follows: the change must end on *some* orbit of the fitted control)]
+    iT, iB, iU, iH, it_ = 0, n, n + nb, 2 * n + nb, 3 * n + nb
+    ih_ = 4 * n + nb
+    m = 4 * n + nb + (0 if use_b else 1)
+    lo = np.r_[np.zeros(n), np.full(nb, b_b[0]), np.full(3 * n, -np.inf), np.zeros(m - ih_)]
+    hi = np.r_[np.full(n, 10.0), np.full(nb, b_b[1]), np.full(3 * n, np.inf), np.full(m - ih_, 10.0)]
+    eye = np.eye(n)
+    nrow = n if use_b else n + 1
+
+    def parts(z):
+        tau = z[iT:iT + n]
+        b = z[iB:iB + n] if use_b else b_p
+        U = np.r_[U0, z[iU:iU + n]]
+        H = np.r_[H0, z[iH:iH + n]]
+        t = np.r_[t0, z[it_:it_ + n]]
+        return tau, b, U, H, t
+
+    def evaluate(z, jac=False, h=1e-6):
+        """Constraints c, soft residuals r (and their Jacobians) at z; None if a step is invalid."""
+        tau, b, U, H, t = parts(z)
+        nr = 5 if jac else 1
+        d = np.zeros((nr, 4))
+        if jac:
+            d[1:] = np.eye(4) * h
+        base = np.stack([U[:n], H[:n], tau, b], 1)
+        if not use_b:
+            base = np.vstack([base, [U[n], H[n], z[ih_], b_p[-1]]])
+        X = (base[:, None, :] + d[None]).reshape(-1, 4)
+        th_rows = _theta_of(X[:, 1], X[:, 2])
+        r = _steps(X[:, 0], X[:, 1], th_rows, X[:, 3], ctl)
+        if not np.all(r.valid & np.isfinite(th_rows)):
+            return None
+        Y = np.stack([r.U_next, r.H_next, r.t_fall + r.t_stance + r.t_rise], 1).reshape(nrow, nr, 3)
+        th_all = th_rows.reshape(nrow, nr)[:, 0]
+        th = th_all[:n]
+        Ur = np.array([U_ref(k, t[k + 1]) for k in range(n)])
+        cont = np.concatenate([Y[:n, 0, 0] - U[1:], Y[:n, 0, 1] - H[1:], t[:n] + Y[:n, 0, 2] - t[1:]])
+        if use_b:
+            c = np.r_[cont, U[1:] - Ur, H[n] - H_t]
+            rr = [(tau - tau_p) / s_tau, (b - b_p) / s_b, (H[1:n] - H_p[:n - 1]) / s_H]
+        else:
+            c = np.r_[cont, U[n] - Ur[n - 1], Y[n, 0, 0] - U[n], Y[n, 0, 1] - H[n]]
+            rr = [(tau - tau_p) / s_tau, (U[1:n] - Ur[:n - 1]) / s_U,
+                  np.maximum(0.0, -sgn_dU * np.diff(U)) / s_pen]
+        rr += [(np.maximum(0.0, H_lo - H[1:]) + np.maximum(0.0, H[1:] - H_hi)) / s_pen,
+               (np.maximum(0.0, th_b[0] - th) + np.maximum(0.0, th - th_b[1])) / s_pen]
+        e = dict(c=c, r=np.concatenate(rr), U=U, H=H, t=t, th=th, Ur=Ur, tau=tau, b=b,
+                 tau_h=None if use_b else float(z[ih_]), th_h=None if use_b else float(th_all[n]))
+        if not jac:
+            return e
+        D = (Y[:, 1:, :] - Y[:, :1, :]) / h  # (nrow, inputs U H τ b, outputs U' H' T)
+        dUr = np.array([(U_ref(k, t[k + 1] + 1e-6) - U_ref(k, t[k + 1] - 1e-6)) / 2e-6 for k in range(n)])
+        # continuity rows o·n + k: output o of step k, S_o(s_k, u_k) − s_{k+1,o}; s_0 is fixed
+        Jc = np.zeros((3 * n, m))
+        k1 = np.arange(1, n)  # steps whose start state is a variable (entry k − 1)
+        for o, col in enumerate((iU, iH, it_)):
+            rows = o * n + np.arange(n)
+            Jc[rows, iT + np.arange(n)] = D[:n, 2, o]
+            if use_b:
+                Jc[rows, iB + np.arange(n)] = D[:n, 3, o]
+            Jc[rows, col + np.arange(n)] -= 1.0
+            Jc[o * n + k1, iU + k1 - 1] += D[k1, 0, o]
+            Jc[o * n + k1, iH + k1 - 1] += D[k1, 1, o]
+            if o == 2:
+                Jc[o * n + k1, it_ + k1 - 1] += 1.0
+        # profile rows: U_k − U_ref(k, t_k)
+        Jp = np.zeros((n, m))
+        Jp[:, iU:iU + n] = eye
+        Jp[:, it_:it_ + n] = -eye * dUr
+        JHn = np.zeros((1, m))
+        JHn[0, iH + n - 1] = 1.0
+        if use_b:
+            C = np.vstack([Jc, Jp, JHn])
+        else:
+            # periodic end: S(s_n, τ_h) − (U_n, H_n) = 0
+            Jper = np.zeros((2, m))
+            for o in range(2):
+                Jper[o, iU + n - 1] = D[n, 0, o] - (o == 0)
+                Jper[o, iH + n - 1] = D[n, 1, o] - (o == 1)
+                Jper[o, ih_] = D[n, 2, o]
+            C = np.vstack([Jc, Jp[-1:], Jper])
+        # soft rows (same order as rr)
+        Jr = []
+        Jt = np.zeros((n, m))
+        Jt[:, iT:iT + n] = eye / s_tau
+        Jr.append(Jt)
+        if use_b:
+            Jb = np.zeros((n, m))
+            Jb[:, iB:iB + n] = eye / s_b
+            JH = np.zeros((n - 1, m))
+            JH[:, iH:iH + n - 1] = np.eye(n - 1) / s_H
+            Jr += [Jb, JH]
+        else:
+            Jr.append(Jp[:n - 1] / s_U)
+            act = (-sgn_dU * np.diff(U) > 0).astype(float)
+            JM = np.zeros((n, m))
+            JM[:, iU:iU + n] = -sgn_dU * (eye - np.eye(n, k=-1))  # U_k − U_{k−1}, U_0 fixed
+            Jr.append(act[:, None] * JM / s_pen)
+        sg = (H[1:] > H_hi).astype(float) - (H[1:] < H_lo).astype(float)
+        JBH = np.zeros((n, m))
+        JBH[:, iH:iH + n] = eye * sg / s_pen
+        Jr.append(JBH)
+        # θ_k = acos(H_k − τ_k²/2): dθ = −(dH_k − τ_k dτ_k)/sin θ_k (H_0 fixed)
+        sgt = (th > th_b[1]).astype(float) - (th < th_b[0]).astype(float)
+        Jth = np.zeros((n, m))
+        Jth[:, iT:iT + n] = eye * (tau / np.sin(th))
+        Jth[1:, iH:iH + n - 1] = -np.eye(n - 1) / np.sin(th[1:])[:, None]
+        Jr.append(sgt[:, None] * Jth / s_pen)
+        e["C"], e["J"] = C, np.vstack(Jr)
+        return e
+
+    def merit(e):
+        return 0.5 * float(e["r"] @ e["r"]) + 1e3 * float(np.sum(np.abs(e["c"])))
+
+    # start: inputs from the prior (or the table rollout), states by simulating them (or the
+    # interpolated references where the simulated run fails)
+    tau0 = tau_p if tau_start is None else np.asarray(tau_start, float)
+    z = None
+    for tau_g, b_g in ((tau0, b_p), (tau_p, b_p), (np.full(n, cyc.t_fall), np.full(n, ctl.b))):
+        U, H, t, th, res, ok = _shoot(U0, H0, t0, tau_g, b_g, ctl)
+        if ok:
+            z = np.r_[tau_g, b_g[:nb], U[1:], H[1:], t[1:], tau_g[-1:] if not use_b else []]
+            break
+    if z is None:
+        Ur = np.array([U_ref(k, t0 + (k + 1) * cyc.step_time) for k in range(n)])
+        z = np.r_[tau_p, b_p[:nb], Ur, H_p, t0 + cyc.step_time * np.arange(1, n + 1),
+                  tau_p[-1:] if not use_b else []]
+    z = np.clip(z, lo, hi)
+    e = evaluate(z, jac=True)
+    if e is None:
+        raise _StepFail(0, U0, H0, U_ref(0, t0 + cyc.step_time), "no valid first guess for the steps")
+    polish = False
+    history = []
+    for it in range(max_iter):
+        C, J, c, r = e["C"], e["J"], e["c"], e["r"]
+        q = C.shape[0]
+        if polish:
+            # constraints only: minimum-norm Newton correction (quadratic convergence)
+            dz = np.linalg.lstsq(C, -c, rcond=1e-13)[0]
+        else:
+            K = np.zeros((m + q, m + q))
+            K[:m, :m] = J.T @ J + 1e-9 * np.eye(m)
+            K[:m, m:] = C.T
+            K[m:, :m] = C
+            dz = np.linalg.lstsq(K, np.r_[-J.T @ r, -c], rcond=1e-15)[0][:m]
+        phi = merit(e)
+        accepted = None
+        for alpha in 0.5 ** np.arange(16):
+            zt = np.clip(z + alpha * dz, lo, hi)
+            et = evaluate(zt)
+            if et is None:
+                continue
+            cm_t = float(np.max(np.abs(et["c"])))
+            if (merit(et) < phi) if not polish else (cm_t < float(np.max(np.abs(c)))):
+                accepted = (zt, et)
+                break
+        if accepted is None:
+            if polish or float(np.max(np.abs(c))) > 1e-6:
+                break
+            polish = True
+            continue
+        z, e_new = accepted
+        cmax = float(np.max(np.abs(e_new["c"])))
+        history.append(merit(e_new))
+        if cmax <= _TOL:
+            e = e_new
+            break
+        if cmax > 1e-6 and len(history) >= 8 and history[-1] > 0.9 * history[-6]:
+            e = e_new  # stalled away from feasible: the goal is out of reach
+            break
+        # the soft objective has stopped improving: finish the constraints by plain Newton
+        if not polish and phi - merit(e_new) <= 1e-5 * phi and cmax <= 1e-5:
+            polish = True
+        e = evaluate(z, jac=True)
+        if e is None:
+            e = e_new
+            break
+    if e is None:
+        e = evaluate(z)
+    cmax = float(np.max(np.abs(e["c"])))
+    pen = float(np.max(np.abs(e["r"][-2 * n:]))) * s_pen
+    mono = float(np.max(np.r_[0.0, -sgn_dU * np.diff(e["U"])]))
+    if cmax > _ACCEPT or pen > 1e-6 or mono > 1e-9:
+        if cmax > _ACCEPT:
+            k = int(np.argmax(np.abs(e["U"][1:] - e["Ur"]))) if use_b else n - 1
+            why = f"the steps cannot meet the speed profile and end height (off by {cmax:.2g})"
+        elif pen > 1e-6:
+            k, why = 0, f"a step leaves the comfort band (apex height or touchdown angle, by {pen:.2g})"
+        else:
+            k, why = int(np.argmax(-sgn_dU * np.diff(e["U"]))), f"the speed reverses by {mono:.2g}"
+        raise _StepFail(k, float(e["U"][k]), float(e["H"][k]), float(e["Ur"][k]), why)
+    return e["tau"], e["b"], e["th_h"]
+
+
+def _record(out, th, b, r, phase, U_ref_next):
+    """Append one simulated step (StepResult r with scalar or (1,) fields) to the plan lists."""
+    f1 = {f: float(np.ravel(getattr(r, f))[0]) for f in ("x_contact", "t_fall", "t_stance", "t_rise",
+                                                          "peak_force", "U_next", "H_next", "apex_dx")}
+    out["theta0"].append(th)
+    out["b"].append(b)
+    out["_b"] = b
+    out["x_contact"].append(out["x_apex"][-1] + f1["x_contact"])
+    for f in ("t_fall", "t_stance", "t_rise", "peak_force"):
+        out[f].append(f1[f])
+    out["t_apex"].append(out["t_apex"][-1] + f1["t_fall"] + f1["t_stance"] + f1["t_rise"])
+    out["U"].append(f1["U_next"])
+    out["H"].append(f1["H_next"])
+    out["U_ref"].append(U_ref_next)
+    out["x_apex"].append(out["x_apex"][-1] + f1["apex_dx"])
+    out["phase"].append(phase)
+
+
 # --- planning core ----------------------------------------------------------------------------------
 def _ease(s, policy):
     s = np.clip(np.asarray(s, float), 0.0, 1.0)
@@ -515,25 +813,13 @@ def _run(cyc, out, phase, n, ref_k, done, comfort, mode, table):
         if not conv:  # a poor start: scan the band once for a better one
             th0 = _theta_scan(U, H, U_guess, out["_b"], cyc, th_b, theta_prev)
             th, b, conv = _solve_step(U, H, t, ref, th0, out["_b"], cyc, solve_mode, th_b, b_b)
-        x = (th, b)
         r = _steps(U, H, th, b, cyc.control)
         ok = bool(_step_ok(r, cyc, comfort)[0])
         if not (conv and ok):
             why = _why_not(r, 0, cyc, comfort) if not ok else "the reference is out of reach"
             raise _StepFail(len(out["theta0"]), U, H, U_guess, why)
-        out["theta0"].append(float(x[0]))
-        out["b"].append(float(x[1]))
-        out["_b"] = float(x[1])
-        out["x_contact"].append(out["x_apex"][-1] + float(r.x_contact[0]))
-        for f in ("t_fall", "t_stance", "t_rise", "peak_force"):
-            out[f].append(float(getattr(r, f)[0]))
         t_next = t + float(r.t_fall[0] + r.t_stance[0] + r.t_rise[0])
-        out["U"].append(float(r.U_next[0]))
-        out["H"].append(float(r.H_next[0]))
-        out["U_ref"].append(float(ref(t_next)[0]))
-        out["t_apex"].append(t_next)
-        out["x_apex"].append(out["x_apex"][-1] + float(r.apex_dx[0]))
-        out["phase"].append(phase)
+        _record(out, th, b, r, phase, float(ref(t_next)[0]))
         k += 1
         if len(out["theta0"]) > 10000:
             raise PlanError("plan longer than 10000 steps")
@@ -606,7 +892,11 @@ def _unreachable(cyc, U_target, n, fail, comfort, energy, what):
         one = f"the {'fastest' if faster else 'slowest'} reachable in 1 step is U = {hi1 if faster else lo1:.3g}"
     else:
         one = "no comfortable step exists from the start state"
-    sus = f"max sustainable U ≈ {smax:.3g}" if faster else f"min sustainable U ≈ {smin:.3g}"
+    # the continuation stops at 0.25x and 3x the start speed: a range edge there is a lower bound
+    if faster:
+        sus = (f"max sustainable U > {smax:.3g}" if smax >= 2.7 * cyc.U else f"max sustainable U ≈ {smax:.3g}")
+    else:
+        sus = (f"min sustainable U < {smin:.3g}" if smin <= 0.28 * cyc.U else f"min sustainable U ≈ {smin:.3g}")
     if not smin <= U_target <= smax:
         rng = f"; reaching U = {U_target:.3g} is outside the machine's range ({sus}, start U = {cyc.U:.3g})"
     else:
@@ -696,44 +986,92 @@ def _plan_n(cyc, U_t, n, table, comfort, policy, energy, lead_steps, hold_steps)
     raise PlanError(msg)
 
 
+def _table_rollout(table, U0, H0, t0, n, U_ref, step_time, tau_fallback):
+    """Initial fall times for n steps from the transition table alone (the paper's §5.3 use):
+    per step θ0 = theta_for_speed(U_k, H_k, U_ref), the next apex from the interpolant. Where the
+    table has no answer the fallback is kept and the rollout stops."""
+    tau = np.array(tau_fallback, float)
+    U, H, t = U0, H0, t0
+    for k in range(n):
+        th, ok = table.theta_for_speed(U, H, U_ref(k, t + step_time))
+        if not bool(ok):
+            break
+        lk = table.lookup(U, H, float(th))
+        if not bool(lk.feasible):
+            break
+        tau[k] = math.sqrt(max(2.0 * (H - math.cos(float(th))), 0.0))
+        U, H, t = float(lk.U_next), float(lk.H_next), t + float(lk.t_fall + lk.t_stance + lk.t_rise)
+    return tau
+
+
+def _change_steps(cyc, out, n, U_ref, target, mode, comfort, table, policy):
+    """Optimise and append n change steps from out's last apex, ending on a periodic orbit:
+    ``target`` (energy "b") or, θ0-only (target None), the orbit of the fitted control the steps
+    reach. Returns the orbit (LimitCycle)."""
+    U0, H0, t0 = out["U"][-1], out["H"][-1], out["t_apex"][-1]
+    w = _ease(np.arange(1, n + 1) / n, policy)
+    end = target if target is not None else cyc
+    tau_p = cyc.t_fall + (end.t_fall - cyc.t_fall) * w
+    b_p = cyc.control.b + (end.control.b - cyc.control.b) * w
+    H_t = end.H if target is not None else H0
+    H_p = H0 + (H_t - H0) * w
+    tau0 = tau_p
+    if table is not None and mode == "theta":
+        tau0 = _table_rollout(table, U0, H0, t0, n, U_ref, cyc.step_time, tau_p)
+    tau, b, th_h = _optimise_change(cyc, U0, H0, t0, n, U_ref, (tau_p, b_p, H_p), H_t, mode, comfort,
+                                    tau_start=tau0)
+    start = len(out["theta0"])
+    for k in range(n):
+        U, H = out["U"][-1], out["H"][-1]
+        th = float(_theta_of(H, tau[k]))
+        r = step(U, H, th, replace(cyc.control, b=float(b[k])))
+        t_next = out["t_apex"][-1] + float(r.t_fall + r.t_stance + r.t_rise)
+        if not bool(_step_ok(r, cyc, comfort)):
+            raise _StepFail(start + k, U, H, U_ref(k, t_next), _why_not(r, (), cyc, comfort))
+        _record(out, th, float(b[k]), r, CHANGE, float(U_ref(k, t_next)))
+    if target is None:
+        target = _cycle_from(out["U"][-1], out["H"][-1], float(th_h), cyc.control, 0.0)
+        probs = _orbit_problems(target, cyc, comfort, mode)
+        if probs:
+            raise PlanError("the orbit the theta0-only steps end on is not comfortable: " + "; ".join(probs))
+    return target
+
+
+def _theta_change(cyc, out, n, U_ref, U_t, comfort, table, policy):
+    """θ0-only change steps ending on a periodic orbit of the fitted control. θ0 hardly moves the
+    apex energy E = ½U² + H, so a change whose energy-consistent end height E0 − ½U_t² lies far
+    outside the band is refused at once. Returns the end orbit (raises PlanError / _StepFail)."""
+    H_energy = cyc.H + 0.5 * (cyc.U ** 2 - U_t ** 2)
+    lo, hi = cyc.H + comfort.H_band[0], cyc.H + comfort.H_band[1]
+    if not lo - 0.05 <= H_energy <= hi + 0.05:
+        raise PlanError(f"theta0 alone keeps the apex energy, so U = {U_t:.3g} would need an apex "
+                        f"height H ≈ {H_energy:.3g} (band {lo:.3g}..{hi:.3g})")
+    return _change_steps(cyc, out, n, U_ref, None, "theta", comfort, table, policy)
+
+
 def _plan_change(cyc, U_t, n, table, comfort, policy, mode, lead_steps, hold_steps):
     """One planning attempt in one energy mode (raises _StepFail / PlanError)."""
-    notes = []
-    U0, H0 = cyc.U, cyc.H
-    if mode == "b":
-        target = target_cycle(cyc, U_t, energy="b", comfort=comfort)
-    else:
-        # θ0 barely changes the apex energy E = ½U² + H: the end height is about E0 − ½U_t²
-        H_pred = H0 + 0.5 * (U0 * U0 - U_t * U_t)
-        lo, hi = H0 + comfort.H_band[0], H0 + comfort.H_band[1]
-        if not lo - 0.02 <= H_pred <= hi + 0.02:
-            raise PlanError(f"theta0 alone keeps the apex energy, so U = {U_t:.3g} would need an apex "
-                            f"height H ≈ {H_pred:.3g} (band {lo:.3g}..{hi:.3g})")
-        target = None
-    H_t = target.H if target is not None else H0
-    def frac(k):  # progress after change step k (0-based) of n
-        return float(_ease((k + 1) / n, policy))
+    U0 = cyc.U
 
-    out = _new_out(U0, H0, cyc.control.b)
-    _run(cyc, out, LEAD, int(lead_steps), lambda k, t: (U0, H0), None, comfort, mode, table)
-    _run(cyc, out, CHANGE, n, lambda k, t: (U0 + (U_t - U0) * frac(k), H0 + (H_t - H0) * frac(k)),
-         None, comfort, mode, table)
-    if mode == "theta":
-        H_end = out["H"][-1]
-        target, probs = _orbit(cyc, U_t, (H_end, out["theta0"][-1], cyc.control.b), "theta", comfort)
-        if target is None or probs or abs(H_end - target.H) > comfort.settle_H:
-            have = (f"H = {target.H:.4g}" if target is not None and not probs
-                    else "there is none within the bounds")
-            raise PlanError(f"theta0 alone ends at H = {H_end:.4g}, not near a periodic orbit at "
-                            f"U = {U_t:.4g} ({have})")
-        notes.append("theta0-only control (the paper's): the fitted control in every step")
+    def U_ref(k, t):
+        return U0 + (U_t - U0) * float(_ease((k + 1) / n, policy))
+
+    out = _new_out(cyc.U, cyc.H, cyc.control.b)
+    _run(cyc, out, LEAD, int(lead_steps), lambda k, t: (cyc.U, cyc.H), None, comfort, mode, table)
+    if mode == "b":
+        target = target_cycle(cyc, U_t, energy=mode, comfort=comfort)
+        _change_steps(cyc, out, n, U_ref, target, mode, comfort, table, policy)
     else:
-        db = np.max(np.abs(np.array(out["b"]) - cyc.control.b)) if out["b"] else 0.0
-        notes.append(f"theta0 + delta-b control (theta0 alone cannot keep the apex height at the "
-                     f"target speed); max |delta b| = {db:.4f}")
-    H_hold = H_t if mode == "b" else out["H"][-1]
-    _run(cyc, out, HOLD, int(hold_steps), lambda k, t: (U_t, H_hold), None, comfort, mode, table)
-    return _finish(cyc, out, U_t, target, mode, policy, notes)
+        target = _theta_change(cyc, out, n, U_ref, U_t, comfort, table, policy)
+    _run(cyc, out, HOLD, int(hold_steps), lambda k, t: (U_t, target.H), None, comfort, mode, table)
+    if mode == "theta":
+        note = ("theta0-only control (the paper's): the fitted control in every change step; apex "
+                "speeds follow the profile in the least-squares sense, exactly at the end")
+    else:
+        db = float(np.max(np.abs(np.array(out["b"]) - cyc.control.b))) if out["b"] else 0.0
+        note = (f"theta0 + delta-b control: apex speeds follow the profile exactly; "
+                f"max |delta b| = {db:.4f} l0")
+    return _finish(cyc, out, U_t, target, mode, policy, [note])
 
 
 def _within_time(cyc, U_t, T, *, table, comfort, policy, energy, lead_steps, hold_steps):
@@ -833,38 +1171,24 @@ def plan_speed_profile(cycle, profile, *, duration: float | None = None, table=N
 
 
 def _plan_profile(cyc, fn, duration, U_end, Us, table, comfort, mode, lead_steps, hold_steps):
-    notes = ["profile followed at the apexes: U(apex) = profile(t_apex - t_start)"]
-    U0, H0 = cyc.U, cyc.H
-    if mode == "b":
-        # apex heights: periodic orbits at the profile's extreme and end speeds, interpolated by speed
-        nodes = np.unique(np.r_[np.min(Us), np.max(Us), U_end, U0])
-        Hn = np.array([H0 if abs(u - U0) <= 1e-12 * U0 else
-                       target_cycle(cyc, float(u), energy="b", comfort=comfort).H for u in nodes])
-
-        def H_of(u):
-            return float(np.interp(u, nodes, Hn))
-    else:
-        def H_of(u):
-            return 0.0  # unused: θ0-only steps solve for U' alone
-    target = None
-    if abs(U_end - U0) > 1e-12 * U0:
-        try:
-            target = target_cycle(cyc, U_end, energy=mode, comfort=comfort)
-        except PlanError:
-            if mode == "b":
-                raise
-    H_t = target.H if target is not None else H0
-
-    out = _new_out(U0, H0, cyc.control.b)
-    _run(cyc, out, LEAD, int(lead_steps), lambda k, t: (U0, H0), None, comfort, mode, table)
+    """One profile-following attempt in one energy mode (raises _StepFail / PlanError)."""
+    target = target_cycle(cyc, U_end, energy="b", comfort=comfort) if mode == "b" else None
+    out = _new_out(cyc.U, cyc.H, cyc.control.b)
+    _run(cyc, out, LEAD, int(lead_steps), lambda k, t: (cyc.U, cyc.H), None, comfort, mode, table)
     t_start = out["t_apex"][-1]
+    # as many steps as fit the duration at the mean of the start and end step times
+    step_time = 0.5 * (cyc.step_time + (target.step_time if target is not None else cyc.step_time))
+    n = max(1, int(round(duration / step_time)))
 
-    def ref(k, t):
-        u = float(fn(min(t - t_start, duration)))
-        return u, H_of(u)
-    _run(cyc, out, CHANGE, None, ref, lambda t: t - t_start >= duration - 1e-9, comfort, mode, table)
-    H_hold = H_t if mode == "b" else out["H"][-1]
-    _run(cyc, out, HOLD, int(hold_steps), lambda k, t: (U_end, H_hold), None, comfort, mode, table)
+    def U_ref(k, t):  # the last change apex takes the profile's end value
+        return float(fn(duration if k == n - 1 else min(max(t - t_start, 0.0), duration)))
+    if mode == "b":
+        _change_steps(cyc, out, n, U_ref, target, mode, comfort, table, "even")
+    else:
+        target = _theta_change(cyc, out, n, U_ref, U_end, comfort, table, "even")
+    _run(cyc, out, HOLD, int(hold_steps), lambda k, t: (U_end, target.H), None, comfort, mode, table)
+    notes = [f"profile followed at the apexes over {n} steps: U(apex) = profile(t_apex - t_start), "
+             f"the last apex's speed is the profile's end value"]
     if mode == "theta":
-        notes.append("theta0-only control: apex heights are left free")
+        notes.append("theta0-only control: speeds follow the profile in the least-squares sense")
     return _finish(cyc, out, U_end, target, mode, "profile", notes)

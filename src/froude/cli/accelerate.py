@@ -88,7 +88,7 @@ def run(args) -> int:
     if args.plot:
         from ..viz.plan_plot import plot_plan
 
-        plot_plan(res, args.plot)
-        say(f"wrote {args.plot}", args.quiet)
+        for written in plot_plan(res, args.plot):
+            say(f"wrote {written}", args.quiet)
     say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep} in {time.perf_counter() - t0:.2f} s", args.quiet)
     return 0

@@ -1,0 +1,62 @@
+"""``froude view [CLIP.bvh]``: the live studio in the browser — change character, speed and acceleration
+with controls and watch the result run beside the reference, with the simple machine drawn over it."""
+from __future__ import annotations
+
+from ..errors import FroudeError
+from .common import add_load_options, say
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "view", help="live studio in the browser: sliders for character, speed, acceleration",
+        description="Open a local web studio (viser) on a running clip: the reference and the result play "
+        "side by side (or overlaid) on a ground grid, with the simple machine (COM, spring leg, contacts, "
+        "COM trail) drawn over the bodies. Controls for the character (presets, height, mass, leg scale), "
+        "the speed factor and strides, or an acceleration goal and its number of steps recompute through "
+        "the same pipeline as 'froude scale' / 'froude accelerate'; live numbers (speed, Froude number, "
+        "step frequency, physics-report errors), a leg-force plot, and downloads of the result as BVH and "
+        "its report. Bad edits show their message in the page and keep the last good result. "
+        "Needs the optional extra: pip install 'froude[studio]'.",
+        epilog="The studio binds to 127.0.0.1 (this machine only) unless --host says otherwise; "
+        "open the printed address in a browser. Ctrl-C stops it.",
+    )
+    p.add_argument("clip", nargs="?", default=None,
+                   help="running BVH clip (default: the embedded sample, CMU 09_01)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to bind (default 127.0.0.1; 0.0.0.0 to share on the network)")
+    p.add_argument("--port", type=int, default=8080, help="port (default 8080; the next free one if taken)")
+    p.add_argument("--open", action="store_true", help="also open the page in the default web browser")
+    p.add_argument("--mass", type=float, default=70.0, help="reference body mass [kg] (default 70)")
+    p.add_argument("--character", default="same", help="starting character: a preset name or 'same'")
+    p.add_argument("--speed", type=float, default=1.0, help="starting speed factor (default 1)")
+    p.add_argument("--strides", type=int, default=4, help="starting output length in strides (default 4)")
+    add_load_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    try:
+        import viser  # noqa: F401
+    except ImportError:
+        raise FroudeError("the studio needs viser: pip install 'froude[studio]'") from None
+    from .. import pipeline
+    from ..characters import list_presets
+    from ..samples import sample_path
+    from ..studio import Params, serve
+
+    if not 0 <= args.port <= 65535:
+        raise FroudeError(f"--port must be 0..65535, got {args.port}")
+    if args.character not in ("same", *list_presets()):
+        raise FroudeError(f"unknown character '{args.character}': use same or a preset ({', '.join(list_presets())})")
+    clip = args.clip or str(sample_path())
+    if args.keep_all_frames:
+        from .common import load_clip
+
+        clip = load_clip(clip, args.length_scale, keep_all=True)
+    say(f"froude view: preparing {args.clip or 'the embedded sample (09_01)'} (fit once, reused for every change) ...")
+    prep = pipeline.prepare(clip, mass=args.mass, length_scale=args.length_scale)
+    params = Params(character=args.character, speed=args.speed, strides=args.strides)
+    code = serve(prep, host=args.host, port=args.port, params=params, open_browser=args.open,
+                 announce=lambda m: print(m, flush=True))
+    say("froude view: stopped")
+    return code

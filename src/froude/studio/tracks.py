@@ -1,0 +1,172 @@
+"""What the studio draws, precomputed once per motion: pure NumPy, no viser.
+
+A ``Track`` holds everything the playback loop needs for one runner at every frame, so that a frame
+update is only array indexing: bone segments from one batched FK, the simple machine's COM, the spring
+legs (COM → contact point while a foot is in stance), the contact points and the COM trail.
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..constants import GRAVITY, UP_AXIS
+from ..kinematics import fk_soa, to_soa
+from ..motion import Motion
+
+#: Every n-th frame of the COM path goes into the drawn trail (a trail needs no 120 Hz detail).
+TRAIL_STRIDE = 3
+
+
+@dataclass(frozen=True, eq=False)
+class Track:
+    """One runner ready to play.
+
+    frame_time [s]; segments: (F, B, 2, 3) float32 bone segments [m] (joint→child, joint→end site);
+    com: (F, 3) simple-machine (or body) COM [m]; legs: (F, 2, 2, 3) float32 spring-leg segment per foot,
+    zero length at the COM when that foot is not in stance; contacts: (n, 3) contact points [m] with
+    contact_foot (n,) 0/1; trail: (K, 2, 3) float32 COM path segments [m];
+    force_t: (T,) [s], force_bw: (T,) machine vertical leg force [body weights] (empty if none);
+    body_force_bw: (F,) vertical force the body's COM implies [body weights];
+    loop_shift: (3,) horizontal displacement over one pass, added per loop so a short clip keeps running.
+    """
+
+    frame_time: float
+    segments: np.ndarray
+    com: np.ndarray
+    legs: np.ndarray
+    contacts: np.ndarray
+    contact_foot: np.ndarray
+    trail: np.ndarray
+    force_t: np.ndarray
+    force_bw: np.ndarray
+    body_force_bw: np.ndarray
+    loop_shift: np.ndarray
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.segments.shape[0])
+
+    @property
+    def duration(self) -> float:
+        return self.n_frames * self.frame_time
+
+    def frame_at(self, t: float) -> tuple[int, np.ndarray]:
+        """Frame index at time t [s] (looping) and the position shift (3,) [m] of that loop."""
+        k = math.floor(t / self.duration) if self.duration > 0 else 0
+        i = int((t - k * self.duration) / self.frame_time) if self.frame_time > 0 else 0
+        return min(max(i, 0), self.n_frames - 1), k * self.loop_shift
+
+
+def bone_segments(motion: Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bone segments of every frame from one batched FK.
+
+    Returns segments (F, B, 2, 3) float32 [m] (B = bones to children + bones to end sites), and the
+    component-major FK outputs P (J, 3, F) [m], R (J, 9, F) for reuse (e.g. the body COM).
+    """
+    sk = motion.skeleton
+    rp, rot, tr = to_soa(motion.root_positions, motion.rotations, motion.translations)
+    P, R = fk_soa(sk.parents, sk.offsets, rp, rot, tr)
+    child = np.flatnonzero(sk.parents >= 0)
+    a = P[sk.parents[child]]  # (Bc, 3, F)
+    b = P[child]
+    if sk.end_sites:
+        ej = np.array([j for j, _ in sk.end_sites])
+        eo = np.array([np.asarray(o, float) for _, o in sk.end_sites])  # (E, 3) local offsets [m]
+        Rm = R[ej].reshape(len(ej), 3, 3, -1)  # row-major entries -> (E, 3, 3, F)
+        tip = P[ej] + np.einsum("erkf,ek->erf", Rm, eo)
+        a = np.concatenate([a, P[ej]])
+        b = np.concatenate([b, tip])
+    seg = np.stack([a, b], axis=1)  # (B, 2, 3, F)
+    return np.ascontiguousarray(seg.transpose(3, 0, 1, 2), dtype=np.float32), P, R
+
+
+def spring_legs(com: np.ndarray, stance_contact: np.ndarray) -> np.ndarray:
+    """(F, 2, 2, 3) float32 leg segments: COM → contact point where stance_contact (F, 2, 3) is finite."""
+    F = com.shape[0]
+    legs = np.empty((F, 2, 2, 3), np.float32)
+    legs[:, :, 0] = com[:, None, :]
+    ok = np.isfinite(stance_contact).all(axis=2)
+    legs[:, :, 1] = np.where(ok[:, :, None], stance_contact, com[:, None, :])
+    return legs
+
+
+def trail_segments(com: np.ndarray, stride: int = TRAIL_STRIDE) -> np.ndarray:
+    """(K, 2, 3) float32 polyline segments along a COM path (F, 3) [m], every ``stride`` frames."""
+    pts = com[::stride]
+    if len(com) and (len(com) - 1) % stride:
+        pts = np.concatenate([pts, com[-1:]])
+    if len(pts) < 2:
+        pts = np.repeat(com[:1], 2, axis=0) if len(com) else np.zeros((2, 3))
+    return np.stack([pts[:-1], pts[1:]], axis=1).astype(np.float32)
+
+
+def path_stance_contacts(path, n_frames: int) -> np.ndarray:
+    """(F, 2, 3) contact point of each foot at each output frame of a MachinePath (NaN: not in stance)."""
+    t = path.times[:n_frames]
+    out = np.full((len(t), 2, 3), np.nan)
+    for i, foot in enumerate(path.foot_of_step):  # loop over steps, not frames
+        m = (t >= path.t_touchdown[i]) & (t < path.t_liftoff[i])
+        out[m, int(foot)] = path.contacts[i]
+    return out
+
+
+def body_force_bw(com: np.ndarray, frame_time: float) -> np.ndarray:
+    """(F,) vertical ground force [body weights] implied by a COM path; NaN when it is too short."""
+    from ..metrics import vertical_force_bw
+
+    try:
+        return vertical_force_bw(com, frame_time)
+    except Exception:  # a too-short or degenerate path: no curve rather than no studio
+        return np.full(len(com), np.nan)
+
+
+def machine_track(motion: Motion, body, path) -> Track:
+    """A result (or preview) on its target skeleton with its machine path drawn over it."""
+    seg, P, R = bone_segments(motion)
+    F = seg.shape[0]
+    com_path = np.asarray(path.com[:F], float)
+    body_com = np.ascontiguousarray(body.com_soa(P, R).T)
+    f_bw = path.force[:, UP_AXIS] / (path.mass * GRAVITY)
+    return Track(
+        frame_time=float(motion.frame_time), segments=seg, com=com_path,
+        legs=spring_legs(com_path, path_stance_contacts(path, F)),
+        contacts=np.asarray(path.contacts, float), contact_foot=np.asarray(path.foot_of_step, int),
+        trail=trail_segments(com_path), force_t=np.asarray(path.times, float), force_bw=f_bw,
+        body_force_bw=body_force_bw(body_com, motion.frame_time), loop_shift=np.zeros(3),
+    )
+
+
+def reference_track(prep) -> Track:
+    """The reference clip with its own COM, detected contacts and legs; loops with its displacement."""
+    motion = prep.motion
+    seg, _, _ = bone_segments(motion)
+    F = seg.shape[0]
+    com = np.asarray(prep.com, float)
+    contact = np.full((F, 2, 3), np.nan)
+    for s in prep.gait.stances:  # loop over contacts, not frames
+        contact[s.start:s.stop, s.foot] = s.contact_point
+    # per loop, move on by the clip's horizontal COM displacement (plus one frame of travel)
+    shift = com[-1] - com[0]
+    if F > 1:
+        shift = shift + (com[-1] - com[-2])
+    shift[UP_AXIS] = 0.0
+    stances = prep.gait.stances
+    return Track(
+        frame_time=float(motion.frame_time), segments=seg, com=com, legs=spring_legs(com, contact),
+        contacts=np.array([s.contact_point for s in stances]).reshape(-1, 3),
+        contact_foot=np.array([s.foot for s in stances], int), trail=trail_segments(com),
+        force_t=np.zeros(0), force_bw=np.zeros(0), body_force_bw=body_force_bw(com, motion.frame_time),
+        loop_shift=shift,
+    )
+
+
+def motion_hash(motion: Motion) -> str:
+    """12 hex digits identifying a motion's numbers (rounded to 1e-6, so float noise does not count)."""
+    h = hashlib.sha1()
+    for a in (motion.root_positions, motion.rotations, motion.skeleton.offsets):
+        h.update((np.round(np.asarray(a, float), 6) + 0.0).tobytes())  # + 0.0: -0.0 and 0.0 hash alike
+    h.update(f"{motion.frame_time:.9f}".encode())
+    return h.hexdigest()[:12]

@@ -29,9 +29,13 @@ from .synthesis import ReferenceCycle, extract_cycle, min_jerk, sample_cycle
 #: Speed factors outside this range leave what a reference clip supports: a warning, not an error.
 SUPPORTED_SPEED_RANGE = (0.6, 1.6)
 #: IK weights [1/m²]: the COM and loaded feet are held hard, swing feet guide the leg gently.
-COM_WEIGHT = 1e5
-STANCE_MARKER_WEIGHT = 1e5
-SWING_MARKER_WEIGHT = 1e2
+COM_WEIGHT = float(__import__("os").environ.get("FROUDE_COM_W", 10.0))
+STANCE_MARKER_WEIGHT = float(__import__("os").environ.get("FROUDE_ST_W", 10.0))
+SWING_MARKER_WEIGHT = float(__import__("os").environ.get("FROUDE_SW_W", 0.1))
+IK_TOL = float(__import__("os").environ.get("FROUDE_TOL", 2e-4))
+IK_ITERS = int(__import__("os").environ.get("FROUDE_ITERS", 6))
+#: Frames whose COM error after the fast pass exceeds this [m] are solved again, harder.
+RETRY_COM_ERROR = 2e-4
 #: Time [s] over which a foot's marker weight ramps between swing and stance around its events.
 WEIGHT_RAMP_S = 0.04
 
@@ -138,14 +142,16 @@ def machine_path(
     theta0=None,
     controls=None,
     start_state: tuple[float, float] | None = None,
+    machine=None,
 ) -> MachinePath:
     """Simulate the (scaled) machine for n_steps steps and place it in the world.
 
     speed: §5.2 horizontal stretch factor s (vertical motion and timing unchanged).
     theta0: per-step touchdown angles (n_steps,) [rad] (default: the cycle's); controls: per-step Controls;
     start_state: apex (U, H) to start from (default: the periodic cycle's).
+    machine: the (unscaled) SimpleMachine to run (default: the fitted one).
     """
-    m = prep.machine.scaled(retarget.L, retarget.M)
+    m = (prep.machine if machine is None else machine).scaled(retarget.L, retarget.M)
     T_unit = m.time_unit
     dt = 1.0 / fps / T_unit
     if theta0 is None and controls is None and start_state is None:
@@ -166,17 +172,8 @@ def machine_path(
     feet = np.where(np.arange(n_steps) % 2 == 0, A, 1 - A)
     t_td = tr.t_touchdown * T_unit
     t_lo = tr.t_liftoff * T_unit
-    psi, knot_t, knot_psi = _stride_phase(t, t_td, t_lo, feet, A, cyc.phase_events, tr, T_unit)
-    # the feet's ground contact (marker contact of the reference, mapped through the time warp)
-    ev = cyc.phase_events
-    p_td = np.where(feet == A, 0.0, ev[2])
-    p_lo = np.where(feet == A, ev[1], ev[3])
-    k = np.arange(n_steps) // 2
-    on_psi = k + cyc.contact_phase[feet, 0]
-    off_psi = k + p_lo + (cyc.contact_phase[feet, 1] - p_lo)
-    del p_td
-    contact_on = _interp_extrap(on_psi, knot_psi, knot_t)
-    contact_off = _interp_extrap(off_psi, knot_psi, knot_t)
+    psi, _, _, contact_on, contact_off = _stride_phase(t, t_td, t_lo, feet, A, cyc.phase_events,
+                                                       cyc.contact_phase, tr, T_unit)
     phi = np.mod(psi, 1.0)
     _, data = sample_cycle(cyc, phi, rotations=False)
     origin = prep.com[0].copy()
@@ -236,23 +233,43 @@ def _periodic_trajectory(m, n_steps: int, dt: float) -> _Tiled:
     )
 
 
-def _stride_phase(t, t_td, t_lo, feet, A, phase_events, tr, T_unit) -> np.ndarray:
-    """Unwrapped reference stride phase of each output time: stance→stance, flight→flight, linearly."""
+def _stride_phase(t, t_td, t_lo, feet, A, phase_events, contact_phase, tr, T_unit):
+    """Unwrapped reference stride phase of each output time, and each step's ground contact [s].
+
+    The time warp is piecewise linear with knots at every touchdown and liftoff (stance→stance,
+    flight→flight, paper §6), plus knots where the foot reaches and leaves the ground as the reference's
+    markers see it (contact_phase, a little outside the force-based stance): those stretches are played at
+    the stance's rate, so the body travels as far over the planted foot as in the reference whatever the
+    flight time is. Returns (psi (T,), knot times, knot phases, contact_on (n,), contact_off (n,)).
+    """
     p = {(A, "td"): 0.0, (A, "lo"): phase_events[1], (1 - A, "td"): phase_events[2], (1 - A, "lo"): phase_events[3]}
+    n = len(feet)
+    k = np.arange(n) // 2
+    psi_td = k + np.array([p[(f, "td")] for f in feet])
+    psi_lo = k + np.array([p[(f, "lo")] for f in feet])
+    ext_before = np.array([p[(f, "td")] - contact_phase[f, 0] for f in feet])  # [phase] before touchdown
+    ext_after = np.array([contact_phase[f, 1] - p[(f, "lo")] for f in feet])  # [phase] after liftoff
+    rate = (t_lo - t_td) / (psi_lo - psi_td)  # [s per phase] in each stance
+    # the flights around each step, in time (the first and last from the machine's own flight time)
+    flight_time = (t_td[1:] - t_lo[:-1]) if n > 1 else np.array([(tr.t_apex[-1] * T_unit - t_lo[-1]) * 2])
+    fl_before = np.concatenate([[flight_time[0]], flight_time])[:n]
+    fl_after = np.concatenate([flight_time, [flight_time[-1]]])[:n]
+    on_t = t_td - ext_before * rate
+    off_t = t_lo + ext_after * rate
+    # never let the extensions eat a flight: keep at least 20 % of each flight as true flight
+    room_before = 0.4 * fl_before
+    room_after = 0.4 * fl_after
+    on_t = np.maximum(on_t, t_td - room_before)
+    off_t = np.minimum(off_t, t_lo + room_after)
     times, psis = [], []
-    for i, f in enumerate(feet):
-        k = i // 2
-        times += [t_td[i], t_lo[i]]
-        psis += [k + p[(f, "td")], k + p[(f, "lo")]]
-    # the flight before the first touchdown and after the last liftoff (the machine's own flight times)
-    flight_before = (t_td[1] - t_lo[0]) if len(t_td) > 1 else (tr.t_apex[-1] * T_unit - t_lo[-1]) * 2
-    flight_after = (t_td[-1] - t_lo[-2]) if len(t_td) > 1 else flight_before
+    for i in range(n):
+        times += [on_t[i], t_td[i], t_lo[i], off_t[i]]
+        psis += [psi_td[i] - ext_before[i], psi_td[i], psi_lo[i], psi_lo[i] + ext_after[i]]
     last_f = feet[-1]
-    k_last = (len(feet) - 1) // 2
-    next_td_psi = k_last + (1.0 if last_f == 1 - A else phase_events[2])
-    times = np.array([t_td[0] - flight_before] + times + [t_lo[-1] + flight_after])
+    next_td_psi = k[-1] + (1.0 if last_f == 1 - A else phase_events[2])
+    times = np.array([t_td[0] - fl_before[0]] + times + [t_lo[-1] + fl_after[-1]])
     psis = np.array([p[(1 - A, "lo")] - 1.0] + psis + [next_td_psi])
-    return np.interp(t, times, psis), times, psis
+    return np.interp(t, times, psis), times, psis, on_t, off_t
 
 
 def _interp_extrap(x, xp, fp):
@@ -272,7 +289,7 @@ class Targets:
     initial: Motion
     com: np.ndarray  # (T, 3) [m]
     markers: np.ndarray  # (T, 2, 3, 3) [m]
-    marker_weight: np.ndarray  # (T, 2)
+    marker_weight: np.ndarray  # (T, 2, 3)
     com_weight: np.ndarray  # (T,)
 
 
@@ -284,21 +301,67 @@ def build_targets(prep: Prepared, path: MachinePath, retarget: Retarget) -> Targ
     phi = np.mod(path.psi, 1.0)
     rot, data = sample_cycle(cyc, phi)
     T = len(path.times)
-    anchors = _foot_anchors(path)
+    anchors, w_ground = _foot_anchors(path)
     rel_world = np.einsum("fpki,ij->fpkj", L * data["marker_rel"], Rh)  # heading frame -> world
-    markers = anchors[:, :, None, :] + rel_world
+    on_ground = anchors[:, :, None, :] + rel_world
+    # In mid-swing the foot moves with the body (its offset from the COM, scaled), not along a stretched
+    # ground path: a stretched path would leave the trailing foot out of the leg's reach after toe-off
+    # when running faster. Near toe-off and touchdown the ground-anchored path takes over.
+    com_rel = L * data["marker_from_com"]
+    com_rel[..., 1] = L * data["marker_rel"][..., 1]  # heights above the ground as in the anchored path
+    with_body = path.com[:, None, None, :] + np.einsum("fpki,ij->fpkj", com_rel, Rh)
+    with_body[..., UP_AXIS] = on_ground[..., UP_AXIS]
+    w = w_ground[:, :, None, None]
+    markers = w * on_ground + (1.0 - w) * with_body
     root = path.com + (L * data["root_from_com"]) @ Rh
     meta = {"source": prep.source, "length_scale": float(prep.motion.meta.get("length_scale", 1.0))}
     initial = Motion(retarget.skeleton, root, rot, float(path.frame_time), None, meta)
-    weight = _marker_weights(path)
+    weight = _marker_weights(path, markers, retarget.body.leg_length) * _reach_factor(initial, retarget.body, markers)
+    weight = np.maximum(weight, SWING_MARKER_WEIGHT)
     return Targets(initial, path.com, markers, weight, np.full(T, COM_WEIGHT))
 
 
-def _foot_anchors(path: MachinePath) -> np.ndarray:
-    """(T, 2, 3) each foot's anchor: its contact point in stance, a min-jerk blend between contacts in swing."""
+def _reach_factor(initial: Motion, body: BodyModel, markers: np.ndarray) -> np.ndarray:
+    """(T, 2, 3) in [0, 1]: 1 where a marker target is within the leg's reach from the hip, fading to 0 as
+    it approaches the straight-leg limit (thigh + shank + the foot's bones to that marker), so an
+    unreachable target is released instead of wrenching the body (the foot simply leaves a little early).
+    """
+    from .kinematics import fk_soa, to_soa
+
+    skel = body.skeleton
+    rp, rot, tr = to_soa(initial.root_positions, initial.rotations, initial.translations)
+    P, _ = fk_soa(skel.parents, skel.offsets, rp, rot, tr)
+    out = np.ones(markers.shape[:3])
+    margin = 0.03 * body.leg_length
+    for i, side in enumerate(("left", "right")):
+        r = body.roles
+        hip = P[r[f"{side}_hip"]].T  # (T, 3)
+        rest = skel.rest_positions()
+        leg = np.linalg.norm(rest[r[f"{side}_knee"]] - rest[r[f"{side}_hip"]]) + np.linalg.norm(
+            rest[r[f"{side}_ankle"]] - rest[r[f"{side}_knee"]])
+        ankle_toe = np.linalg.norm(rest[r[f"{side}_toe"]] - rest[r[f"{side}_ankle"]])
+        toe_end = np.linalg.norm(body.marker_local[i, 2])
+        reach = np.array([leg, leg + ankle_toe, leg + ankle_toe + toe_end]) - 0.5 * margin
+        d = np.linalg.norm(markers[:, i] - hip[:, None, :], axis=-1)  # (T, 3)
+        out[:, i] = min_jerk((reach[None, :] - d) / margin)
+    return out
+
+
+#: Fractions of a swing over which the foot target blends from the ground-anchored path to the
+#: body-relative one after toe-off (quickly: the leg is nearly straight at toe-off and cannot trail a
+#: ground path that a faster body leaves behind) and back before touchdown (slowly, to land on the contact).
+SWING_RELEASE = float(__import__("os").environ.get("FROUDE_REL", 0.05))
+SWING_LANDING = 0.35
+
+
+def _foot_anchors(path: MachinePath) -> tuple[np.ndarray, np.ndarray]:
+    """Each foot's anchor (T, 2, 3): its contact point on the ground, a min-jerk blend between contacts in
+    swing; and the weight (T, 2) of the ground-anchored foot path (1 on the ground and at the ends of a
+    swing, 0 in mid-swing, min-jerk in between)."""
     T = len(path.times)
     t = path.times
     out = np.zeros((T, 2, 3))
+    w_ground = np.ones((T, 2))
     n = len(path.foot_of_step)
     for foot in range(2):
         idx = np.flatnonzero(path.foot_of_step == foot)
@@ -326,7 +389,8 @@ def _foot_anchors(path: MachinePath) -> np.ndarray:
         u = (p - p0) / np.maximum(p1 - p0, 1e-9)
         w = min_jerk(u)[:, None]
         out[sw, foot] = c_ext[k_sw] * (1 - w) + c_ext[k_sw + 1] * w
-    return out
+        w_ground[sw, foot] = 1.0 - min_jerk(u / SWING_RELEASE) * min_jerk((1.0 - u) / SWING_LANDING)
+    return out, w_ground
 
 
 def _psi_at(path: MachinePath, times: np.ndarray) -> np.ndarray:
@@ -338,19 +402,28 @@ def _psi_at(path: MachinePath, times: np.ndarray) -> np.ndarray:
     return np.where(times > t[-1], psi[-1] + (times - t[-1]) * rate, out)
 
 
-def _marker_weights(path: MachinePath) -> np.ndarray:
-    """(T, 2) foot marker weights: on the ground high, swing low, ramped smoothly around every contact."""
+def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float) -> np.ndarray:
+    """(T, 2, 3) foot marker weights: high for markers that bear load, low for the rest.
+
+    A foot on the ground is weighted by STANCE_MARKER_WEIGHT, ramped (min-jerk over WEIGHT_RAMP_S) around
+    each contact; within it each marker's weight falls smoothly from full at ≤ 0.02 L above the ground to
+    the swing weight at ≥ 0.05 L. So the loaded point is held still while the rest of the foot may pivot
+    about it (push-off on the toes when a faster or longer-legged run needs more reach than the
+    reference's foot pose gives). markers: (T, 2, 3, 3) targets [m]; leg_length [m].
+    """
     t = path.times[:, None]
-    w = np.zeros((len(path.times), 2))
+    ramp = np.zeros((len(path.times), 2))
     a = path.contact_on[None, :]
     b = path.contact_off[None, :]
-    # 1 inside each stance, min-jerk ramps over WEIGHT_RAMP_S before touchdown and after liftoff
     u = np.clip(np.minimum(t - (a - WEIGHT_RAMP_S), (b + WEIGHT_RAMP_S) - t) / WEIGHT_RAMP_S, 0.0, 1.0)
     for foot in range(2):
         cols = path.foot_of_step == foot
         if cols.any():
-            w[:, foot] = u[:, cols].max(axis=1)
-    return SWING_MARKER_WEIGHT + (STANCE_MARKER_WEIGHT - SWING_MARKER_WEIGHT) * min_jerk(w)
+            ramp[:, foot] = u[:, cols].max(axis=1)
+    height = markers[..., UP_AXIS]  # ground at 0
+    lo, hi = 0.02 * leg_length, 0.05 * leg_length
+    loaded = min_jerk((hi - height) / (hi - lo))  # 1 at or below lo, 0 at or above hi
+    return SWING_MARKER_WEIGHT + (STANCE_MARKER_WEIGHT - SWING_MARKER_WEIGHT) * min_jerk(ramp)[..., None] * loaded
 
 
 # ---- 4. correct (IK) and report ----------------------------------------------------------------------
@@ -390,17 +463,46 @@ def _mean(x) -> float:
 
 
 def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
-    """§6: whole-body IK toward the machine COM and the foot targets, pulled toward the reference pose."""
-    from .ik import ComTask, MarkerTask, default_frozen_joints, solve_ik
+    """§6: whole-body IK toward the machine COM and the foot targets, pulled toward the reference pose.
 
-    tasks = [
-        ComTask(body, targets.com, targets.com_weight),
-        MarkerTask.feet(body, targets.markers, targets.marker_weight),
-    ]
-    # Toes keep the reference's (time-warped) motion: the toe-end marker then fixes the foot's pitch
-    # through the ankle instead of flicking the toe joint when a loaded marker is held still.
-    frozen = sorted(set(default_frozen_joints(body)) | {body.roles["left_toe"], body.roles["right_toe"]})
-    return solve_ik(targets.initial, tasks, body=body, freeze="auto", on_failure=on_failure)
+    All frames are solved together with the solver's fast chord iterations; the few frames that end
+    above RETRY_COM_ERROR (strongly nonlinear poses, e.g. a nearly straight leg at toe-off) are solved
+    again with a fresh Jacobian every iteration and more iterations, and spliced back in (frames are
+    independent, so this is the same problem, solved harder where needed).
+    """
+    from dataclasses import replace as _replace
+
+    from .ik import ComTask, MarkerTask, solve_ik
+
+    def run(t: Targets, refresh: bool, iters: int):
+        tasks = [ComTask(body, t.com, t.com_weight), MarkerTask.feet(body, t.markers, t.marker_weight)]
+        return solve_ik(t.initial, tasks, body=body, freeze="auto", on_failure="flag", tol=IK_TOL,
+                        max_iters=iters, refresh_jacobian=refresh)
+
+    res = run(targets, False, IK_ITERS)
+    bad = np.flatnonzero((res.com_error > RETRY_COM_ERROR) | res.failed)
+    if bad.size:
+        sub = Targets(targets.initial.with_(root_positions=targets.initial.root_positions[bad],
+                                            rotations=targets.initial.rotations[bad]),
+                      targets.com[bad], targets.markers[bad], targets.marker_weight[bad], targets.com_weight[bad])
+        again = run(sub, True, 4 * IK_ITERS)
+        root = res.motion.root_positions.copy()
+        rot = res.motion.rotations.copy()
+        better = again.com_error < res.com_error[bad]
+        root[bad[better]] = again.motion.root_positions[better]
+        rot[bad[better]] = again.motion.rotations[better]
+        com_err = res.com_error.copy()
+        com_err[bad[better]] = again.com_error[better]
+        failed = res.failed.copy()
+        failed[bad[better]] = again.failed[better]
+        res = _replace(res, motion=res.motion.with_(root_positions=root, rotations=rot), com_error=com_err,
+                       failed=failed)
+    if on_failure == "raise" and not res.ok:
+        from .errors import IkError
+
+        f = int(np.flatnonzero(res.failed)[0])
+        raise IkError(f"IK cannot reach its targets at frame {f} (COM error {1000 * res.com_error[f]:.1f} mm)")
+    return res
 
 
 def resolve_character(character=None, *, height=None, mass=None, leg_scale=None, arm_scale=None,
@@ -422,6 +524,7 @@ def scale(
     duration: float | None = None,
     fps: float | None = None,
     method: str = "physical",
+    speed_model: str = "auto",
     **character_numbers,
 ) -> Result:
     """§5.1, §5.2, §6: the reference run on another character, at another speed, for any number of strides.
@@ -430,6 +533,10 @@ def scale(
     speed: factor s on the dynamically scaled speed; target_speed: absolute speed [m/s] (overrides speed);
     strides / duration [s]: output length; fps: output frame rate (default: the input's);
     method: "physical" (froude) or "naive" (engines: angles copied, root × L, timing unchanged).
+    speed_model: "stretch" (paper §5.2: horizontal stretch, timing kept), "resolve" (the machine's cycle
+        re-solved at the new speed with stance time / s and the step time kept, see machine.speed), or
+        "auto": stretch when slowing down, resolve when speeding up (a stretched stance would need the leg
+        to reach beyond its length at toe-off).
     """
     char = resolve_character(character, **character_numbers)
     retarget = apply_character(char, prep.body)
@@ -464,8 +571,18 @@ def scale(
         return _naive(prep, retarget, speed, n_steps, fps, notes)
     if method != "physical":
         raise FroudeError(f"unknown method '{method}' (physical or naive)")
-    path = machine_path(prep, retarget, speed=speed, n_steps=n_steps, fps=fps)
-    return finish(prep, path, retarget, speed, notes, "physical")
+    if speed_model not in ("auto", "stretch", "resolve"):
+        raise FroudeError(f"unknown speed model '{speed_model}' (auto, stretch or resolve)")
+    if speed_model == "resolve" or (speed_model == "auto" and speed > 1.0 + 1e-9):
+        from .machine.speed import faster_machine
+
+        fast = faster_machine(prep.machine, speed)
+        path = machine_path(prep, retarget, n_steps=n_steps, fps=fps, machine=fast)
+        method = "physical (cycle re-solved at the new speed)"
+    else:
+        path = machine_path(prep, retarget, speed=speed, n_steps=n_steps, fps=fps)
+        method = "physical"
+    return finish(prep, path, retarget, speed, notes, method)
 
 
 def accelerate(

@@ -81,6 +81,8 @@ class ReferenceCycle:
     marker_rel: (K, 2, 3, 3) foot markers relative to each foot's anchor [m], heading frame (the anchor is
         the stance's contact point on the ground, or in swing a minimum-jerk blend of the previous and next
         contact points), with sliding of loaded markers removed.
+    marker_from_com: (K, 2, 3, 3) foot markers relative to the COM (forward, lateral) and above the ground
+        (up) [m], heading frame: how the swinging foot moves with the body.
     contact_lateral: (2,) lateral offset of each foot's contacts from the COM line [m].
     speed: mean forward speed [m/s]; stride_time [s]; leg_length [m]; ground [m].
     max_joint_jump_deg: the reference clip's own largest frame-to-frame joint rotation [deg].
@@ -97,6 +99,7 @@ class ReferenceCycle:
     com_forward: np.ndarray
     com_lateral: np.ndarray
     marker_rel: np.ndarray
+    marker_from_com: np.ndarray
     contact_lateral: np.ndarray
     speed: float
     stride_time: float
@@ -207,6 +210,8 @@ def extract_cycle(
     anchors, anchor_ok = _anchors(gait, psi, phase_events, first_foot, F)
     rel = np.einsum("ij,fpkj->fpki", Rh, markers - anchors[:, :, None, :])  # heading frame
     root_from_com = (motion.root_positions - com) @ Rh.T
+    from_com = np.einsum("ij,fpkj->fpki", Rh, markers - com[:, None, None, :])
+    from_com[..., 1] = markers[..., UP_AXIS] - np.nanmedian(stance_ground)
     contact_lat = np.zeros(2)
     for foot in range(2):
         c = [s.contact_point @ Rh[2] - np.interp((s.start + s.stop) / 2 * dt, t, lat_line)
@@ -270,13 +275,15 @@ def extract_cycle(
     contact_phase = _contact_phases(marker_rel, phase_events, first_foot, contact_tol)
     stance_mask = _contact_mask(np.arange(K) / K, contact_phase)
     marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=contact_tol)
+    marker_from_com = _close_loop_linear(average(from_com))
 
     from .metrics import max_joint_jump_deg
 
     return ReferenceCycle(
         first_foot=first_foot, phase_events=phase_events, contact_phase=contact_phase, durations=dur, frame=Rh,
         rotations=rotations, root_from_com=root_rel, com_height=com_height, com_forward=com_forward,
-        com_lateral=com_lateral, marker_rel=marker_rel, contact_lateral=contact_lat, speed=speed,
+        com_lateral=com_lateral, marker_rel=marker_rel, marker_from_com=marker_from_com,
+        contact_lateral=contact_lat, speed=speed,
         stride_time=T, leg_length=body.leg_length, ground=float(np.nanmedian(stance_ground)),
         max_joint_jump_deg=max_joint_jump_deg(motion),
     )
@@ -451,4 +458,5 @@ def sample_cycle(cycle: ReferenceCycle, phi: np.ndarray, rotations: bool = True)
         "com_forward": lin(cycle.com_forward),
         "com_lateral": lin(cycle.com_lateral),
         "marker_rel": lin(cycle.marker_rel),
+        "marker_from_com": lin(cycle.marker_from_com),
     }

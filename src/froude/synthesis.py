@@ -207,7 +207,8 @@ def extract_cycle(
         stance_ground[s.start : s.stop, s.foot] = s.ground
 
     # Per-frame anchors of each foot: stance contact point or a min-jerk blend between contacts.
-    anchors, anchor_ok = _anchors(gait, psi, phase_events, first_foot, F)
+    stride_vec = speed * T * Rh[0]  # one stride along the heading [m]
+    anchors, anchor_ok = _anchors(gait, psi, stride_vec, F)
     rel = np.einsum("ij,fpkj->fpki", Rh, markers - anchors[:, :, None, :])  # heading frame
     root_from_com = (motion.root_positions - com) @ Rh.T
     from_com = np.einsum("ij,fpkj->fpki", Rh, markers - com[:, None, None, :])
@@ -352,33 +353,45 @@ def _contact_mask(phi: np.ndarray, contact_phase: np.ndarray) -> np.ndarray:
     return (np.mod(p - on, 1.0) < (off - on))
 
 
-def _anchors(gait: Gait, psi: np.ndarray, phase_events: np.ndarray, first_foot: int, F: int):
+def _anchors(gait: Gait, psi: np.ndarray, stride: np.ndarray, F: int):
     """Anchor point of each foot per frame (F, 2, 3) [m] and whether it is known (F, 2).
 
     In stance the anchor is the stance's contact point (on its ground); in swing it moves from the
-    previous contact to the next one with min-jerk progress in stride phase.
+    previous contact to the next one with min-jerk progress in stride phase. A swing cut by the clip's
+    edge gets a virtual contact one stride (``stride`` (3,) [m], horizontal) before the first or after
+    the last contact of that foot, one stride phase earlier or later: the cycle is periodic.
     """
-    anchors = np.full((F, 2, 3), np.nan)
+    anchors = np.zeros((F, 2, 3))
     ok = np.zeros((F, 2), bool)
+    frames = np.arange(F)
     for foot in range(2):
         st = [s for s in gait.stances if s.foot == foot]
-        pts = []
+        if not st:
+            continue
+        pts, psi_on, psi_off = [], [], []
         for s in st:
             c = s.contact_point.copy()
             c[UP_AXIS] = s.ground
             pts.append(c)
             anchors[s.start : s.stop, foot] = c
             ok[s.start : s.stop, foot] = True
-        for s0, s1, c0, c1 in zip(st[:-1], st[1:], pts[:-1], pts[1:]):
-            a, b = s0.stop, s1.start
-            if b <= a:
+            psi_on.append(psi[s.start])
+            psi_off.append(psi[min(s.stop, F - 1)])
+        # virtual neighbours (a stance cut at the edge has an unknown start or end: use its known end)
+        pts = [pts[0] - stride] + pts + [pts[-1] + stride]
+        psi_off = [psi_off[0] - 1.0] + psi_off + [psi_off[-1] + 1.0]
+        psi_on = [psi_on[0] - 1.0] + psi_on + [psi_on[-1] + 1.0]
+        bounds = [(-10**9, 0)] + [(s.start, s.stop) for s in st] + [(F + 10**9, F + 10**9)]
+        for j in range(len(bounds) - 1):
+            a, b = bounds[j][1], bounds[j + 1][0]
+            sel = (frames >= max(a, 0)) & (frames < min(b, F))
+            if not sel.any():
                 continue
-            p0, p1 = psi[a - 1] if a > 0 else psi[a], psi[b]
-            u = (psi[a:b] - p0) / max(p1 - p0, 1e-9)
+            p0, p1 = psi_off[j], psi_on[j + 1]
+            u = (psi[sel] - p0) / max(p1 - p0, 1e-9)
             w = min_jerk(u)[:, None]
-            anchors[a:b, foot] = c0 * (1 - w) + c1 * w
-            ok[a:b, foot] = True
-    anchors = np.where(np.isnan(anchors), 0.0, anchors)
+            anchors[sel, foot] = pts[j] * (1 - w) + pts[j + 1] * w
+            ok[sel, foot] = True
     return anchors, ok
 
 

@@ -272,7 +272,9 @@ def extract_cycle(
         wsum = w.sum(axis=0)
     marker_rel = np.sum(rel_vals * w[..., None, None], axis=0) / wsum[..., None, None]
     marker_rel = _close_loop_linear(marker_rel)
-    contact_tol = 0.025 * body.leg_length
+    # 0.03 L: a little above the 0.02 L (and its hysteresis band) at which the physics report calls a
+    # marker loaded, so everything the report checks is held
+    contact_tol = 0.03 * body.leg_length
     contact_phase = _contact_phases(marker_rel, phase_events, first_foot, contact_tol)
     stance_mask = _contact_mask(np.arange(K) / K, contact_phase)
     marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=contact_tol)
@@ -401,8 +403,8 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float) -> 
     rel: (K, 2, 3, 3) marker offsets from the anchor (heading frame: forward, up, lateral).
     A marker is loaded while it is within contact_tol of the ground during stance. The three markers of
     a foot move together by one horizontal correction δ(φ) (so the foot keeps the reference's shape and
-    orientation, which IK can then meet exactly), chosen so that every loaded marker stays where it was
-    when its loading began; when no marker that was already loaded stays loaded, δ is held. After the
+    orientation, which IK can then meet exactly): from one sample to the next δ cancels the mean motion of
+    the markers loaded at both, so loaded points stay put and δ stays continuous. After the
     stance δ fades out over the swing (min-jerk), so the cycle still closes. Heights are clamped to ≥ 0.
     """
     out = rel.copy()
@@ -418,17 +420,15 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float) -> 
                 idx = np.concatenate([idx[gap[0] + 1 :], idx[: gap[0] + 1]])
         h = rel[idx, foot][:, :, [0, 2]]  # (n, 3 markers, 2) horizontal offsets
         loaded = rel[idx, foot, :, 1] <= contact_tol  # (n, 3)
-        delta = np.zeros((idx.size, 2))
-        d = np.zeros(2)
-        held = np.full((3, 2), np.nan)
-        for i in range(idx.size):  # a loop over the ~50 samples of one stance, not over frames
-            keep = loaded[i] & ~np.isnan(held[:, 0])
-            if keep.any():
-                d = np.mean(held[keep] - h[i, keep], axis=0)
-            new = loaded[i] & np.isnan(held[:, 0])
-            held[new] = h[i, new] + d
-            held[~loaded[i]] = np.nan
-            delta[i] = d
+        # δ changes by minus the mean motion of the markers loaded at both neighbouring samples, so the
+        # loaded points stay put (on average, if two loaded points move relative to each other) and δ is
+        # continuous whatever markers load and unload (a re-averaging would jump)
+        both = loaded[1:] & loaded[:-1]  # (n-1, 3)
+        step = h[1:] - h[:-1]  # (n-1, 3, 2)
+        n_both = both.sum(axis=1, keepdims=True)
+        mean_step = np.where(n_both > 0, (step * both[..., None]).sum(axis=1) / np.maximum(n_both, 1), 0.0)
+        delta = np.concatenate([np.zeros((1, 2)), -np.cumsum(mean_step, axis=0)])
+        d = delta[-1]
         out[idx, foot, :, 0] += delta[:, None, 0]
         out[idx, foot, :, 2] += delta[:, None, 1]
         if np.any(d != 0):

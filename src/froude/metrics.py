@@ -134,27 +134,31 @@ def flight_gravity(com: np.ndarray, frame_time: float, flights, min_frames: int 
     return g, [float(x) for x in gs], float(np.sqrt(np.mean(np.square(acc_h))))
 
 
-def foot_skate_mm(markers: np.ndarray, gait: Gait, contact_tol: float) -> float:
-    """Largest sliding of a foot marker while it stays in ground contact [mm].
+def foot_skate_mm(markers: np.ndarray, gait: Gait, leg_length: float) -> float:
+    """Largest sliding of a foot marker while it is on the ground [mm].
 
-    markers: (F, 2, 3, 3) [m]. For each stance and each marker of the stance foot, the frames in which
-    the marker is within ``contact_tol`` [m] of that stance's ground are its contact frames. A contact
-    lasts until the marker lifts clearly off (above 1.5 × contact_tol: hysteresis, so noise around the
-    threshold does not split a contact); skate is the largest horizontal distance of the marker from
-    where its contact began. Rolling from heel to toe, or a toe tip that lifts and touches down again,
-    is not sliding.
+    markers: (F, 2, 3, 3) [m] (ankle, toe, toe end per foot: joint centres, which sit a sole's thickness
+    above the floor when the foot is down). For each stance and each marker of the stance foot that
+    reaches the floor (its lowest point in the stance within 0.03 L of that stance's ground), the marker
+    is on the ground while it is within a contact band of that lowest point: max(5 mm, 0.006 L). A contact
+    lasts until the marker clearly lifts (above 1.5 bands: hysteresis, so noise does not split it); skate
+    is the largest horizontal distance of the marker from where its contact began. Rolling from heel to
+    toe, or a toe tip that lifts and touches down again, is not sliding.
     """
     worst = 0.0
+    band = max(0.005, 0.006 * leg_length)
     for s in gait.stances:
         seg = markers[s.start : s.stop, s.foot]  # (n, 3 markers, 3)
         height = seg[..., UP_AXIS] - s.ground
         for k in range(seg.shape[1]):
-            on = height[:, k] <= contact_tol
+            h_min = height[:, k].min()
+            if h_min > 0.03 * leg_length:
+                continue
+            on = height[:, k] <= h_min + band
             idx = np.flatnonzero(on)
             if idx.size < 2:
                 continue
-            # split into contacts where the marker rose above the hysteresis band in between
-            lifted = np.array([height[a + 1 : b, k].max(initial=-np.inf) > 1.5 * contact_tol
+            lifted = np.array([height[a + 1 : b, k].max(initial=-np.inf) > h_min + 1.5 * band
                                for a, b in zip(idx[:-1], idx[1:])])
             starts = np.concatenate([[0], np.flatnonzero(lifted) + 1])
             stops = np.concatenate([np.flatnonzero(lifted) + 1, [idx.size]])
@@ -219,7 +223,7 @@ def physics_report(
     penetration = float(max(0.0, np.max(ground_f[:, None] - h_low))) * 1000.0
     floats = [float(np.min(h_low[s.start : s.stop, s.foot]) - ground_f[s.start]) for s in gait.stances]
     float_mm = 1000.0 * max([0.0] + floats)
-    skate = foot_skate_mm(markers, gait, contact_tol=0.02 * L)
+    skate = foot_skate_mm(markers, gait, L)
 
     fz = vertical_force_bw(com, dt) if motion.n_frames >= 8 else np.full(motion.n_frames, np.nan)
     inner = slice(3, max(3, motion.n_frames - 3))  # filter edges are least trustworthy

@@ -277,7 +277,7 @@ def extract_cycle(
     contact_tol = 0.03 * body.leg_length
     contact_phase = _contact_phases(marker_rel, phase_events, first_foot, contact_tol)
     stance_mask = _contact_mask(np.arange(K) / K, contact_phase)
-    marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=contact_tol)
+    marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=contact_tol, band=0.02 * body.leg_length)
     marker_from_com = _close_loop_linear(average(from_com))
 
     from .metrics import max_joint_jump_deg
@@ -397,11 +397,13 @@ def _anchors(gait: Gait, psi: np.ndarray, stride: np.ndarray, F: int):
     return anchors, ok
 
 
-def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float) -> np.ndarray:
+def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, band: float) -> np.ndarray:
     """Remove the reference's foot sliding in stance by translating each foot rigidly.
 
     rel: (K, 2, 3, 3) marker offsets from the anchor (heading frame: forward, up, lateral).
-    A marker is loaded while it is within contact_tol of the ground during stance. The three markers of
+    A marker that reaches within contact_tol of the ground in a stance is loaded while it is within
+    ``band`` of its own lowest point of that stance (joint centres sit a sole's thickness above the
+    floor). The three markers of
     a foot move together by one horizontal correction δ(φ) (so the foot keeps the reference's shape and
     orientation, which IK can then meet exactly): from one sample to the next δ cancels the mean motion of
     the markers loaded at both, so loaded points stay put and δ stays continuous. After the
@@ -419,14 +421,21 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float) -> 
             if gap.size:
                 idx = np.concatenate([idx[gap[0] + 1 :], idx[: gap[0] + 1]])
         h = rel[idx, foot][:, :, [0, 2]]  # (n, 3 markers, 2) horizontal offsets
-        loaded = rel[idx, foot, :, 1] <= contact_tol  # (n, 3)
-        # δ changes by minus the mean motion of the markers loaded at both neighbouring samples, so the
-        # loaded points stay put (on average, if two loaded points move relative to each other) and δ is
-        # continuous whatever markers load and unload (a re-averaging would jump)
-        both = loaded[1:] & loaded[:-1]  # (n-1, 3)
+        height = rel[idx, foot, :, 1]  # (n, 3) above the ground
+        h_min = height.min(axis=0)
+        # a marker bears load while near its own lowest point of the stance (joint centres sit a sole's
+        # thickness above the floor) and only if it reaches the floor at all
+        reaches = h_min <= contact_tol
+        loaded = (height <= h_min + band) & reaches
+        # δ changes by minus the (weighted) mean motion of the markers loaded at both neighbouring samples,
+        # so the loaded points stay put and δ is continuous whatever markers load and unload (a
+        # re-averaging of held positions would jump); markers pressed deeper (nearer their lowest point)
+        # count more, so the point that carries the foot stays put and a lightly touching one gives way
+        depth = np.clip(1.0 - (height - h_min) / band, 0.0, 1.0) ** 4
+        wgt = (loaded[1:] & loaded[:-1]) * 0.5 * (depth[1:] + depth[:-1])  # (n-1, 3)
         step = h[1:] - h[:-1]  # (n-1, 3, 2)
-        n_both = both.sum(axis=1, keepdims=True)
-        mean_step = np.where(n_both > 0, (step * both[..., None]).sum(axis=1) / np.maximum(n_both, 1), 0.0)
+        w_sum = wgt.sum(axis=1, keepdims=True)
+        mean_step = np.where(w_sum > 0, (step * wgt[..., None]).sum(axis=1) / np.maximum(w_sum, 1e-12), 0.0)
         delta = np.concatenate([np.zeros((1, 2)), -np.cumsum(mean_step, axis=0)])
         d = delta[-1]
         out[idx, foot, :, 0] += delta[:, None, 0]

@@ -318,7 +318,10 @@ def build_targets(prep: Prepared, path: MachinePath, retarget: Retarget) -> Targ
     initial = Motion(retarget.skeleton, root, rot, float(path.frame_time), None, meta)
     weight = _marker_weights(path, markers, retarget.body.leg_length) * _reach_factor(initial, retarget.body, markers)
     weight = np.maximum(weight, SWING_MARKER_WEIGHT)
-    return Targets(initial, path.com, markers, weight, np.full(T, COM_WEIGHT))
+    # Weights are per (leg length)^2, so the trade-off between a position error and a joint angle is the
+    # same for a child and a giant (errors in metres grow with size, joint angles do not).
+    per_size = (prep.body.leg_length / retarget.body.leg_length) ** 2
+    return Targets(initial, path.com, markers, weight * per_size, np.full(T, COM_WEIGHT * per_size))
 
 
 def _reach_factor(initial: Motion, body: BodyModel, markers: np.ndarray) -> np.ndarray:

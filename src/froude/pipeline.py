@@ -28,12 +28,15 @@ from .synthesis import ReferenceCycle, extract_cycle, min_jerk, sample_cycle
 
 #: Speed factors outside this range leave what a reference clip supports: a warning, not an error.
 SUPPORTED_SPEED_RANGE = (0.6, 1.6)
-#: IK weights [1/m²]: the COM and loaded feet are held hard, swing feet guide the leg gently.
-COM_WEIGHT = float(__import__("os").environ.get("FROUDE_COM_W", 10.0))
-STANCE_MARKER_WEIGHT = float(__import__("os").environ.get("FROUDE_ST_W", 10.0))
-SWING_MARKER_WEIGHT = float(__import__("os").environ.get("FROUDE_SW_W", 0.1))
-IK_TOL = float(__import__("os").environ.get("FROUDE_TOL", 2e-4))
-IK_ITERS = int(__import__("os").environ.get("FROUDE_ITERS", 6))
+#: IK weights [1/m²] for a reference-sized body (scaled by (reference leg / target leg)² for others);
+#: posture pulls at 1e-4 per rad² (the solver's default). The COM is held hardest: it carries the physics
+#: (flight gravity needs it to well under a millimetre); loaded foot markers next; swing feet only guide.
+COM_WEIGHT = 1e4
+STANCE_MARKER_WEIGHT = 1e3
+SWING_MARKER_WEIGHT = 1e-2
+#: IK stops a frame when every weighted error is below this [m], after at most IK_ITERS steps.
+IK_TOL = 1e-4
+IK_ITERS = 8
 #: Frames whose COM error after the fast pass exceeds this [m] are solved again, harder.
 RETRY_COM_ERROR = 2e-4
 #: Time [s] over which a foot's marker weight ramps between swing and stance around its events.
@@ -353,7 +356,7 @@ def _reach_factor(initial: Motion, body: BodyModel, markers: np.ndarray) -> np.n
 #: Fractions of a swing over which the foot target blends from the ground-anchored path to the
 #: body-relative one after toe-off (quickly: the leg is nearly straight at toe-off and cannot trail a
 #: ground path that a faster body leaves behind) and back before touchdown (slowly, to land on the contact).
-SWING_RELEASE = float(__import__("os").environ.get("FROUDE_REL", 0.05))
+SWING_RELEASE = 0.05
 SWING_LANDING = 0.35
 
 
@@ -657,7 +660,7 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
         notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]
     motion = ik.motion
     report = physics_report(
-        motion, retarget.body, ground_height=0.0, machine_com=path.com, marker_targets=_stance_only(targets, path),
+        motion, retarget.body, ground_height=0.0, machine_com=path.com, marker_targets=_stance_only(targets),
         reference_pose=targets.initial, reference_max_joint_jump_deg=prep.cycle.max_joint_jump_deg,
     )
     report.extras.update({"character": retarget.character.name, "L": retarget.L, "M": retarget.M,
@@ -666,10 +669,11 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
     return Result(motion, report, path, targets, retarget, method, speed, tuple(notes), plan)
 
 
-def _stance_only(targets: Targets, path: MachinePath) -> np.ndarray:
-    """Foot marker targets where the foot is in stance (NaN elsewhere): the ones that must be met."""
+def _stance_only(targets: Targets) -> np.ndarray:
+    """Foot marker targets that must be met (loaded markers of feet on the ground), NaN elsewhere."""
     out = targets.markers.copy()
-    out[~path.contact] = np.nan
+    w = targets.marker_weight
+    out[w < 0.5 * w.max()] = np.nan
     return out
 
 

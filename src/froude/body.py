@@ -147,6 +147,10 @@ def load_joint_map(path: str | Path) -> dict[str, str]:
     return data
 
 
+#: Frames per forward-kinematics pass in BodyModel.com / com_and_markers (bounds memory on long clips).
+FK_CHUNK = 16384
+
+
 @dataclass(frozen=True, eq=False)
 class BodyModel:
     """Segment masses and COM points of a skeleton, and its foot markers.
@@ -308,10 +312,21 @@ class BodyModel:
                 acc[r] += P[j, r] * m + R[j, 3 * r] * lx + R[j, 3 * r + 1] * ly + R[j, 3 * r + 2] * lz
         return acc / self.total_mass
 
+    def joint_positions(self, motion: Motion, joints) -> np.ndarray:
+        """(F, len(joints), 3) world positions [m] of some joints (FK in chunks of FK_CHUNK frames)."""
+        F = motion.n_frames
+        out = np.empty((F, len(joints), 3))
+        for a in range(0, max(F, 1), FK_CHUNK):
+            b = min(a + FK_CHUNK, F)
+            tr = None if motion.translations is None else motion.translations[a:b]
+            rp, rot, tr = to_soa(motion.root_positions[a:b], motion.rotations[a:b], tr)
+            P, _ = fk_soa(self.skeleton.parents, self.skeleton.offsets, rp, rot, tr)
+            out[a:b] = P[list(joints)].transpose(2, 0, 1)
+        return out
+
     def com(self, motion: Motion) -> np.ndarray:
-        """Whole-body centre of mass (F, 3) [m] of every frame."""
-        P, R = self.fk(motion)
-        return np.ascontiguousarray(self.com_soa(P, R).T)
+        """Whole-body centre of mass (F, 3) [m] of every frame (in chunks: memory O(FK_CHUNK))."""
+        return self.com_and_markers(motion, markers=False)[0]
 
     def segment_points(self, p_world_joint: np.ndarray, R_world_joint: np.ndarray) -> np.ndarray:
         """(F, S, 3) world segment COMs [m] from frame-major FK outputs."""
@@ -320,8 +335,7 @@ class BodyModel:
 
     def foot_markers(self, motion: Motion) -> np.ndarray:
         """(F, 2, 3, 3) foot markers [m]: (left, right) x (ankle, toe, toe end) x xyz."""
-        P, R = self.fk(motion)
-        return self.foot_markers_soa(P, R)
+        return self.com_and_markers(motion)[1]
 
     def foot_markers_soa(self, P: np.ndarray, R: np.ndarray) -> np.ndarray:
         """(F, 2, 3, 3) foot markers [m] from component-major FK outputs."""
@@ -335,10 +349,24 @@ class BodyModel:
                     out[:, i, k, r] = P[j, r] + R[j, 3 * r] * lx + R[j, 3 * r + 1] * ly + R[j, 3 * r + 2] * lz
         return out
 
-    def com_and_markers(self, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
-        """COM (F, 3) [m] and foot markers (F, 2, 3, 3) [m] from one FK pass."""
-        P, R = self.fk(motion)
-        return np.ascontiguousarray(self.com_soa(P, R).T), self.foot_markers_soa(P, R)
+    def com_and_markers(self, motion: Motion, markers: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """COM (F, 3) [m] and foot markers (F, 2, 3, 3) [m] (None if markers=False) from one FK pass.
+
+        Frames are processed FK_CHUNK at a time: FK of all joints costs ~3 kB per frame, an hour at
+        120 Hz would otherwise need 1.3 GB at once; the chunks are large enough to keep the speed.
+        """
+        F = motion.n_frames
+        com = np.empty((F, 3))
+        mk = np.empty((F, 2, 3, 3)) if markers else None
+        for a in range(0, max(F, 1), FK_CHUNK):
+            b = min(a + FK_CHUNK, F)
+            tr = None if motion.translations is None else motion.translations[a:b]
+            rp, rot, tr = to_soa(motion.root_positions[a:b], motion.rotations[a:b], tr)
+            P, R = fk_soa(self.skeleton.parents, self.skeleton.offsets, rp, rot, tr)
+            com[a:b] = self.com_soa(P, R).T
+            if markers:
+                mk[a:b] = self.foot_markers_soa(P, R)
+        return com, mk
 
     def world(self, motion: Motion):
         """Frame-major FK: p_world_joint (F, J, 3) [m], R_world_joint (F, J, 3, 3)."""

@@ -34,11 +34,12 @@ SUPPORTED_SPEED_RANGE = (0.6, 1.6)
 COM_WEIGHT = 1e4
 STANCE_MARKER_WEIGHT = 1e3
 SWING_MARKER_WEIGHT = 1e-2
-#: IK stops a frame when every weighted error is below this [m], after at most IK_ITERS steps.
-IK_TOL = 1e-4
-IK_ITERS = 8
+#: IK stops a frame when every weighted error is below this [m], after at most IK_ITERS steps; the COM is
+#: then made exact by shifting the root (a root translation moves the COM one to one).
+IK_TOL = 1e-3
+IK_ITERS = 4
 #: Frames whose COM error after the fast pass exceeds this [m] are solved again, harder.
-RETRY_COM_ERROR = 2e-4
+RETRY_COM_ERROR = 3e-3
 #: Time [s] over which a foot's marker weight ramps between swing and stance around its events.
 WEIGHT_RAMP_S = 0.04
 
@@ -332,16 +333,13 @@ def _reach_factor(initial: Motion, body: BodyModel, markers: np.ndarray) -> np.n
     it approaches the straight-leg limit (thigh + shank + the foot's bones to that marker), so an
     unreachable target is released instead of wrenching the body (the foot simply leaves a little early).
     """
-    from .kinematics import fk_soa, to_soa
-
     skel = body.skeleton
-    rp, rot, tr = to_soa(initial.root_positions, initial.rotations, initial.translations)
-    P, _ = fk_soa(skel.parents, skel.offsets, rp, rot, tr)
+    hips = body.joint_positions(initial, [body.roles["left_hip"], body.roles["right_hip"]])  # (T, 2, 3)
     out = np.ones(markers.shape[:3])
     margin = 0.03 * body.leg_length
     for i, side in enumerate(("left", "right")):
         r = body.roles
-        hip = P[r[f"{side}_hip"]].T  # (T, 3)
+        hip = hips[:, i]  # (T, 3)
         rest = skel.rest_positions()
         leg = np.linalg.norm(rest[r[f"{side}_knee"]] - rest[r[f"{side}_hip"]]) + np.linalg.norm(
             rest[r[f"{side}_ankle"]] - rest[r[f"{side}_knee"]])
@@ -417,15 +415,21 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float) -
     about it (push-off on the toes when a faster or longer-legged run needs more reach than the
     reference's foot pose gives). markers: (T, 2, 3, 3) targets [m]; leg_length [m].
     """
-    t = path.times[:, None]
-    ramp = np.zeros((len(path.times), 2))
-    a = path.contact_on[None, :]
-    b = path.contact_off[None, :]
-    u = np.clip(np.minimum(t - (a - WEIGHT_RAMP_S), (b + WEIGHT_RAMP_S) - t) / WEIGHT_RAMP_S, 0.0, 1.0)
+    t = path.times
+    ramp = np.zeros((len(t), 2))
     for foot in range(2):
-        cols = path.foot_of_step == foot
-        if cols.any():
-            ramp[:, foot] = u[:, cols].max(axis=1)
+        cols = np.flatnonzero(path.foot_of_step == foot)
+        if cols.size == 0:
+            continue
+        a = path.contact_on[cols]
+        b = path.contact_off[cols]
+        # the contacts that can touch a frame: the last one starting before t + ramp, and the one before it
+        k = np.searchsorted(a - WEIGHT_RAMP_S, t, side="right") - 1
+        for kk in (k, k - 1):
+            ok = kk >= 0
+            kc = np.clip(kk, 0, cols.size - 1)
+            u = np.clip(np.minimum(t - (a[kc] - WEIGHT_RAMP_S), (b[kc] + WEIGHT_RAMP_S) - t) / WEIGHT_RAMP_S, 0.0, 1.0)
+            ramp[:, foot] = np.maximum(ramp[:, foot], np.where(ok, u, 0.0))
     height = markers[..., UP_AXIS]  # ground at 0
     lo, hi = 0.02 * leg_length, 0.05 * leg_length
     loaded = min_jerk((hi - height) / (hi - lo))  # 1 at or below lo, 0 at or above hi
@@ -503,6 +507,12 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
         failed[bad[better]] = again.failed[better]
         res = _replace(res, motion=res.motion.with_(root_positions=root, rotations=rot), com_error=com_err,
                        failed=failed)
+    # Make the COM exact: the remaining sub-millimetre error is removed by a root translation (the COM
+    # moves one to one with it), which moves the feet by as little, so the flight parabola is exact.
+    com_now = body.com(res.motion)
+    shift = targets.com - com_now
+    res = _replace(res, motion=res.motion.with_(root_positions=res.motion.root_positions + shift),
+                   com_error=np.zeros(len(shift)))
     if on_failure == "raise" and not res.ok:
         from .errors import IkError
 
@@ -531,6 +541,7 @@ def scale(
     fps: float | None = None,
     method: str = "physical",
     speed_model: str = "auto",
+    report: bool = True,
     **character_numbers,
 ) -> Result:
     """§5.1, §5.2, §6: the reference run on another character, at another speed, for any number of strides.
@@ -543,6 +554,7 @@ def scale(
         re-solved at the new speed with stance time / s and the step time kept, see machine.speed), or
         "auto": stretch when slowing down, resolve when speeding up (a stretched stance would need the leg
         to reach beyond its length at toe-off).
+    report: compute the physics report (False: result.report is None; for benchmarks of the synthesis).
     """
     char = resolve_character(character, **character_numbers)
     retarget = apply_character(char, prep.body)
@@ -582,13 +594,15 @@ def scale(
     if speed_model == "resolve" or (speed_model == "auto" and speed > 1.0 + 1e-9):
         from .machine.speed import faster_machine
 
-        fast = faster_machine(prep.machine, speed)
-        path = machine_path(prep, retarget, n_steps=n_steps, fps=fps, machine=fast)
+        machine = faster_machine(prep.machine, speed)
+        stretch = 1.0
         method = "physical (cycle re-solved at the new speed)"
     else:
-        path = machine_path(prep, retarget, speed=speed, n_steps=n_steps, fps=fps)
+        machine, stretch = prep.machine, speed
         method = "physical"
-    return finish(prep, path, retarget, speed, notes, method)
+    path = machine_path(prep, retarget, speed=stretch, n_steps=n_steps, fps=fps, machine=machine)
+    periodic = (machine, stretch, fps)
+    return finish(prep, path, retarget, speed, notes, method, periodic=periodic, report=report)
 
 
 def accelerate(
@@ -651,14 +665,31 @@ def accelerate(
     return res
 
 
-def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, notes, method: str, plan=None) -> Result:
-    """Targets → IK → report: the common tail of scale and accelerate."""
+#: A steady (periodic) output longer than this many strides is corrected by solving the IK of one stride
+#: sampled PERIODIC_OVERSAMPLE times finer and tiling it (see _periodic_correct).
+PERIODIC_MIN_STRIDES = 6
+PERIODIC_OVERSAMPLE = 4
+
+
+def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, notes, method: str, plan=None,
+           periodic=None, report: bool = True) -> Result:
+    """Targets → IK → report: the common tail of scale and accelerate.
+
+    periodic: (machine, stretch, fps) when the path is the steady cycle repeated: long outputs then solve
+    the IK of one stride only (the result is periodic too) and tile it.
+    """
     targets = build_targets(prep, path, retarget)
-    ik = correct(targets, retarget.body)
-    if not ik.ok:
-        bad = np.flatnonzero(ik.failed)
-        notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]
-    motion = ik.motion
+    n_strides = len(path.foot_of_step) / 2
+    if periodic is not None and n_strides > PERIODIC_MIN_STRIDES:
+        motion = _periodic_correct(prep, retarget, targets, path, *periodic)
+    else:
+        ik = correct(targets, retarget.body)
+        if not ik.ok:
+            bad = np.flatnonzero(ik.failed)
+            notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]
+        motion = ik.motion
+    if not report:
+        return Result(motion, None, path, targets, retarget, method, speed, tuple(notes), plan)
     report = physics_report(
         motion, retarget.body, ground_height=0.0, machine_com=path.com, marker_targets=_stance_only(targets),
         reference_pose=targets.initial, reference_max_joint_jump_deg=prep.cycle.max_joint_jump_deg,
@@ -667,6 +698,38 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
                           "speed_factor": speed, "method": method, "notes": list(notes),
                           "machine_apex_speed_m_s": path.apex_speed.tolist()})
     return Result(motion, report, path, targets, retarget, method, speed, tuple(notes), plan)
+
+
+def _periodic_correct(prep: Prepared, retarget: Retarget, targets: Targets, path: MachinePath, machine,
+                      stretch: float, fps: float) -> Motion:
+    """IK of a steady output by solving one stride and tiling it.
+
+    The steady cycle is periodic: stride n of the output is stride 0 translated by n stride lengths (COM,
+    contacts, foot targets and the time-warped reference pose all repeat). So the IK is solved once, for one
+    stride sampled PERIODIC_OVERSAMPLE times finer than the output, and each output frame takes the pose at
+    its time modulo the stride (root interpolated linearly, rotations by nlerp between samples a few
+    milliseconds apart) plus its stride's translation; finally the COM is made exact by a root translation,
+    as in ``correct``. The work is then that of one stride whatever the length, which is what makes long
+    outputs (an hour of running) cheap in time and memory.
+    """
+    from .synthesis import nlerp_rows
+
+    m = machine.scaled(retarget.L, retarget.M)
+    k = PERIODIC_OVERSAMPLE
+    one = machine_path(prep, retarget, speed=stretch, n_steps=2, fps=k * fps, machine=machine)
+    ik = correct(build_targets(prep, one, retarget), retarget.body)
+    T2 = 2.0 * m.step_time * m.time_unit  # stride period [s]
+    stride = path.contacts[2] - path.contacts[0] if len(path.contacts) > 2 else np.zeros(3)
+    stride[UP_AXIS] = 0.0
+    t = path.times
+    n = np.floor(t / T2 + 1e-9)
+    x = (t - n * T2) * (k * fps)  # fractional dense sample
+    i0 = np.clip(np.floor(x).astype(int), 0, ik.motion.n_frames - 2)
+    w = (x - i0)[:, None]
+    root = ik.motion.root_positions[i0] * (1 - w) + ik.motion.root_positions[i0 + 1] * w + n[:, None] * stride
+    rot = nlerp_rows(ik.motion.rotations, i0, i0 + 1, w[:, 0])
+    motion = targets.initial.with_(root_positions=root, rotations=rot)
+    return motion.with_(root_positions=root + (targets.com - retarget.body.com(motion)))
 
 
 def _stance_only(targets: Targets) -> np.ndarray:

@@ -453,6 +453,21 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
     return out
 
 
+def nlerp_rows(q: np.ndarray, i0: np.ndarray, i1: np.ndarray, w: np.ndarray, chunk: int = 32768) -> np.ndarray:
+    """(T, J, 4) normalised linear interpolation between rows i0 and i1 (T,) of q (N, J, 4) at weights w (T,).
+
+    In chunks, so that the temporaries of a long output (an hour is 432 000 frames) stay small.
+    """
+    out = np.empty((len(w),) + q.shape[1:])
+    for a in range(0, len(w), chunk):
+        sl = slice(a, a + chunk)
+        q0, q1 = q[i0[sl]], q[i1[sl]]
+        w_ = w[sl, None, None]
+        sign = np.where(np.sum(q0 * q1, axis=-1, keepdims=True) < 0, -1.0, 1.0)
+        out[sl] = quat.normalize(q0 * (1.0 - w_) + q1 * (sign * w_))
+    return out
+
+
 def sample_cycle(cycle: ReferenceCycle, phi: np.ndarray, rotations: bool = True):
     """Cycle quantities at stride phases phi (T,): rotations (T, J, 4) (None if not asked) and a dict of
     linear arrays. Rotations use normalised linear interpolation: neighbouring cycle samples are a few
@@ -465,10 +480,7 @@ def sample_cycle(cycle: ReferenceCycle, phi: np.ndarray, rotations: bool = True)
     w = x - np.floor(x)
     rot = None
     if rotations:
-        q0, q1 = cycle.rotations[i0], cycle.rotations[i1]
-        w_ = w[:, None, None]
-        sign = np.where(np.sum(q0 * q1, axis=-1, keepdims=True) < 0, -1.0, 1.0)
-        rot = quat.normalize(q0 * (1.0 - w_) + q1 * (sign * w_))
+        rot = nlerp_rows(cycle.rotations, i0, i1, w)
 
     def lin(a):
         ww = w.reshape((-1,) + (1,) * (a.ndim - 1))

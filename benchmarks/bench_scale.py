@@ -1,0 +1,72 @@
+"""Benchmark of `froude scale` (issue 5): modify + synthesise + IK throughput, and memory of long outputs.
+
+    python benchmarks/bench_scale.py            # 30 strides (≈ 10 s at 120 Hz) of 09_01 → child
+    python benchmarks/bench_scale.py --hour     # also a 1-hour output in a fresh process: time and peak RSS
+
+Prints output frames per second of the synthesis (machine path, time-warped reference, IK targets, IK)
+on one core, with and without the physics report, and for --hour the peak resident memory.
+"""
+import os
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_v] = "1"
+
+import argparse  # noqa: E402
+import resource  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+
+def measure(strides: int, repeats: int = 5) -> None:
+    import froude
+    from froude import pipeline
+
+    t = time.perf_counter()
+    prep = pipeline.prepare(froude.sample_path())
+    print(f"prepare (load + fit + cycle) of 09_01: {time.perf_counter() - t:.3f} s (once per clip)")
+    pipeline.scale(prep, "child", strides=strides, report=False)  # warm-up
+    for report in (False, True):
+        ts = []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            res = pipeline.scale(prep, "child", strides=strides, report=report)
+            ts.append(time.perf_counter() - t)
+        n = res.motion.n_frames
+        what = "modify + synthesise + IK + physics report" if report else "modify + synthesise + IK"
+        print(f"{what:<45} {n} frames: median {np.median(ts) * 1000:.1f} ms = {n / np.median(ts):,.0f} frames/s "
+              f"(best {n / min(ts):,.0f})")
+    r = res.report
+    print(f"   report: COM RMS {r.com_tracking_rms_mm:.3f} mm, skate {r.foot_skate_mm:.2f} mm, "
+          f"flight gravity {r.flight_gravity_m_s2:.3f} m/s^2, bars: {r.check_bars() or 'all met'}")
+
+
+def hour_child() -> None:
+    """Run in a fresh process: one hour of output, its time and peak RSS."""
+    import froude
+    from froude import pipeline
+
+    prep = pipeline.prepare(froude.sample_path())
+    t = time.perf_counter()
+    res = pipeline.scale(prep, "child", duration=3600.0, report=True)
+    dt = time.perf_counter() - t
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"1-hour output: {res.motion.n_frames} frames in {dt:.1f} s ({res.motion.n_frames / dt:,.0f} frames/s, "
+          f"with the physics report); peak RSS {peak_mb:.0f} MB; bars: {res.report.check_bars() or 'all met'}")
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--strides", type=int, default=30)
+    ap.add_argument("--hour", action="store_true", help="also measure a 1-hour output in a fresh process")
+    ap.add_argument("--_hour_child", action="store_true", help=argparse.SUPPRESS)
+    a = ap.parse_args()
+    if a._hour_child:
+        hour_child()
+        sys.exit(0)
+    print(f"load average: {os.getloadavg()[0]:.2f} (2 cores; figures are noisy when the machine is busy)")
+    measure(a.strides)
+    if a.hour:
+        subprocess.run([sys.executable, __file__, "--_hour_child"], check=True)

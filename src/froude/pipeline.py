@@ -374,11 +374,20 @@ def _foot_anchors(path: MachinePath) -> tuple[np.ndarray, np.ndarray]:
         c = path.contacts[idx]
         td = path.contact_on[idx]
         lo = path.contact_off[idx]
-        # virtual contacts one stride before the first and after the last (periodic extension)
-        stride = c[1] - c[0] if len(c) > 1 else (path.contacts[-1] - path.contacts[0]) * 2 / max(n - 1, 1)
+        # virtual contacts one stride before the first and after the last (periodic extension); with a single
+        # contact of this foot, the stride comes from both feet's steps (along the heading only: the feet's
+        # lateral offsets differ)
+        if len(c) > 1:
+            stride, swing = c[1] - c[0], td[1] - lo[0]
+        else:
+            fwd = path.frame[0]
+            step = (path.contacts[-1] - path.contacts[0]) @ fwd / max(n - 1, 1)
+            stride = 2.0 * step * fwd
+            t_stride = 2.0 * (path.t_touchdown[-1] - path.t_touchdown[0]) / max(n - 1, 1)
+            swing = t_stride - (lo[0] - td[0])
         c_ext = np.concatenate([c[:1] - stride, c, c[-1:] + stride])
-        lo_ext = np.concatenate([[td[0] - (td[1] - lo[0]) if len(td) > 1 else td[0] - 0.5], lo, [np.inf]])
-        td_ext = np.concatenate([[-np.inf], td, [lo[-1] + (td[1] - lo[0]) if len(td) > 1 else lo[-1] + 0.5]])
+        lo_ext = np.concatenate([[td[0] - swing], lo, [np.inf]])
+        td_ext = np.concatenate([[-np.inf], td, [lo[-1] + swing]])
         # for each frame: the last touchdown at or before it (index into *_ext)
         k = np.searchsorted(td_ext, t, side="right") - 1
         in_stance = t < lo_ext[k]

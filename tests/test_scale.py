@@ -1,0 +1,162 @@
+"""Issue 5: scaling running to new characters and speeds (§5.1, §5.2, §6), on the real clips."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import froude
+from froude import pipeline, quat
+from froude.characters import list_presets
+from froude.constants import GRAVITY
+from froude.metrics import physics_report
+
+from conftest import MOCAP
+
+RUNNING = ["09_01", "09_02", "09_03", "09_04", "09_05", "09_06", "09_07", "09_08", "02_03"]
+PRESETS = ["child", "troll", "giant", "small"]
+SPEEDS = [0.7, 1.0, 1.2]
+
+
+@pytest.fixture(scope="module")
+def prepared():
+    """Each running clip fitted once for the whole module."""
+    return {c: pipeline.prepare(MOCAP / f"{c}.bvh") for c in RUNNING}
+
+
+@pytest.mark.parametrize("clip", RUNNING)
+def test_physics_bars_every_preset_and_speed(prepared, clip):
+    """Acceptance 1: every output of every clip, preset and speed meets DESIGN.md's physics bars."""
+    prep = prepared[clip]
+    failures = []
+    for preset in PRESETS:
+        for s in SPEEDS:
+            rep = pipeline.scale(prep, preset, speed=s, strides=4).report
+            for f in rep.check_bars():
+                failures.append(f"{clip} {preset} x{s}: {f}")
+            assert np.isfinite(rep.com_tracking_max_mm) and rep.reference_max_joint_jump_deg > 0
+    assert not failures, "\n".join(failures)
+
+
+@pytest.mark.parametrize("clip", ["09_01", "09_05", "02_03"])
+def test_dynamic_similarity(prepared, clip):
+    """Acceptance 2: step frequency × L^-1/2 and U unchanged for a scaled character; speed × s and step
+    duration unchanged for a speed change."""
+    prep = prepared[clip]
+    same = pipeline.scale(prep, None, speed=1.0, strides=6).report
+    for preset in ("child", "troll", "giant"):
+        res = pipeline.scale(prep, preset, speed=1.0, strides=6)
+        L = res.retarget.L
+        assert res.report.step_frequency_hz == pytest.approx(same.step_frequency_hz / np.sqrt(L), rel=0.02)
+        assert res.report.froude_U == pytest.approx(same.froude_U, rel=0.02)
+    for s in (0.7, 1.2):
+        rep = pipeline.scale(prep, None, speed=s, strides=6).report
+        assert rep.mean_speed_m_s == pytest.approx(s * same.mean_speed_m_s, rel=0.02)
+        assert 1.0 / rep.step_frequency_hz == pytest.approx(1.0 / same.step_frequency_hz, rel=0.02)
+
+
+def test_naive_baseline_floats(prepared):
+    """Acceptance 3: the engine-style retarget keeps timing, so its flight gravity is L × 9.81."""
+    prep = prepared["09_01"]
+    naive = pipeline.scale(prep, "child", method="naive", strides=4)
+    physical = pipeline.scale(prep, "child", strides=4)
+    L = naive.retarget.L
+    g = naive.report.flight_gravity_m_s2
+    assert abs(g - GRAVITY) / GRAVITY > 0.15
+    # the engine keeps the reference's timing, so it keeps the reference's own (mocap-measured) gravity × L
+    g_ref = physics_report(prep.motion, prep.body).flight_gravity_m_s2
+    assert g == pytest.approx(L * g_ref, rel=0.15)
+    assert physical.report.flight_gravity_m_s2 == pytest.approx(GRAVITY, rel=0.03)
+
+
+@pytest.mark.parametrize("clip", RUNNING)
+def test_ten_strides_no_seam(prepared, clip):
+    """Acceptance 4: 10 strides from a 1.5-2 stride clip, no visible seam: the largest joint-angle jump
+    anywhere (loop points included) is at most 1.5 × the largest in the reference."""
+    prep = prepared[clip]
+    res = pipeline.scale(prep, None, strides=10)
+    m = res.motion
+    assert len(res.path.foot_of_step) == 20
+    jumps = np.degrees(quat.angle_between(m.rotations[1:], m.rotations[:-1])).max(axis=1)
+    assert jumps.max() <= 1.5 * res.report.reference_max_joint_jump_deg
+    # and at each stride boundary of the machine (the loop points of the cycle) in particular
+    seams = np.searchsorted(res.path.times, res.path.t_touchdown[::2])
+    assert jumps[np.clip(seams - 1, 0, len(jumps) - 1)].max() <= 1.5 * res.report.reference_max_joint_jump_deg
+
+
+def test_long_output_is_the_tiled_cycle(prepared):
+    """A steady output longer than PERIODIC_MIN_STRIDES is solved on one stride and tiled; it must agree
+    with the frame-by-frame solution and still meet the bars."""
+    prep = prepared["09_03"]
+    long = pipeline.scale(prep, "troll", strides=pipeline.PERIODIC_MIN_STRIDES + 2)
+    short_path = long.path
+    direct = pipeline.correct(long.targets, long.retarget.body).motion
+    p_long = long.retarget.body.foot_markers(long.motion)
+    p_direct = long.retarget.body.foot_markers(direct)
+    d = np.linalg.norm(p_long - p_direct, axis=-1)
+    loaded = long.targets.marker_weight >= 0.5 * long.targets.marker_weight.max()
+    assert d[loaded].max() < 0.002  # feet on the ground: the same to 2 mm
+    assert d.max() < 0.03  # swinging feet (weakly guided, several near-equal poses): within 3 cm
+    assert not long.report.check_bars()
+    assert len(short_path.foot_of_step) == 2 * (pipeline.PERIODIC_MIN_STRIDES + 2)
+
+
+def test_output_file_and_report(tmp_path, prepared):
+    """The CLI writes the BVH with the input's joint names and channel orders, and the report."""
+    out = tmp_path / "child.bvh"
+    r = subprocess.run([sys.executable, "-m", "froude.cli", "scale", str(MOCAP / "09_01.bvh"), "--character",
+                        "child", "--speed", "0.7", "--strides", "2", "-o", str(out)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "Froude number" in r.stdout and "physics bars: all met" in r.stdout
+    ref = froude.load_bvh(MOCAP / "09_01.bvh")
+    got = froude.load_bvh(out)
+    assert got.skeleton.names == ref.skeleton.names and got.skeleton.channels == ref.skeleton.channels
+    assert got.skeleton.same_topology(ref.skeleton) is None
+    rep = json.loads(out.with_name("child.report.json").read_text())
+    assert rep["schema"] == "froude.report/1" and rep["extras"]["character"] == "child"
+    assert abs(rep["flight_gravity_m_s2"] - GRAVITY) < 0.03 * GRAVITY
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--character", "elf"], "unknown character 'elf'"),
+    (["--char-mass", "0"], "mass must be > 0"),
+    (["--height", "-1"], "height must be > 0"),
+    (["--speed", "0"], "speed factor must be > 0"),
+    (["--speed", "fast"], "cannot read speed"),
+])
+def test_bad_input_one_line_exit_2(tmp_path, args, needle):
+    """Acceptance 6: one-line errors and exit status 2, nothing written."""
+    out = tmp_path / "o.bvh"
+    r = subprocess.run([sys.executable, "-m", "froude.cli", "scale", str(MOCAP / "09_01.bvh"), *args, "-o", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 2
+    err = [line for line in r.stderr.splitlines() if "error" in line]
+    assert len(err) == 1 and needle in err[0], r.stderr
+    assert "Traceback" not in r.stderr and not out.exists()
+
+
+def test_walking_clip_and_topology_mismatch(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "froude.cli", "scale", str(MOCAP / "02_01.bvh"), "-o",
+                        str(tmp_path / "w.bvh")], capture_output=True, text=True)
+    assert r.returncode == 2 and "walking" in r.stderr and "Traceback" not in r.stderr
+    # a target skeleton with another topology: drop the last joint of a copy of the clip
+    text = (MOCAP / "09_01.bvh").read_text().replace("JOINT RThumb", "JOINT RThumbX")
+    bad = tmp_path / "other.bvh"
+    bad.write_text(text)
+    r = subprocess.run([sys.executable, "-m", "froude.cli", "scale", str(MOCAP / "09_01.bvh"), "--character", str(bad),
+                        "-o", str(tmp_path / "x.bvh")], capture_output=True, text=True)
+    assert r.returncode == 2 and "RThumbX" in r.stderr, r.stderr
+    assert not (tmp_path / "x.bvh").exists()
+
+
+def test_presets_listed_and_yaml_character(tmp_path, prepared):
+    assert {"child", "troll", "giant", "small"} <= set(list_presets())
+    y = tmp_path / "hobbit.yaml"
+    y.write_text("name: hobbit\nheight: 1.1\nmass: 30\nproportions:\n  legs: 0.85\n  head: 1.2\n")
+    res = pipeline.scale(prepared["09_02"], str(y), strides=2)
+    assert res.retarget.body.stature == pytest.approx(1.1, rel=1e-6)
+    assert res.retarget.body.total_mass == pytest.approx(30.0)
+    assert not res.report.check_bars()

@@ -397,6 +397,10 @@ def _anchors(gait: Gait, psi: np.ndarray, stride: np.ndarray, F: int):
     return anchors, ok
 
 
+#: Per-sample relaxation of an unloaded marker's own de-skating correction toward the foot's common one.
+RELAX = 0.2
+
+
 def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, band: float) -> np.ndarray:
     """Remove the reference's foot sliding in stance by translating each foot rigidly.
 
@@ -436,19 +440,29 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
         step = h[1:] - h[:-1]  # (n-1, 3, 2)
         w_sum = wgt.sum(axis=1, keepdims=True)
         mean_step = np.where(w_sum > 0, (step * wgt[..., None]).sum(axis=1) / np.maximum(w_sum, 1e-12), 0.0)
-        delta = np.concatenate([np.zeros((1, 2)), -np.cumsum(mean_step, axis=0)])
+        delta = np.concatenate([np.zeros((1, 2)), -np.cumsum(mean_step, axis=0)])  # common (rigid) part
+        # Each marker then gets its own correction: while it stays loaded it cancels its own motion exactly
+        # (two loaded points that move relative to each other both stay put; IK bends the toe joint to
+        # match); while unloaded it relaxes back to the common one, so the foot keeps its shape in the air.
+        own = np.zeros((idx.size, 3, 2))
+        both = loaded[1:] & loaded[:-1]
+        for i in range(1, idx.size):  # ~50 samples of one stance
+            held = own[i - 1] - step[i - 1]
+            relaxed = own[i - 1] + RELAX * (delta[i] - own[i - 1])
+            own[i] = np.where(both[i - 1][:, None], held, relaxed)
         d = delta[-1]
-        out[idx, foot, :, 0] += delta[:, None, 0]
-        out[idx, foot, :, 2] += delta[:, None, 1]
-        if np.any(d != 0):
-            swing = np.flatnonzero(~stance[:, foot])
-            if swing.size:
-                start = (idx[-1] + 1) % K
-                order = (np.arange(swing.size) + np.searchsorted(swing, start)) % swing.size
-                sw = swing[order]
-                fade = 1.0 - min_jerk(np.linspace(0, 1, sw.size))
-                out[sw, foot, :, 0] += d[0] * fade[:, None]
-                out[sw, foot, :, 2] += d[1] * fade[:, None]
+        out[idx, foot, :, 0] += own[..., 0]
+        out[idx, foot, :, 2] += own[..., 1]
+        rest = own[-1] - d  # what remains of the markers' own corrections at the end of the stance
+        swing = np.flatnonzero(~stance[:, foot])
+        if swing.size:
+            start = (idx[-1] + 1) % K
+            order = (np.arange(swing.size) + np.searchsorted(swing, start)) % swing.size
+            sw = swing[order]
+            fade = 1.0 - min_jerk(np.linspace(0, 1, sw.size))
+            corr = (d[None, :] + rest)[None] * fade[:, None, None]  # (n_sw, 3, 2)
+            out[sw, foot, :, 0] += corr[..., 0]
+            out[sw, foot, :, 2] += corr[..., 1]
     out[..., 1] = np.maximum(out[..., 1], 0.0)
     return out
 

@@ -38,6 +38,8 @@ SWING_MARKER_WEIGHT = 1e-2
 #: then made exact by shifting the root (a root translation moves the COM one to one).
 IK_TOL = 1e-3
 IK_ITERS = 4
+#: A joint changing this much more between two frames than in the reference pose there is a branch flip.
+BRANCH_JUMP_DEG = 10.0
 #: Frames whose COM error after the fast pass exceeds this [m] are solved again, harder.
 RETRY_COM_ERROR = 3e-3
 #: Time [s] over which a foot's marker weight ramps between swing and stance around its events.
@@ -377,17 +379,19 @@ def _foot_anchors(path: MachinePath) -> tuple[np.ndarray, np.ndarray]:
         # virtual contacts one stride before the first and after the last (periodic extension); with a single
         # contact of this foot, the stride comes from both feet's steps (along the heading only: the feet's
         # lateral offsets differ)
+        # (the first stride extends backwards, the last one forwards: speeds change in an acceleration)
         if len(c) > 1:
-            stride, swing = c[1] - c[0], td[1] - lo[0]
+            stride_a, swing_a = c[1] - c[0], td[1] - lo[0]
+            stride_b, swing_b = c[-1] - c[-2], td[-1] - lo[-2]
         else:
             fwd = path.frame[0]
             step = (path.contacts[-1] - path.contacts[0]) @ fwd / max(n - 1, 1)
-            stride = 2.0 * step * fwd
+            stride_a = stride_b = 2.0 * step * fwd
             t_stride = 2.0 * (path.t_touchdown[-1] - path.t_touchdown[0]) / max(n - 1, 1)
-            swing = t_stride - (lo[0] - td[0])
-        c_ext = np.concatenate([c[:1] - stride, c, c[-1:] + stride])
-        lo_ext = np.concatenate([[td[0] - swing], lo, [np.inf]])
-        td_ext = np.concatenate([[-np.inf], td, [lo[-1] + swing]])
+            swing_a = swing_b = t_stride - (lo[0] - td[0])
+        c_ext = np.concatenate([c[:1] - stride_a, c, c[-1:] + stride_b])
+        lo_ext = np.concatenate([[td[0] - swing_a], lo, [np.inf]])
+        td_ext = np.concatenate([[-np.inf], td, [lo[-1] + swing_b]])
         # for each frame: the last touchdown at or before it (index into *_ext)
         k = np.searchsorted(td_ext, t, side="right") - 1
         in_stance = t < lo_ext[k]
@@ -516,6 +520,7 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
         failed[bad[better]] = again.failed[better]
         res = _replace(res, motion=res.motion.with_(root_positions=root, rotations=rot), com_error=com_err,
                        failed=failed)
+    res = _fix_branch_flips(res, targets, body, run_from=lambda t, start: _solve_from(t, start, body))
     # Make the COM exact: the remaining sub-millimetre error is removed by a root translation (the COM
     # moves one to one with it), which moves the feet by as little, so the flight parabola is exact.
     com_now = body.com(res.motion)
@@ -527,6 +532,52 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
 
         f = int(np.flatnonzero(res.failed)[0])
         raise IkError(f"IK cannot reach its targets at frame {f} (COM error {1000 * res.com_error[f]:.1f} mm)")
+    return res
+
+
+def _solve_from(t: Targets, start: Motion, body: BodyModel):
+    """IK of some frames warm-started from ``start`` while still pulled toward the targets' reference pose."""
+    from .ik import ComTask, MarkerTask, PostureTask, RootTask, solve_ik
+
+    tasks = [ComTask(body, t.com, t.com_weight), MarkerTask.feet(body, t.markers, t.marker_weight),
+             PostureTask(reference=t.initial), RootTask(reference=t.initial)]
+    return solve_ik(start, tasks, body=body, freeze="auto", on_failure="flag", tol=IK_TOL,
+                    max_iters=4 * IK_ITERS, refresh_jacobian=True)
+
+
+def _fix_branch_flips(res, targets: Targets, body: BodyModel, run_from, passes: int = 2):
+    """Re-solve frames where IK jumped to another branch (e.g. a knee flipping near full extension).
+
+    A frame whose largest joint change from the previous frame exceeds the reference pose's own change
+    there by more than BRANCH_JUMP_DEG is solved again, warm-started from the previous frame's solution
+    (frames are independent problems; near-singular ones have several nearby optima, and the neighbour's
+    is the continuous one). Kept only where it lowers the jump.
+    """
+    from dataclasses import replace as _replace
+
+    from . import quat
+
+    init_jump = np.degrees(quat.angle_between(targets.initial.rotations[1:], targets.initial.rotations[:-1]).max(axis=1))
+    for _ in range(passes):
+        rot = res.motion.rotations
+        jump = np.degrees(quat.angle_between(rot[1:], rot[:-1]).max(axis=1))
+        bad = np.flatnonzero(jump > init_jump + BRANCH_JUMP_DEG) + 1  # frame after the jump
+        if bad.size == 0:
+            break
+        start = res.motion.with_(root_positions=res.motion.root_positions[bad - 1], rotations=rot[bad - 1])
+        sub = Targets(targets.initial.with_(root_positions=targets.initial.root_positions[bad],
+                                            rotations=targets.initial.rotations[bad]),
+                      targets.com[bad], targets.markers[bad], targets.marker_weight[bad], targets.com_weight[bad])
+        again = run_from(sub, start)
+        new_jump = np.degrees(quat.angle_between(again.motion.rotations, rot[bad - 1]).max(axis=1))
+        better = (new_jump < jump[bad - 1]) & (again.com_error <= np.maximum(res.com_error[bad], 1e-3))
+        root = res.motion.root_positions.copy()
+        rot = rot.copy()
+        root[bad[better]] = again.motion.root_positions[better]
+        rot[bad[better]] = again.motion.rotations[better]
+        com_err = res.com_error.copy()
+        com_err[bad[better]] = again.com_error[better]
+        res = _replace(res, motion=res.motion.with_(root_positions=root, rotations=rot), com_error=com_err)
     return res
 
 

@@ -38,6 +38,10 @@ SWING_MARKER_WEIGHT = 1e-2
 #: then made exact by shifting the root (a root translation moves the COM one to one).
 IK_TOL = 1e-3
 IK_ITERS = 4
+#: Posture weight [1/rad²] of the trunk, arms and head (the legs take the solver's default, 1e-4).
+UPPER_BODY_POSTURE_WEIGHT = 1e-2
+#: Joints IK leaves alone: hands, fingers, mass-less joints and the head and neck (kept from the reference).
+IK_FREEZE = "auto+head"
 #: A joint changing this much more between two frames than in the reference pose there is a branch flip.
 BRANCH_JUMP_DEG = 10.0
 #: Frames whose COM error after the fast pass exceeds this [m] are solved again, harder.
@@ -495,11 +499,13 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
     """
     from dataclasses import replace as _replace
 
-    from .ik import ComTask, MarkerTask, solve_ik
+    from .ik import ComTask, MarkerTask, PostureTask, solve_ik
+
+    posture = PostureTask(weight=posture_weights(body))
 
     def run(t: Targets, refresh: bool, iters: int):
-        tasks = [ComTask(body, t.com, t.com_weight), MarkerTask.feet(body, t.markers, t.marker_weight)]
-        return solve_ik(t.initial, tasks, body=body, freeze="auto", on_failure="flag", tol=IK_TOL,
+        tasks = [ComTask(body, t.com, t.com_weight), MarkerTask.feet(body, t.markers, t.marker_weight), posture]
+        return solve_ik(t.initial, tasks, body=body, freeze=IK_FREEZE, on_failure="flag", tol=IK_TOL,
                         max_iters=iters, refresh_jacobian=refresh)
 
     res = run(targets, False, IK_ITERS)
@@ -535,13 +541,37 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
     return res
 
 
+def posture_weights(body: BodyModel) -> np.ndarray:
+    """(J,) posture weights [1/rad²]: the legs free to meet the feet, the upper body held to the reference.
+
+    The COM is finally placed by the root (see ``correct``), so the trunk, arms and head need not bend to
+    move it: they keep the reference's motion (UPPER_BODY_POSTURE_WEIGHT), the legs take the solver's
+    default.
+    """
+    from .ik import DEFAULT_JOINT_WEIGHT
+
+    skel = body.skeleton
+    w = np.full(skel.n_joints, DEFAULT_JOINT_WEIGHT)
+    legs = set()
+    for side in ("left", "right"):
+        stack = [body.roles[f"{side}_hip"]]
+        while stack:
+            j = stack.pop()
+            legs.add(j)
+            stack.extend(skel.children(j))
+    for j in range(1, skel.n_joints):
+        if j not in legs:
+            w[j] = UPPER_BODY_POSTURE_WEIGHT
+    return w
+
+
 def _solve_from(t: Targets, start: Motion, body: BodyModel):
     """IK of some frames warm-started from ``start`` while still pulled toward the targets' reference pose."""
     from .ik import ComTask, MarkerTask, PostureTask, RootTask, solve_ik
 
     tasks = [ComTask(body, t.com, t.com_weight), MarkerTask.feet(body, t.markers, t.marker_weight),
-             PostureTask(reference=t.initial), RootTask(reference=t.initial)]
-    return solve_ik(start, tasks, body=body, freeze="auto", on_failure="flag", tol=IK_TOL,
+             PostureTask(weight=posture_weights(body), reference=t.initial), RootTask(reference=t.initial)]
+    return solve_ik(start, tasks, body=body, freeze=IK_FREEZE, on_failure="flag", tol=IK_TOL,
                     max_iters=4 * IK_ITERS, refresh_jacobian=True)
 
 

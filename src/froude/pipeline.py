@@ -514,7 +514,7 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
         sub = Targets(targets.initial.with_(root_positions=targets.initial.root_positions[bad],
                                             rotations=targets.initial.rotations[bad]),
                       targets.com[bad], targets.markers[bad], targets.marker_weight[bad], targets.com_weight[bad])
-        again = run(sub, True, 4 * IK_ITERS)
+        again = run(sub, True, 2 * IK_ITERS)
         root = res.motion.root_positions.copy()
         rot = res.motion.rotations.copy()
         better = again.com_error < res.com_error[bad]
@@ -572,7 +572,7 @@ def _solve_from(t: Targets, start: Motion, body: BodyModel):
     tasks = [ComTask(body, t.com, t.com_weight), MarkerTask.feet(body, t.markers, t.marker_weight),
              PostureTask(weight=posture_weights(body), reference=t.initial), RootTask(reference=t.initial)]
     return solve_ik(start, tasks, body=body, freeze=IK_FREEZE, on_failure="flag", tol=IK_TOL,
-                    max_iters=4 * IK_ITERS, refresh_jacobian=True)
+                    max_iters=2 * IK_ITERS, refresh_jacobian=True)
 
 
 def _fix_branch_flips(res, targets: Targets, body: BodyModel, run_from, passes: int = 2):
@@ -620,6 +620,30 @@ def resolve_character(character=None, *, height=None, mass=None, leg_scale=None,
     return character_from_numbers(base, height, mass, leg_scale, arm_scale, head_scale, trunk_scale)
 
 
+@dataclass(frozen=True, eq=False)
+class ScalePlan:
+    """The first half of ``scale``: the character applied, the machine chosen and its path simulated.
+
+    ``finish(*plan.finish_args())`` completes it (targets, IK, report); the studio shows ``path`` and
+    ``build_targets(prep, plan.path, plan.retarget).initial`` as an instant preview.
+    """
+
+    prep: Prepared
+    path: MachinePath
+    retarget: Retarget
+    speed: float
+    notes: tuple
+    method: str
+    periodic: tuple | None
+    naive: Result | None = None
+
+    def finish(self, report: bool = True) -> Result:
+        if self.naive is not None:
+            return self.naive
+        return finish(self.prep, self.path, self.retarget, self.speed, list(self.notes), self.method,
+                      periodic=self.periodic, report=report)
+
+
 def scale(
     prep: Prepared,
     character=None,
@@ -646,6 +670,25 @@ def scale(
         to reach beyond its length at toe-off).
     report: compute the physics report (False: result.report is None; for benchmarks of the synthesis).
     """
+    return plan_scale(prep, character, speed=speed, target_speed=target_speed, strides=strides,
+                      duration=duration, fps=fps, method=method, speed_model=speed_model,
+                      **character_numbers).finish(report=report)
+
+
+def plan_scale(
+    prep: Prepared,
+    character=None,
+    *,
+    speed: float = 1.0,
+    target_speed: float | None = None,
+    strides: int | None = 4,
+    duration: float | None = None,
+    fps: float | None = None,
+    method: str = "physical",
+    speed_model: str = "auto",
+    **character_numbers,
+) -> ScalePlan:
+    """The first half of ``scale`` (same arguments): character, machine, path. Cheap: no IK."""
     char = resolve_character(character, **character_numbers)
     retarget = apply_character(char, prep.body)
     fps = prep.motion.fps if fps is None else float(fps)
@@ -676,7 +719,8 @@ def scale(
             raise FroudeError(f"strides must be >= 1, got {strides}")
         n_steps = 2 * int(strides)
     if method == "naive":
-        return _naive(prep, retarget, speed, n_steps, fps, notes)
+        res = _naive(prep, retarget, speed, n_steps, fps, notes)
+        return ScalePlan(prep, None, retarget, speed, tuple(notes), "naive", None, naive=res)
     if method != "physical":
         raise FroudeError(f"unknown method '{method}' (physical or naive)")
     if speed_model not in ("auto", "stretch", "resolve"):
@@ -691,8 +735,7 @@ def scale(
         machine, stretch = prep.machine, speed
         method = "physical"
     path = machine_path(prep, retarget, speed=stretch, n_steps=n_steps, fps=fps, machine=machine)
-    periodic = (machine, stretch, fps)
-    return finish(prep, path, retarget, speed, notes, method, periodic=periodic, report=report)
+    return ScalePlan(prep, path, retarget, speed, tuple(notes), method, (machine, stretch, fps))
 
 
 def accelerate(

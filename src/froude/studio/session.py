@@ -87,17 +87,16 @@ class Session:
     def preview(self, params: Params) -> Solved | None:
         """The machine path and the time-warped reference on the target skeleton, without IK.
 
-        Mirrors the front half of ``pipeline.scale`` (which stays the authority for the result);
-        accelerate has no cheap preview (its plan is the expensive part), so None.
+        The front half of ``pipeline.scale`` (``pipeline.plan_scale``); accelerate has no cheap preview
+        (its plan is the expensive part), so None.
         """
         if params.mode != "scale":
             return None
         t0 = time.perf_counter()
         params.check()
         spec, nums = params.character_args()
-        retarget = apply_character(pipeline.resolve_character(spec, **nums), self.prep.body)
-        path = pipeline.machine_path(self.prep, retarget, speed=params.speed, n_steps=2 * int(params.strides),
-                                     fps=self.prep.motion.fps)
+        plan = pipeline.plan_scale(self.prep, spec, speed=params.speed, strides=int(params.strides), **nums)
+        retarget, path = plan.retarget, plan.path
         targets = pipeline.build_targets(self.prep, path, retarget)
         _require_finite(targets.initial)
         track = machine_track(targets.initial, retarget.body, path)

@@ -15,7 +15,8 @@ from typing import Callable
 import numpy as np
 
 from . import pipeline
-from .io.bvh import atomic_write_text, save_bvh
+from .io.atomic import atomic_write_text
+from .io.bvh import save_bvh
 from .metrics import physics_report, write_report
 from .samples import sample_path
 

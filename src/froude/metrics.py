@@ -286,6 +286,6 @@ def _stiffness(com: np.ndarray, gait: Gait, fz_bw: np.ndarray, body: BodyModel) 
 
 def write_report(report: Report, path) -> None:
     """Write a report as JSON, atomically."""
-    from .io.bvh import atomic_write_text
+    from .io.atomic import atomic_write_text
 
     atomic_write_text(path, report.to_json() + "\n")

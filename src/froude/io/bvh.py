@@ -12,7 +12,6 @@ compose intrinsically in file order.
 from __future__ import annotations
 
 import os
-import tempfile
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +21,7 @@ import numpy as np
 from .. import quat
 from ..errors import BvhError
 from ..motion import Motion
+from .atomic import atomic_write_text
 from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 
 _VALID_CHANNELS = set(POSITION_CHANNELS) | set(ROTATION_CHANNELS)
@@ -524,23 +524,6 @@ def bvh_text(motion: Motion, length_scale: float | None = None) -> str:
     out.append(f"Frame Time: {motion.frame_time:.7f}")
     header = "\n".join(out) + "\n"
     return header + _format_block(motion_to_channels(motion, length_scale))
-
-
-def atomic_write_text(path: str | os.PathLike, text: str) -> None:
-    """Write text to path atomically: a temporary file in the same folder, then os.replace."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=str(path.parent))
-    try:
-        with os.fdopen(fd, "w", newline="\n") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
 
 
 def save_bvh(motion: Motion, path: str | os.PathLike, *, length_scale: float | None = None) -> None:

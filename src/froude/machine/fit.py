@@ -34,7 +34,7 @@ from ..gait import detect_gait, require_running, summarize
 from ..motion import Motion
 from .control_fit import fit_leg_control
 from .dynamics import N_PER_STANCE, REASONS, Control, simulate, step
-from .forces import (CUTOFF_HZ, EVENT_THRESHOLD_BW, StanceGeometry, flight_residual, force_shares,
+from .forces import (CUTOFF_HZ, EVENT_THRESHOLD_BW, flight_residual, force_shares,
                      ground_force, refine_events, sagittal_frame, smooth_com, stance_geometry)
 from .model import SimpleMachine
 

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..constants import GRAVITY
 from ..errors import FitError
-from ..io.bvh import atomic_write_text
+from ..io.atomic import atomic_write_text
 from .dynamics import Control
 
 __all__ = ["SCHEMA", "SimpleMachine", "load_machine"]

@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -211,16 +209,14 @@ class TransitionTable:
                 "grid": [list(map(float, self.grid.U)), list(map(float, self.grid.H)),
                          list(map(float, self.grid.theta0))],
                 "n_per_stance": int(self.n_per_stance), "key": self.key}
-        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as fh:
+        from ..io.atomic import atomic_write
+
+        def write(tmp):
+            with open(tmp, "wb") as fh:
                 np.savez(fh, meta=np.array(json.dumps(meta)), valid=self.valid, reason=self.reason,
                          **{f: getattr(self, f) for f in _VALUE_FIELDS})
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+
+        atomic_write(path, write)
         return path
 
     @classmethod

@@ -11,8 +11,6 @@ import numpy as np
 
 def plot_fit(res, path, title: str = "") -> None:
     """Write the three-panel figure of a FitResult (froude.machine.fit) to a PNG, atomically."""
-    import os
-    import tempfile
 
     import matplotlib
 
@@ -74,17 +72,9 @@ def plot_fit(res, path, title: str = "") -> None:
     a2.legend(fontsize=8)
     fig.suptitle(f"{title or m.source}: simple machine fit  (K = {m.K:.1f}, θ0 = {np.degrees(m.theta0):.1f}°, "
                  f"{m.mean_speed * m.speed_unit:.2f} m/s)")
-    path = str(path)
-    d = os.path.dirname(os.path.abspath(path))
-    os.makedirs(d, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".fit.", suffix=".png", dir=d)
-    os.close(fd)
+    from ..io.atomic import atomic_write
+
     try:
-        fig.savefig(tmp, dpi=110, format="png")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+        atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     finally:
         plt.close(fig)

@@ -16,8 +16,6 @@ Public API: ``filmstrip_image`` (the RGB array plus the drawn geometry), ``rende
 """
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
@@ -666,21 +664,9 @@ def _check_path(path, allowed: tuple[str, ...]) -> Path:
 
 def _atomic(path: Path, write: Callable[[str], None]) -> None:
     """Run write(temp_path) on a temp file beside ``path`` (same extension), then move it into place."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=f".{path.stem}.",
-                               suffix=path.suffix)
-    os.close(fd)
-    try:
-        write(tmp)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file ordinary permissions
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    from ..io.atomic import atomic_write
+
+    atomic_write(path, write)
 
 
 def _write_png(path: Path, image: np.ndarray) -> None:

@@ -6,9 +6,6 @@ l0, times in √(l0/g), angles in degrees.
 """
 from __future__ import annotations
 
-import os
-import tempfile
-from pathlib import Path
 
 import numpy as np
 
@@ -23,17 +20,9 @@ def _pyplot():
 
 
 def _save(fig, path):
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".png", dir=path.parent)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=120)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    from ..io.atomic import atomic_write
+
+    return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120))
 
 
 def plot_table(table, H, path, *, cycle=None, title=None):

@@ -400,19 +400,22 @@ def _exp_soa(v: np.ndarray) -> np.ndarray:
 
 
 def _cholesky_soa(A: np.ndarray) -> np.ndarray:
-    """Lower Cholesky factor of a batch of SPD matrices stored (m, m, F) (frame axis last), in place of
-    a copy; only A's lower triangle is read. One NumPy call works on whole (k, F) blocks."""
+    """Lower Cholesky factor of a batch of SPD matrices stored (m, m, F) (frame axis last), written over
+    A's lower triangle (returned: A itself; its strict upper triangle is neither read nor written). One
+    NumPy call works on whole (k, F) blocks; no second m × m × F array is touched."""
     m = A.shape[0]
-    L = np.empty_like(A)  # only the lower triangle is written and read
+    L = A
     for j in range(m):
         Lj = L[j, :j]
-        d = A[j, j] - np.einsum("kf,kf->f", Lj, Lj) if j else A[j, j].copy()
+        d = L[j, j]
+        if j:
+            d -= np.einsum("kf,kf->f", Lj, Lj)
         np.sqrt(d, out=d)
-        L[j, j] = d
         if j < m - 1:
-            col = A[j + 1:, j] - np.einsum("ikf,kf->if", L[j + 1:, :j], Lj) if j else A[j + 1:, j].copy()
+            col = L[j + 1:, j]
+            if j:
+                col -= np.einsum("ikf,kf->if", L[j + 1:, :j], Lj)
             col /= d
-            L[j + 1:, j] = col
     return L
 
 
@@ -464,6 +467,9 @@ class _Plan:
     mk_local: np.ndarray  # (P, 3), plan order
     groups: tuple  # of _Group
     pairs: tuple  # (g1, g2, i1, i2): common joints of groups g1 <= g2 as positions in each union
+    w_own: np.ndarray  # (Jn, 3, 12) first mass moment of each joint's own segments from its FK rows [kg m]
+    w_mk: np.ndarray  # (P, 3, 12) each marker from its joint's FK rows (R entries, then P) [m]
+    subtree: np.ndarray  # (K, Jn) 1.0 where joint j is in the subtree of active joint k
 
 
 def _make_plan(skel: Skeleton, body: BodyModel | None, frozen: list[int], w_pos: float, w_rot: np.ndarray,
@@ -539,12 +545,31 @@ def _make_plan(skel: Skeleton, body: BodyModel | None, frozen: list[int], w_pos:
     for j in range(len(sub) - 1, 0, -1):
         m_sub[parents[j]] += m_sub[j]
     mk_order = np.array(order, np.int64)
+    # Task points are linear in a joint's FK rows (R row-major, then P): x = R l + p. Per joint, the
+    # own segments' mass moment Σ m (p + R l) = W_own [R; p]; per marker W_mk [R; p].
+    Jn = len(sub)
+    w_own = np.zeros((Jn, 3, 12))
+    for seg in range(len(seg_mass)):
+        j, m = seg_joint[seg], seg_mass[seg]
+        for r in range(3):
+            w_own[j, r, 3 * r:3 * r + 3] += m * seg_local[seg]
+            w_own[j, r, 9 + r] += m
+    mk_local_plan = np.asarray(mk_local, float)[mk_order] if len(mk_order) else np.zeros((0, 3))
+    w_mk = np.zeros((len(mk_order), 3, 12))
+    for k in range(len(mk_order)):
+        for r in range(3):
+            w_mk[k, r, 3 * r:3 * r + 3] = mk_local_plan[k]
+            w_mk[k, r, 9 + r] = 1.0
+    in_sub = np.eye(Jn)
+    for j in range(Jn - 1, 0, -1):  # children have larger indices than their parents
+        in_sub[parents[j]] = np.maximum(in_sub[parents[j]], in_sub[j])
+    subtree = np.ascontiguousarray(in_sub[new[act_orig]])
     return _Plan(
         sub, parents, np.asarray(skel.offsets)[sub], new[act_orig], act_orig, 1.0 / w_rot[act_orig], 1.0 / w_pos,
         seg_joint, seg_local, seg_mass, m_sub, has_com, mk_order,
         new[np.asarray(mk_joint, np.int64)[mk_order]] if len(mk_order) else np.zeros(0, np.int64),
         np.asarray(mk_local, float)[mk_order] if len(mk_order) else np.zeros((0, 3)),
-        tuple(groups), tuple(pairs),
+        tuple(groups), tuple(pairs), w_own, w_mk, subtree,
     )
 
 
@@ -553,152 +578,150 @@ class _FK:
     """``kinematics.fk_soa`` with buffers kept across the iterations of a chunk: the outputs are written in
     place (fresh multi-megabyte arrays every iteration cost as much in page faults as the arithmetic) and
     the local rotation matrices of frozen joints, which never change, are converted once. The arithmetic
-    is fk_soa's, row for row (checked against it in the tests)."""
+    is fk_soa's, entry for entry and in the same order (checked against it in the tests), but each joint's
+    3 × 3 product and offset are a handful of broadcast operations on (3, 3, F) / (3, F) blocks, and the
+    active joints' local rotations are converted in one batch from (4, K, F) quaternion rows.
+
+    Outputs live in one (Jn, 12, F) array T: rows 0-8 the world rotation (row-major), rows 9-11 the
+    world position [m], so task points and mass moments are small matrix products over T's rows.
+    """
 
     def __init__(self, plan: "_Plan", rot_T: np.ndarray):
         Jn, _, F = rot_T.shape
+        K = len(plan.act)
         self.plan = plan
-        self.R_local = np.empty((Jn, 9, F))
-        self.R = np.empty((Jn, 9, F))
-        self.P = np.empty((Jn, 3, F))
-        self.tmp = np.empty((3, F))
+        self.F = F
         frozen = np.ones(Jn, bool)
         frozen[plan.act] = False
-        for j in np.flatnonzero(frozen):
-            _quat_rows(rot_T[j], self.R_local[j], self.tmp)
+        self.slot = -np.ones(Jn, np.int64)  # frozen joint -> row of R_frozen; active -> -1 - position
+        self.slot[plan.act] = -1 - np.arange(K)
+        fro = np.flatnonzero(frozen)
+        self.slot[fro] = np.arange(len(fro))
+        self.R_frozen = np.empty((len(fro), 9, F))
+        tmp = np.empty((3, F))
+        for i, j in enumerate(fro):
+            _quat_rows(rot_T[j], self.R_frozen[i], tmp)
+        # flat buffers, re-viewed contiguous when the working set shrinks
+        self._bufs = {name: np.empty(n * F) for name, n in
+                      (("T", Jn * 12), ("RA", 9 * K), ("tq", 3 * K), ("t33", 9), ("t3", 3))}
+        self._view(F)
+
+    def _view(self, n: int) -> None:
+        Jn, K = len(self.plan.parents), len(self.plan.act)
+        b = self._bufs
+        self.n = n
+        self.T = b["T"][:Jn * 12 * n].reshape(Jn, 12, n)
+        self.RA = b["RA"][:9 * K * n].reshape(9, K, n)
+        self.tq = b["tq"][:3 * K * n].reshape(3, K, n)
+        self.t33 = b["t33"][:9 * n].reshape(3, 3, n)
+        self.t3 = b["t3"][:3 * n].reshape(3, n)
+
+    @property
+    def P(self) -> np.ndarray:
+        return self.T[:, 9:12]
+
+    @property
+    def R(self) -> np.ndarray:
+        return self.T[:, :9]
 
     def compact(self, keep: np.ndarray) -> None:
         """Keep only the frames ``keep`` (the working set shrank)."""
-        self.R_local = np.ascontiguousarray(self.R_local[:, :, keep])
-        n = len(keep)
-        self.R, self.P, self.tmp = self.R[:, :, :n], self.P[:, :, :n], self.tmp[:, :n]
+        self.R_frozen = np.ascontiguousarray(self.R_frozen[:, :, keep])
+        self._view(len(keep))
 
-    def __call__(self, root_T, rot_T, tr_T):
-        plan, R_local, R, P = self.plan, self.R_local, self.R, self.P
-        t1 = self.tmp[0]
-        for j in plan.act:
-            _quat_rows(rot_T[j], R_local[j], self.tmp)
-        R[0] = R_local[0]
-        P[0] = root_T
+    def __call__(self, root_T, rot_T, tr_T, q_act=None):
+        """FK of the plan's joints: P (Jn, 3, F) [m], R (Jn, 9, F) (views of ``T``). The active joints'
+        local rotations come from ``q_act`` (4, K, F) when given, else from rot_T (Jn, 4, F)."""
+        plan, T, t33, t3 = self.plan, self.T, self.t33, self.t3
+        n = self.n
+        if q_act is None:
+            q_act = rot_T[plan.act].transpose(1, 0, 2)
+        _quat_rows(q_act, self.RA, self.tq)
+        slot = self.slot
+        T[0, :9] = self.RA[:, 0]
+        T[0, 9:] = root_T
         for j in range(1, len(plan.parents)):
             pj = plan.parents[j]
-            A, B, C = R[pj], R_local[j], R[j]
-            for r in range(3):
-                a0, a1, a2 = A[3 * r], A[3 * r + 1], A[3 * r + 2]
-                for c in range(3):
-                    o = C[3 * r + c]
-                    np.multiply(a0, B[c], out=o)
-                    np.multiply(a1, B[3 + c], out=t1)
-                    o += t1
-                    np.multiply(a2, B[6 + c], out=t1)
-                    o += t1
+            A = T[pj, :9].reshape(3, 3, n)
+            s = slot[j]
+            B = self.R_frozen[s].reshape(3, 3, n) if s >= 0 else self.RA[:, -1 - s].reshape(3, 3, n)
+            C = T[j, :9].reshape(3, 3, n)
+            # C[r, c] = A[r, 0] B[0, c] + A[r, 1] B[1, c] + A[r, 2] B[2, c]
+            np.multiply(A[:, 0:1], B[0:1], out=C)
+            np.multiply(A[:, 1:2], B[1:2], out=t33)
+            C += t33
+            np.multiply(A[:, 2:3], B[2:3], out=t33)
+            C += t33
+            Pj, Pp = T[j, 9:], T[pj, 9:]
             if tr_T is None:
                 ox, oy, oz = plan.offsets[j]
-                for r in range(3):
-                    o = P[j, r]
-                    if ox:
-                        np.multiply(A[3 * r], ox, out=o)
-                        o += P[pj, r]
-                    else:
-                        o[:] = P[pj, r]
-                    if oy:
-                        np.multiply(A[3 * r + 1], oy, out=t1)
-                        o += t1
-                    if oz:
-                        np.multiply(A[3 * r + 2], oz, out=t1)
-                        o += t1
+                if ox:
+                    np.multiply(A[:, 0], ox, out=Pj)
+                    Pj += Pp
+                else:
+                    Pj[:] = Pp
+                if oy:
+                    np.multiply(A[:, 1], oy, out=t3)
+                    Pj += t3
+                if oz:
+                    np.multiply(A[:, 2], oz, out=t3)
+                    Pj += t3
             else:
                 t = tr_T[j]
-                for r in range(3):
-                    P[j, r] = P[pj, r] + A[3 * r] * t[0] + A[3 * r + 1] * t[1] + A[3 * r + 2] * t[2]
-        return P, R
+                np.multiply(A[:, 0], t[0], out=t3)
+                np.add(Pp, t3, out=Pj)
+                np.multiply(A[:, 1], t[1], out=t3)
+                Pj += t3
+                np.multiply(A[:, 2], t[2], out=t3)
+                Pj += t3
+        return self.P, self.R
 
 
-def _evaluate(plan: _Plan, root_T, rot_T, tr_T, fk=None):
-    """FK of the needed joints and the task points (``fk``: a _FK with kept buffers, else fk_soa).
+def _evaluate(plan: _Plan, root_T, rot_T, tr_T, fk=None, q_act=None):
+    """FK of the needed joints and the task points (``fk``: a _FK with kept buffers, else a fresh one).
 
-    Returns P (Jn, 3, F), R (Jn, 9, F) and x (npts, 3, F) task points (COM first) [m].
+    Returns P (Jn, 3, F), R (Jn, 9, F) and x (npts, 3, F) task points (COM first) [m]; with a ComTask,
+    ``fk.s_own`` (Jn, 3, F) holds each joint's own segments' first mass moment [kg m] at this pose.
     """
     if fk is None:
-        P, R = fk_soa(plan.parents, plan.offsets, root_T, rot_T, tr_T)
-    else:
-        P, R = fk(root_T, rot_T, tr_T)
-    F = root_T.shape[1]
+        fk = _FK(plan, rot_T)
+    P, R = fk(root_T, rot_T, tr_T, q_act)
+    T = fk.T
+    F = T.shape[2]
     npts = (1 if plan.has_com else 0) + len(plan.mk_joint)
     x = np.empty((npts, 3, F))
-    # Per-segment and per-marker loops over (F,) rows: no gathered (S, 9, F) copies, whose fresh
-    # multi-megabyte allocations cost more in page faults than the arithmetic.
     if plan.has_com:
-        acc = x[0]
-        acc[:] = 0.0
-        t = np.empty(F)
-        for seg in range(len(plan.seg_mass)):
-            j, m = plan.seg_joint[seg], plan.seg_mass[seg]
-            lx, ly, lz = plan.seg_local[seg] * m
-            Pj, Rj = P[j], R[j]
-            for r in range(3):
-                np.multiply(Pj[r], m, out=t)
-                acc[r] += t
-                np.multiply(Rj[3 * r], lx, out=t)
-                acc[r] += t
-                np.multiply(Rj[3 * r + 1], ly, out=t)
-                acc[r] += t
-                np.multiply(Rj[3 * r + 2], lz, out=t)
-                acc[r] += t
-        acc *= 1.0 / plan.m_sub[0]
+        fk.s_own = np.matmul(plan.w_own, T)  # (Jn, 3, F): one stacked matrix product
+        np.add.reduce(fk.s_own, axis=0, out=x[0])
+        x[0] *= 1.0 / plan.m_sub[0]
     n0 = npts - len(plan.mk_joint)
     for k in range(len(plan.mk_joint)):
-        j = plan.mk_joint[k]
-        lx, ly, lz = plan.mk_local[k]
-        Pj, Rj, o = P[j], R[j], x[n0 + k]
-        for r in range(3):
-            np.multiply(Rj[3 * r], lx, out=o[r])
-            o[r] += Pj[r]
-            if ly:
-                o[r] += Rj[3 * r + 1] * ly
-            if lz:
-                o[r] += Rj[3 * r + 2] * lz
+        np.matmul(plan.w_mk[k], T[plan.mk_joint[k]], out=x[n0 + k])
     return P, R, x
 
 
-def _com_levers(plan: _Plan, P, R) -> np.ndarray:
+def _com_levers(plan: _Plan, P, R, s_own=None) -> np.ndarray:
     """(K, 3, F) COM levers of the active joints: (s_k − m_k p_k) / M with s_k the first mass moment of
-    joint k's subtree (``kinematics.com_jacobian``'s trick: the cost is O(J F), not O(J S F))."""
-    F = P.shape[2]
-    s = np.zeros((len(plan.sub), 3, F))
-    t = np.empty(F)
-    for seg in range(len(plan.seg_mass)):
-        j, m = plan.seg_joint[seg], plan.seg_mass[seg]
-        lx, ly, lz = plan.seg_local[seg] * m
-        Pj, Rj, sj = P[j], R[j], s[j]
-        for r in range(3):
-            np.multiply(Pj[r], m, out=t)
-            sj[r] += t
-            np.multiply(Rj[3 * r], lx, out=t)
-            sj[r] += t
-            np.multiply(Rj[3 * r + 1], ly, out=t)
-            sj[r] += t
-            np.multiply(Rj[3 * r + 2], lz, out=t)
-            sj[r] += t
-    for k in range(len(plan.sub) - 1, 0, -1):
-        s[plan.parents[k]] += s[k]
-    out = np.empty((len(plan.act), 3, F))
-    inv_m = 1.0 / plan.m_sub[0]
-    for i, k in enumerate(plan.act):
-        np.multiply(P[k], plan.m_sub[k], out=out[i])
-        np.subtract(s[k], out[i], out=out[i])
-        out[i] *= inv_m
+    joint k's subtree (``kinematics.com_jacobian``'s trick: the cost is O(J F), not O(J S F)).
+    s_own: (Jn, 3, F) each joint's own segments' mass moment (``_evaluate``'s), computed when None."""
+    Jn, _, F = P.shape
+    if s_own is None:
+        T = np.concatenate([R, P], axis=1)
+        s_own = np.matmul(plan.w_own, T)
+    out = (plan.subtree @ s_own.reshape(Jn, 3 * F)).reshape(-1, 3, F)
+    out -= plan.m_sub[plan.act][:, None, None] * P[plan.act]
+    out *= 1.0 / plan.m_sub[0]
     return out
 
 
-def _linearize(plan: _Plan, P, R, x, sw):
+def _linearize(plan: _Plan, P, R, x, sw, s_own=None):
     """Linearise at a pose: per group the weighted levers ũ (g, u, 3, F), the active joints' world
     rotations (K, 9, F) and the Cholesky factor of K' = J̃ D⁻¹ J̃ᵀ + I."""
     F = x.shape[2]
     npts = x.shape[0]
     m = 3 * npts
     d = plan.d_rot
-    lev_com = _com_levers(plan, P, R) if plan.has_com else None
+    lev_com = _com_levers(plan, P, R, s_own) if plan.has_com else None
     levers, dlevers = [], []
     for g in plan.groups:
         if plan.has_com and g.points[0] == 0:
@@ -797,7 +820,7 @@ def _solve_chunk(plan: _Plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, 
     x_final = np.empty_like(target)
     q_all = np.ascontiguousarray(rot_T[plan.act].transpose(1, 0, 2))  # (4, K, F) active joint rotations
     work = None  # None: every frame; else the chunk indices still iterating (working copies below)
-    w_root, w_rot, w_tr, w_q = root_T, rot_T, tr_T, q_all
+    w_root, w_tr, w_q = root_T, tr_T, q_all
     w_target, w_sw, w_refr, w_refa = target, sw, ref_root_T, ref_act
     lin = None
     fk = _FK(plan, rot_T)
@@ -805,11 +828,10 @@ def _solve_chunk(plan: _Plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, 
     def flush():
         if work is not None:
             root_T[:, work] = w_root
-            rot_T[:, :, work] = w_rot
             q_all[:, :, work] = w_q
 
     for it in range(max_iters + 1):
-        P, R, x = _evaluate(plan, w_root, w_rot, w_tr, fk)
+        P, R, x = _evaluate(plan, w_root, None, w_tr, fk, w_q)
         e = w_target - x
         err2 = np.where(w_sw > 0, (e * e).sum(axis=1), 0.0).max(axis=0)  # (n,) largest squared error
         done = err2 <= tol * tol
@@ -822,7 +844,7 @@ def _solve_chunk(plan: _Plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, 
         if it == max_iters or done.all():
             break
         if lin is None or refresh:
-            lin = _linearize(plan, P, R, x, w_sw)
+            lin = _linearize(plan, P, R, x, w_sw, fk.s_own if plan.has_com else None)
         if it == 0 and start_is_reference:
             eps, eps_t = None, None  # ε = 0 at the warm start: skip the log map and J ε
         else:
@@ -840,7 +862,6 @@ def _solve_chunk(plan: _Plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, 
         dt *= scale
         w_q = _qmul_soa(w_q, _exp_soa(dl))  # products of unit quaternions: no renormalisation needed
         w_root = w_root + dt
-        w_rot[plan.act] = w_q.transpose(1, 0, 2)
         if work is None:
             iterations += live
             q_all = w_q
@@ -854,7 +875,7 @@ def _solve_chunk(plan: _Plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, 
             flush()
             keep = np.flatnonzero(live)
             work = keep if work is None else work[keep]
-            w_root, w_rot = root_T[:, work], rot_T[:, :, work]
+            w_root = root_T[:, work]
             w_tr = None if tr_T is None else tr_T[:, :, work]
             w_q = q_all[:, :, work]
             w_target, w_sw, w_refr, w_refa = target[:, :, work], sw[:, work], ref_root_T[:, work], ref_act[:, :, work]
@@ -864,6 +885,7 @@ def _solve_chunk(plan: _Plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, 
             if refresh:
                 lin = None
     flush()
+    rot_T[plan.act] = q_all.transpose(1, 0, 2)
     dot = np.abs((q_all * ref_act).sum(axis=0)).min(axis=0)
     return iterations, converged, x_final, 2.0 * np.arccos(np.minimum(dot, 1.0))
 

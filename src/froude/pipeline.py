@@ -492,32 +492,41 @@ def _mean(x) -> float:
 def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
     """§6: whole-body IK toward the machine COM and the foot targets, pulled toward the reference pose.
 
-    All frames are solved together with the solver's fast chord iterations; the few frames that end
-    above RETRY_COM_ERROR (strongly nonlinear poses, e.g. a nearly straight leg at toe-off) are solved
-    again with a fresh Jacobian every iteration and more iterations, and spliced back in (frames are
-    independent, so this is the same problem, solved harder where needed).
+    All frames are solved together with the solver's fast chord iterations. Then one repair pass solves
+    again, with a fresh Jacobian every iteration, the few frames that stayed above RETRY_COM_ERROR or
+    jumped to another branch (a knee flipping near full extension), warm-started from the neighbouring
+    frame's solution where they jumped; frames are independent problems, so this is the same problem
+    solved harder where needed. Finally the COM is made exact by a root translation.
     """
     from dataclasses import replace as _replace
 
+    from . import quat
     from .ik import ComTask, MarkerTask, PostureTask, solve_ik
 
-    posture = PostureTask(weight=posture_weights(body))
-
-    def run(t: Targets, refresh: bool, iters: int):
-        tasks = [ComTask(body, t.com, t.com_weight), MarkerTask.feet(body, t.markers, t.marker_weight), posture]
-        return solve_ik(t.initial, tasks, body=body, freeze=IK_FREEZE, on_failure="flag", tol=IK_TOL,
-                        max_iters=iters, refresh_jacobian=refresh)
-
-    res = run(targets, False, IK_ITERS)
-    bad = np.flatnonzero((res.com_error > RETRY_COM_ERROR) | res.failed)
+    tasks = [ComTask(body, targets.com, targets.com_weight),
+             MarkerTask.feet(body, targets.markers, targets.marker_weight), PostureTask(weight=posture_weights(body))]
+    res = solve_ik(targets.initial, tasks, body=body, freeze=IK_FREEZE, on_failure="flag", tol=IK_TOL,
+                   max_iters=IK_ITERS)
+    rot = res.motion.rotations
+    init_jump = np.degrees(quat.angle_between(targets.initial.rotations[1:], targets.initial.rotations[:-1]).max(axis=1))
+    jump = np.degrees(quat.angle_between(rot[1:], rot[:-1]).max(axis=1))
+    flip = np.zeros(len(rot), bool)
+    flip[1:] = jump > init_jump + BRANCH_JUMP_DEG
+    bad = np.flatnonzero(flip | (res.com_error > RETRY_COM_ERROR) | res.failed)
     if bad.size:
+        src = np.where(flip[bad], bad - 1, bad)  # a jumped frame starts from its neighbour's solution
+        start = res.motion.with_(root_positions=res.motion.root_positions[src], rotations=rot[src])
         sub = Targets(targets.initial.with_(root_positions=targets.initial.root_positions[bad],
                                             rotations=targets.initial.rotations[bad]),
                       targets.com[bad], targets.markers[bad], targets.marker_weight[bad], targets.com_weight[bad])
-        again = run(sub, True, 2 * IK_ITERS)
+        again = _solve_from(sub, start, body)
+        prev = rot[np.maximum(bad - 1, 0)]
+        old_jump = np.degrees(quat.angle_between(rot[bad], prev).max(axis=1))
+        new_jump = np.degrees(quat.angle_between(again.motion.rotations, prev).max(axis=1))
+        better = np.where(flip[bad], new_jump < old_jump, again.com_error < res.com_error[bad])
+        better &= again.com_error <= np.maximum(res.com_error[bad], RETRY_COM_ERROR)
         root = res.motion.root_positions.copy()
-        rot = res.motion.rotations.copy()
-        better = again.com_error < res.com_error[bad]
+        rot = rot.copy()
         root[bad[better]] = again.motion.root_positions[better]
         rot[bad[better]] = again.motion.rotations[better]
         com_err = res.com_error.copy()
@@ -526,11 +535,9 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
         failed[bad[better]] = again.failed[better]
         res = _replace(res, motion=res.motion.with_(root_positions=root, rotations=rot), com_error=com_err,
                        failed=failed)
-    res = _fix_branch_flips(res, targets, body, run_from=lambda t, start: _solve_from(t, start, body))
     # Make the COM exact: the remaining sub-millimetre error is removed by a root translation (the COM
     # moves one to one with it), which moves the feet by as little, so the flight parabola is exact.
-    com_now = body.com(res.motion)
-    shift = targets.com - com_now
+    shift = targets.com - body.com(res.motion)
     res = _replace(res, motion=res.motion.with_(root_positions=res.motion.root_positions + shift),
                    com_error=np.zeros(len(shift)))
     if on_failure == "raise" and not res.ok:
@@ -572,43 +579,7 @@ def _solve_from(t: Targets, start: Motion, body: BodyModel):
     tasks = [ComTask(body, t.com, t.com_weight), MarkerTask.feet(body, t.markers, t.marker_weight),
              PostureTask(weight=posture_weights(body), reference=t.initial), RootTask(reference=t.initial)]
     return solve_ik(start, tasks, body=body, freeze=IK_FREEZE, on_failure="flag", tol=IK_TOL,
-                    max_iters=2 * IK_ITERS, refresh_jacobian=True)
-
-
-def _fix_branch_flips(res, targets: Targets, body: BodyModel, run_from, passes: int = 2):
-    """Re-solve frames where IK jumped to another branch (e.g. a knee flipping near full extension).
-
-    A frame whose largest joint change from the previous frame exceeds the reference pose's own change
-    there by more than BRANCH_JUMP_DEG is solved again, warm-started from the previous frame's solution
-    (frames are independent problems; near-singular ones have several nearby optima, and the neighbour's
-    is the continuous one). Kept only where it lowers the jump.
-    """
-    from dataclasses import replace as _replace
-
-    from . import quat
-
-    init_jump = np.degrees(quat.angle_between(targets.initial.rotations[1:], targets.initial.rotations[:-1]).max(axis=1))
-    for _ in range(passes):
-        rot = res.motion.rotations
-        jump = np.degrees(quat.angle_between(rot[1:], rot[:-1]).max(axis=1))
-        bad = np.flatnonzero(jump > init_jump + BRANCH_JUMP_DEG) + 1  # frame after the jump
-        if bad.size == 0:
-            break
-        start = res.motion.with_(root_positions=res.motion.root_positions[bad - 1], rotations=rot[bad - 1])
-        sub = Targets(targets.initial.with_(root_positions=targets.initial.root_positions[bad],
-                                            rotations=targets.initial.rotations[bad]),
-                      targets.com[bad], targets.markers[bad], targets.marker_weight[bad], targets.com_weight[bad])
-        again = run_from(sub, start)
-        new_jump = np.degrees(quat.angle_between(again.motion.rotations, rot[bad - 1]).max(axis=1))
-        better = (new_jump < jump[bad - 1]) & (again.com_error <= np.maximum(res.com_error[bad], 1e-3))
-        root = res.motion.root_positions.copy()
-        rot = rot.copy()
-        root[bad[better]] = again.motion.root_positions[better]
-        rot[bad[better]] = again.motion.rotations[better]
-        com_err = res.com_error.copy()
-        com_err[bad[better]] = again.com_error[better]
-        res = _replace(res, motion=res.motion.with_(root_positions=root, rotations=rot), com_error=com_err)
-    return res
+                    max_iters=IK_ITERS + 2, refresh_jacobian=True)
 
 
 def resolve_character(character=None, *, height=None, mass=None, leg_scale=None, arm_scale=None,

@@ -74,6 +74,8 @@ REASONS = {
 
 #: Default RK4 steps per nominal stance (or per half spring period, whichever is shorter).
 N_PER_STANCE = 48
+#: Up to this many rows, step() integrates each row with the scalar twin instead of the NumPy batch.
+SMALL_BATCH = 16
 #: COM height [l0] at or below which stance is declared a collapse.
 MIN_COM_HEIGHT = 0.2
 #: Longest allowed stance, in units of the nominal stance duration T_c.
@@ -631,15 +633,17 @@ def _step_flat(U, H, th, K, a, b, c, Tc, n_per_stance, max_stance, chunk):
     vy = np.full(N, np.nan)
     fpk = np.full(N, np.nan)
     rows = np.flatnonzero(reason == OK)
-    if rows.size == 1:
-        # One row: the plain-float twin is ~10x faster than NumPy on length-1 arrays.
-        i = int(rows[0])
-        res = _integrate_stance_scalar(-float(std[i]), float(ctd[i]), float(U[i]), -float(t_fall[i]),
-                                       float(K[i]), float(a[i]), float(b[i]), float(c[i]),
-                                       float(Tc[i]), n_per_stance, max_stance)
-        t_st[i], px[i], py[i], vx[i], vy[i], fpk[i] = (res["t"], res["px"], res["py"], res["vx"],
-                                                       res["vy"], res["fmax"])
-        reason[i] = res["reason"]
+    if 0 < rows.size <= SMALL_BATCH:
+        # A few rows (a finite-difference Jacobian, a line search): the plain-float twin per row is
+        # faster than NumPy on short arrays (measured: 8 rows 10 ms batched, 8 x 0.5 ms per row).
+        for i in rows:
+            i = int(i)
+            res = _integrate_stance_scalar(-float(std[i]), float(ctd[i]), float(U[i]), -float(t_fall[i]),
+                                           float(K[i]), float(a[i]), float(b[i]), float(c[i]),
+                                           float(Tc[i]), n_per_stance, max_stance)
+            t_st[i], px[i], py[i], vx[i], vy[i], fpk[i] = (res["t"], res["px"], res["py"], res["vx"],
+                                                           res["vy"], res["fmax"])
+            reason[i] = res["reason"]
         rows = rows[:0]
     for s in range(0, rows.size, chunk):
         r = rows[s:s + chunk]

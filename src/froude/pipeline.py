@@ -615,20 +615,7 @@ class ScalePlan:
                       periodic=self.periodic, report=report)
 
 
-def scale(
-    prep: Prepared,
-    character=None,
-    *,
-    speed: float = 1.0,
-    target_speed: float | None = None,
-    strides: int | None = 4,
-    duration: float | None = None,
-    fps: float | None = None,
-    method: str = "physical",
-    speed_model: str = "auto",
-    report: bool = True,
-    **character_numbers,
-) -> Result:
+def scale(prep: Prepared, character=None, *, report: bool = True, **options) -> Result:
     """§5.1, §5.2, §6: the reference run on another character, at another speed, for any number of strides.
 
     character: preset name, YAML/BVH path or Character (None: the reference's own body);
@@ -640,10 +627,9 @@ def scale(
         "auto": stretch when slowing down, resolve when speeding up (a stretched stance would need the leg
         to reach beyond its length at toe-off).
     report: compute the physics report (False: result.report is None; for benchmarks of the synthesis).
+    The other options are ``plan_scale``'s (this is ``plan_scale(...).finish(report)``).
     """
-    return plan_scale(prep, character, speed=speed, target_speed=target_speed, strides=strides,
-                      duration=duration, fps=fps, method=method, speed_model=speed_model,
-                      **character_numbers).finish(report=report)
+    return plan_scale(prep, character, **options).finish(report=report)
 
 
 def plan_scale(

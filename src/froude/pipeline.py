@@ -11,8 +11,7 @@ the reference's direction of travel.
 from __future__ import annotations
 
 import math
-import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -873,4 +872,3 @@ def write_result(result: Result, out_path) -> tuple[Path, Path]:
     return out_path, rp
 
 
-_ = (os, replace)

@@ -92,7 +92,7 @@ def run_demo(outdir: str | Path, clip: str | Path | None = None, *, strides: int
     render_filmstrip([_window(mo, a, 1.0) for mo, a in zip(fig3_motions, starts)], files["fig3"],
                      labels=[lab + (f" (from {a:.1f} s)" if a else "") for lab, a in zip(fig3_labels, starts)])
     files["fig3_child_vs_naive"] = out / "child_physical_vs_naive.png"
-    render_filmstrip([_first_seconds(results["child"].motion, 1.0), _first_seconds(results["child_naive"].motion, 1.0)],
+    render_filmstrip([_window(results["child"].motion, 0.0, 1.0), _window(results["child_naive"].motion, 0.0, 1.0)],
                      files["fig3_child_vs_naive"], labels=["child (froude)", "child (naive, floaty)"])
 
     if video:
@@ -109,10 +109,6 @@ def run_demo(outdir: str | Path, clip: str | Path | None = None, *, strides: int
     for r in rows:
         files[r.key] = r.bvh
     return files
-
-
-def _first_seconds(motion, seconds: float):
-    return _window(motion, 0.0, seconds)
 
 
 def _window(motion, start: float, seconds: float):

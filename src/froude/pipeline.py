@@ -281,15 +281,6 @@ def _stride_phase(t, t_td, t_lo, feet, A, phase_events, contact_phase, tr, T_uni
     return np.interp(t, times, psis), times, psis, on_t, off_t
 
 
-def _interp_extrap(x, xp, fp):
-    """np.interp with linear extrapolation beyond both ends (xp increasing)."""
-    y = np.interp(x, xp, fp)
-    lo_slope = (fp[1] - fp[0]) / (xp[1] - xp[0])
-    hi_slope = (fp[-1] - fp[-2]) / (xp[-1] - xp[-2])
-    y = np.where(x < xp[0], fp[0] + (x - xp[0]) * lo_slope, y)
-    return np.where(x > xp[-1], fp[-1] + (x - xp[-1]) * hi_slope, y)
-
-
 # ---- 3. synthesise: time-warped reference on the target skeleton, IK targets ------------------------------
 @dataclass(frozen=True, eq=False)
 class Targets:

@@ -343,11 +343,6 @@ def _contact_phases(marker_rel: np.ndarray, phase_events: np.ndarray, first_foot
     return out
 
 
-def _wrap(x: float) -> float:
-    """x mod 1 into [-0.5, 0.5)."""
-    return float((x + 0.5) % 1.0 - 0.5)
-
-
 def _contact_mask(phi: np.ndarray, contact_phase: np.ndarray) -> np.ndarray:
     """(…, 2) bool marker contact of each foot at stride phases phi (…)."""
     p = np.mod(phi, 1.0)[..., None]

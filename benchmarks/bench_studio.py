@@ -108,6 +108,7 @@ def main() -> None:
                 t_res = t0 + timing.preview_compute + timing.preview_push + timing.result_compute
                 rows["result at page"].append(tab.first_after(t_res) - t0)
                 assert not studio.message.startswith("error"), studio.message
+                time.sleep(0.3)  # let this change's last messages (the report) arrive before the next t0
             print(f"changes of {name}: {args.repeats}")
     finally:
         tab.close()

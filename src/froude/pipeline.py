@@ -457,6 +457,7 @@ class Result:
     speed_factor: float
     notes: tuple[str, ...] = field(default=())
     plan: object = None
+    extras: dict = field(default_factory=dict)  # merged into report.extras (e.g. the speed plan)
 
     def summary_rows(self) -> list[tuple[str, str]]:
         r = self.report
@@ -698,6 +699,7 @@ def accelerate(
     fps: float | None = None,
     energy: str = "auto",
     policy: str = "ease",
+    report: bool = True,
     **character_numbers,
 ) -> Result:
     """§5.3 + §6: speed up or slow down to ``to_speed`` [m/s] or ``to_factor`` × the start speed.
@@ -731,8 +733,7 @@ def accelerate(
     path = machine_path(prep, retarget, n_steps=plan.n_steps, fps=fps, theta0=plan.theta0,
                         controls=plan.controls, start_state=(float(plan.U[0]), float(plan.H[0])))
     notes = list(plan.notes)
-    res = finish(prep, path, retarget, 1.0, notes, "physical", plan=plan)
-    res.report.extras.update({
+    extras = {
         "plan": {
             "start_speed_m_s": start_speed, "target_speed_m_s": target,
             "apex_speed_m_s": (plan.U * v_unit).tolist(), "apex_U": plan.U.tolist(),
@@ -741,8 +742,8 @@ def accelerate(
             "phase": ["lead" if p == 0 else "change" if p == 1 else "hold" for p in plan.phase],
             "mode": plan.mode, "policy": plan.policy,
         }
-    })
-    return res
+    }
+    return finish(prep, path, retarget, 1.0, notes, "physical", plan=plan, report=report, extras=extras)
 
 
 #: A steady (periodic) output longer than this many strides is corrected by solving the IK of one stride
@@ -752,7 +753,7 @@ PERIODIC_OVERSAMPLE = 4
 
 
 def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, notes, method: str, plan=None,
-           periodic=None, report: bool = True) -> Result:
+           periodic=None, report: bool = True, extras: dict | None = None) -> Result:
     """Targets → IK → report: the common tail of scale and accelerate.
 
     periodic: (machine, stretch, fps) when the path is the steady cycle repeated: long outputs then solve
@@ -768,16 +769,25 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
             bad = np.flatnonzero(ik.failed)
             notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]
         motion = ik.motion
-    if not report:
-        return Result(motion, None, path, targets, retarget, method, speed, tuple(notes), plan)
+    res = Result(motion, None, path, targets, retarget, method, speed, tuple(notes), plan, dict(extras or {}))
+    return add_report(prep, res) if report else res
+
+
+def add_report(prep: Prepared, res: Result) -> Result:
+    """The result with its physics report (DESIGN.md) computed: tracking against the machine, the loaded
+    foot targets and the time-warped reference pose. (Separate so that a viewer can show the motion first.)
+    """
+    from dataclasses import replace as _replace
+
     report = physics_report(
-        motion, retarget.body, ground_height=0.0, machine_com=path.com, marker_targets=_stance_only(targets),
-        reference_pose=targets.initial, reference_max_joint_jump_deg=prep.cycle.max_joint_jump_deg,
+        res.motion, res.retarget.body, ground_height=0.0, machine_com=res.path.com,
+        marker_targets=_stance_only(res.targets), reference_pose=res.targets.initial,
+        reference_max_joint_jump_deg=prep.cycle.max_joint_jump_deg,
     )
-    report.extras.update({"character": retarget.character.name, "L": retarget.L, "M": retarget.M,
-                          "speed_factor": speed, "method": method, "notes": list(notes),
-                          "machine_apex_speed_m_s": path.apex_speed.tolist()})
-    return Result(motion, report, path, targets, retarget, method, speed, tuple(notes), plan)
+    report.extras.update({"character": res.retarget.character.name, "L": res.retarget.L, "M": res.retarget.M,
+                          "speed_factor": res.speed_factor, "method": res.method, "notes": list(res.notes),
+                          "machine_apex_speed_m_s": res.path.apex_speed.tolist(), **res.extras})
+    return _replace(res, report=report)
 
 
 def _periodic_correct(prep: Prepared, retarget: Retarget, targets: Targets, path: MachinePath, machine,

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..constants import UP_AXIS
 from ..errors import FroudeError
-from .session import MODES, Params, Session, Solved, with_character
+from .session import MODES, Params, Session, Solved, with_character, with_report
 from .tracks import Track
 
 #: Frames drawn per second (the motion itself is indexed at its own rate, 120 Hz for the sample).
@@ -46,6 +46,7 @@ class Timing:
     preview_push: float = float("nan")
     result_compute: float = float("nan")
     result_push: float = float("nan")
+    report_compute: float = float("nan")
 
 
 class _Runner:
@@ -366,14 +367,20 @@ class Studio:
             if self._newer_pending():
                 return timing  # superseded: go straight to the newer change
             t0 = time.perf_counter()
-            res = self.session.solve(params)
+            res = self.session.solve(params, report=False)  # the corrected motion first ...
             timing.result_compute = time.perf_counter() - t0
             if self._newer_pending():
                 return timing
             t1 = time.perf_counter()
+            self._publish(res, status="computing the physics report ...")
+            timing.result_push = time.perf_counter() - t1
+            t2 = time.perf_counter()
+            res = with_report(self.session.prep, res)  # ... then its numbers
+            timing.report_compute = time.perf_counter() - t2
+            if self._newer_pending():
+                return timing
             self.good = res
             self._publish(res)
-            timing.result_push = time.perf_counter() - t1
         except FroudeError as e:
             self._show_error(e)
         except Exception as e:  # never let a bug in one change kill the studio; say it and carry on
@@ -402,7 +409,8 @@ class Studio:
             if not solved.preview:
                 t, fm, fb = self._force_series(solved.track)
                 self.gui_plot.data = (t, fm, fb)
-                self.gui_numbers.content = self._numbers_md(solved)
+                if solved.result.report is not None:
+                    self.gui_numbers.content = self._numbers_md(solved)
             self.gui_status.content = self._status_md()
             self.gui_state.content = self._state_md()
             self._draw()
@@ -425,8 +433,10 @@ class Studio:
         """One line the tests (and users) can read: what is on screen right now."""
         s = getattr(self, "shown", None) or self.good
         p = s.params
-        speed = f"{s.result.report.mean_speed_m_s:.3f}" if s.result is not None else "n/a"
-        status = "error" if self.message.startswith("error") else ("preview" if s.preview else "ok")
+        complete = s.result is not None and s.result.report is not None
+        speed = f"{s.result.report.mean_speed_m_s:.3f}" if complete else "n/a"
+        status = "error" if self.message.startswith("error") else (
+            "preview" if s.preview else ("ok" if complete else "report"))
         return (f"`state: character={p.character} mode={p.mode} speed_factor={p.speed:g} to_factor={p.to_factor:g} "
                 f"steps={p.steps} strides={p.strides} n_frames={s.n_frames} speed_m_s={speed} hash={s.hash} "
                 f"status={status}`")

@@ -103,19 +103,33 @@ class Session:
         return Solved(params, track, None, True, time.perf_counter() - t0, motion_hash(targets.initial),
                       targets.initial.n_frames)
 
-    def solve(self, params: Params) -> Solved:
-        """The full result through the pipeline (IK included) and its track. Raises FroudeError."""
+    def solve(self, params: Params, report: bool = True) -> Solved:
+        """The full result through the pipeline (IK included) and its track. Raises FroudeError.
+
+        report=False leaves the physics report for ``with_report`` (the motion can be shown first).
+        """
         t0 = time.perf_counter()
         params.check()
         spec, nums = params.character_args()
         if params.mode == "scale":
-            res = pipeline.scale(self.prep, spec, speed=params.speed, strides=int(params.strides), **nums)
+            res = pipeline.scale(self.prep, spec, speed=params.speed, strides=int(params.strides), report=report,
+                                 **nums)
         else:
-            res = pipeline.accelerate(self.prep, spec, to_factor=params.to_factor, steps=int(params.steps), **nums)
+            res = pipeline.accelerate(self.prep, spec, to_factor=params.to_factor, steps=int(params.steps),
+                                      report=report, **nums)
         _require_finite(res.motion)
         track = machine_track(res.motion, res.retarget.body, res.path)
         return Solved(params, track, res, False, time.perf_counter() - t0, motion_hash(res.motion),
                       res.motion.n_frames)
+
+
+def with_report(prep: pipeline.Prepared, solved: Solved) -> Solved:
+    """The same solved result with its physics report computed (no-op if it has one)."""
+    from dataclasses import replace
+
+    if solved.result is None or solved.result.report is not None:
+        return solved
+    return replace(solved, result=pipeline.add_report(prep, solved.result))
 
 
 def _require_finite(motion) -> None:

@@ -45,7 +45,7 @@ import numpy as np
 from . import quat
 from .body import BodyModel
 from .errors import IkError
-from .kinematics import _quat_rows, com_jacobian, fk_soa, forward_kinematics, point_jacobian
+from .kinematics import _quat_rows, com_jacobian, forward_kinematics, point_jacobian
 from .motion import Motion
 from .skeleton import Skeleton
 
@@ -362,16 +362,27 @@ def dof_weights(skeleton: Skeleton, posture: PostureTask, root: RootTask) -> tup
 
 
 # ---- component-major (SOA) helpers ---------------------------------------------------------------------
-def _qmul_soa(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of quaternion rows a, b (4, ...) -> (4, ...)."""
+def _qmul_soa(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Hamilton product of quaternion rows a, b (4, ...) -> (4, ...), written into ``out`` when given
+    (which must not overlap a or b)."""
     aw, ax, ay, az = a
     bw, bx, by, bz = b
-    return np.stack([
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    ])
+    if out is None:
+        out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    t = np.empty(out.shape[1:])
+    # each row left to right, as written: w = aw bw − ax bx − ay by − az bz, ...
+    for o, terms in ((out[0], ((aw, bw, 1), (ax, bx, -1), (ay, by, -1), (az, bz, -1))),
+                     (out[1], ((aw, bx, 1), (ax, bw, 1), (ay, bz, 1), (az, by, -1))),
+                     (out[2], ((aw, by, 1), (ax, bz, -1), (ay, bw, 1), (az, bx, 1))),
+                     (out[3], ((aw, bz, 1), (ax, by, 1), (ay, bx, -1), (az, bw, 1)))):
+        np.multiply(terms[0][0], terms[0][1], out=o)
+        for u, v, sgn in terms[1:]:
+            np.multiply(u, v, out=t)
+            if sgn > 0:
+                o += t
+            else:
+                o -= t
+    return out
 
 
 def _log_err_soa(q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
@@ -390,13 +401,35 @@ def _log_err_soa(q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
     return np.stack([x * scale, y * scale, z * scale])
 
 
-def _exp_soa(v: np.ndarray) -> np.ndarray:
-    """Quaternion rows (4, ...) of rotation vectors (3, ...) [rad]."""
-    angle = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-    half = 0.5 * angle
+def _exp_soa(v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Quaternion rows (4, ...) of rotation vectors (3, ...) [rad], written into ``out`` when given."""
+    if out is None:
+        out = np.empty((4,) + v.shape[1:])
+    angle = v[0] * v[0]
+    t = np.multiply(v[1], v[1], out=out[1])
+    angle += t
+    np.multiply(v[2], v[2], out=t)
+    angle += t
+    np.sqrt(angle, out=angle)
+    half = np.multiply(angle, 0.5, out=out[2])
+    np.cos(half, out=out[0])
     small = angle < 1e-8
-    scale = np.where(small, 0.5 - angle * angle / 48.0, np.sin(half) / np.where(small, 1.0, angle))
-    return np.stack([np.cos(half), v[0] * scale, v[1] * scale, v[2] * scale])
+    if small.any():
+        scale = np.where(small, 0.5 - angle * angle / 48.0, np.sin(half) / np.where(small, 1.0, angle))
+    else:
+        scale = np.sin(half, out=out[3])
+        scale /= angle
+    np.multiply(v[0], scale, out=out[1])
+    np.multiply(v[1], scale, out=out[2])
+    np.multiply(v[2], scale, out=out[3])
+    return out
+
+
+def _soa_quats(rotations: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """(4, K, F) contiguous quaternion rows of the joints ``joints`` (K,) of rotations (F, J, 4)."""
+    F = rotations.shape[0]
+    g = np.take(rotations, joints, axis=1).reshape(F, 4 * len(joints)).T.copy()  # (K·4, F)
+    return g.reshape(len(joints), 4, F).transpose(1, 0, 2).copy()
 
 
 def _cholesky_soa(A: np.ndarray) -> np.ndarray:
@@ -586,8 +619,8 @@ class _FK:
     world position [m], so task points and mass moments are small matrix products over T's rows.
     """
 
-    def __init__(self, plan: "_Plan", rot_T: np.ndarray):
-        Jn, _, F = rot_T.shape
+    def __init__(self, plan: "_Plan", rot_T: np.ndarray, extra: Sequence[tuple[str, int]] = ()):
+        Jn, F = len(plan.parents), rot_T.shape[-1]
         K = len(plan.act)
         self.plan = plan
         self.F = F
@@ -597,24 +630,39 @@ class _FK:
         self.slot[plan.act] = -1 - np.arange(K)
         fro = np.flatnonzero(frozen)
         self.slot[fro] = np.arange(len(fro))
-        self.R_frozen = np.empty((len(fro), 9, F))
-        tmp = np.empty((3, F))
+        # One work area for the whole chunk (FK outputs and temporaries, plus the ``extra`` (name, rows)
+        # areas of the caller: the system matrix, ...), each region re-viewed contiguous over its first
+        # n frames when the working set shrinks. One allocation instead of a dozen: freshly mapped memory
+        # costs a page fault per 4 kB, as much as the arithmetic on it.
+        regions = [("T", Jn * 12), ("RA", 9 * K), ("tq", 3 * K), ("t33", 9), ("t3", 3), ("Rf", 9 * len(fro))]
+        regions += list(extra)
+        self._work = np.empty(sum(r for _, r in regions) * F)
+        self._regions, off = {}, 0
+        for name, r in regions:
+            self._regions[name] = (off, r)
+            off += r * F
+        self.R_frozen = self.area("Rf", (len(fro), 9))
+        tmp = self.area("t3", (3,))
         for i, j in enumerate(fro):
             _quat_rows(rot_T[j], self.R_frozen[i], tmp)
-        # flat buffers, re-viewed contiguous when the working set shrinks
-        self._bufs = {name: np.empty(n * F) for name, n in
-                      (("T", Jn * 12), ("RA", 9 * K), ("tq", 3 * K), ("t33", 9), ("t3", 3))}
         self._view(F)
+
+    def area(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+        """The work area ``name`` as a contiguous (*shape, n) array over the current n frames."""
+        off, rows = self._regions[name]
+        n = getattr(self, "n", self.F)
+        size = int(np.prod(shape, dtype=np.int64)) * n
+        assert size <= rows * self.F
+        return self._work[off:off + size].reshape(*shape, n)
 
     def _view(self, n: int) -> None:
         Jn, K = len(self.plan.parents), len(self.plan.act)
-        b = self._bufs
         self.n = n
-        self.T = b["T"][:Jn * 12 * n].reshape(Jn, 12, n)
-        self.RA = b["RA"][:9 * K * n].reshape(9, K, n)
-        self.tq = b["tq"][:3 * K * n].reshape(3, K, n)
-        self.t33 = b["t33"][:9 * n].reshape(3, 3, n)
-        self.t3 = b["t3"][:3 * n].reshape(3, n)
+        self.T = self.area("T", (Jn, 12))
+        self.RA = self.area("RA", (9, K))
+        self.tq = self.area("tq", (3, K))
+        self.t33 = self.area("t33", (3, 3))
+        self.t3 = self.area("t3", (3,))
 
     @property
     def P(self) -> np.ndarray:
@@ -691,7 +739,8 @@ def _evaluate(plan: _Plan, root_T, rot_T, tr_T, fk=None, q_act=None):
     npts = (1 if plan.has_com else 0) + len(plan.mk_joint)
     x = np.empty((npts, 3, F))
     if plan.has_com:
-        fk.s_own = np.matmul(plan.w_own, T)  # (Jn, 3, F): one stacked matrix product
+        s_own = fk.area("s_own", (T.shape[0], 3)) if "s_own" in fk._regions else None
+        fk.s_own = np.matmul(plan.w_own, T, out=s_own)  # (Jn, 3, F): one stacked matrix product
         np.add.reduce(fk.s_own, axis=0, out=x[0])
         x[0] *= 1.0 / plan.m_sub[0]
     n0 = npts - len(plan.mk_joint)
@@ -714,9 +763,10 @@ def _com_levers(plan: _Plan, P, R, s_own=None) -> np.ndarray:
     return out
 
 
-def _linearize(plan: _Plan, P, R, x, sw, s_own=None):
+def _linearize(plan: _Plan, P, R, x, sw, s_own=None, fk=None):
     """Linearise at a pose: per group the weighted levers ũ (g, u, 3, F), the active joints' world
-    rotations (K, 9, F) and the Cholesky factor of K' = J̃ D⁻¹ J̃ᵀ + I."""
+    rotations (K, 9, F) and the Cholesky factor of K' = J̃ D⁻¹ J̃ᵀ + I (``fk``: a _FK whose work area
+    has regions "A" (m × m rows) and "Ra" (9 K rows) to hold the last two; fresh arrays when None)."""
     F = x.shape[2]
     npts = x.shape[0]
     m = 3 * npts
@@ -734,7 +784,13 @@ def _linearize(plan: _Plan, P, R, x, sw, s_own=None):
         dlevers.append(U * d[g.joints][None, :, None, None])
     # K' blocks Σ_k d_k ((ũ_p·ũ_q) I − ũ_q ũ_pᵀ) + d_pos √(w_p w_q) I (+ I on the diagonal), written
     # straight into the lower triangle: rows of group g2, columns of group g1 (g1 <= g2).
-    A = np.zeros((m, m, F))
+    if fk is None:
+        A = np.zeros((m, m, F))
+        Ra = R[plan.act]
+    else:
+        A = fk.area("A", (m, m))
+        A.fill(0.0)
+        Ra = np.take(R, plan.act, axis=0, out=fk.area("Ra", (len(plan.act), 9)))
     for g1, g2, i1, i2 in plan.pairs:
         G1, G2 = plan.groups[g1], plan.groups[g2]
         n1, n2 = len(G1.points), len(G2.points)
@@ -752,7 +808,7 @@ def _linearize(plan: _Plan, P, R, x, sw, s_own=None):
         blkdiag += plan.d_pos * sw[:, None, :] * sw[None, :, :]
     for r in range(m):
         A[r, r] += 1.0
-    return levers, R[plan.act], _cholesky_soa(A)
+    return levers, Ra, _cholesky_soa(A)
 
 
 def _step(plan: _Plan, lin, e, eps, eps_t, sw):
@@ -801,35 +857,56 @@ def _step(plan: _Plan, lin, e, eps, eps_t, sw):
     return dl, dt
 
 
+def _take_lower(L: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """The frames ``keep`` of a batch of lower-triangular factors (m, m, F): only the lower triangle is
+    copied (the strict upper one of the result is left unset; ``_cho_solve_soa`` never reads it)."""
+    m = L.shape[0]
+    out = np.empty((m, m, len(keep)))
+    for r in range(m):
+        np.take(L[r, :r + 1], keep, axis=1, out=out[r, :r + 1])
+    return out
+
+
 def _solve_chunk(plan: _Plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, sw,
                  tol: float, step_tol: float, max_iters: int, max_step: float, refresh: bool,
-                 start_is_reference: bool = False):
-    """Gauss-Newton on one chunk, in place on root_T (3, F) and rot_T (Jn, 4, F) (FK joints).
+                 start_is_reference: bool = False, q_start=None):
+    """Gauss-Newton on one chunk, in place on root_T (3, F).
 
-    ref_act: (4, K, F) reference rotations of the active joints; target: (npts, 3, F) task targets [m];
-    sw: (npts, F) square-root weights. A frame stops when every weighted task point is within ``tol`` [m]
-    of its target, or when its step is below ``step_tol``. The first step linearises at the warm start;
-    later steps reuse that factorisation (a chord / modified Gauss-Newton iteration) unless ``refresh``.
-    Frames that have stopped drop out of the working set (compacted when at most half remain), so late
-    iterations cost in proportion to the frames that still need them. Returns iterations (F,),
-    converged (F,), the final task points (npts, 3, F) and the largest active-joint deviation (F,) [rad].
+    rot_T: (Jn, 4, F) input rotations of the FK joints (any strides; read only: the frozen joints' are
+    used, and the active joints' when ``q_start`` (4, K, F) is None). ref_act: (4, K, F) reference
+    rotations of the active joints; target: (npts, 3, F) task targets [m]; sw: (npts, F) square-root
+    weights. A frame stops when every weighted task point is within ``tol`` [m] of its target, or when its
+    step is below ``step_tol``. The first step linearises at the warm start; later steps reuse that
+    factorisation (a chord / modified Gauss-Newton iteration) unless ``refresh``. Frames that have stopped
+    drop out of the working set (compacted when at most three quarters remain), so late iterations cost in
+    proportion to the frames that still need them. Returns iterations (F,), converged (F,), the final task
+    points (npts, 3, F), the largest active-joint deviation (F,) [rad] and the active joints' rotations
+    (4, K, F).
     """
     F = root_T.shape[1]
+    K = len(plan.act)
+    npts = target.shape[0]
     iterations = np.zeros(F, np.int64)
     converged = np.zeros(F, bool)
     x_final = np.empty_like(target)
-    q_all = np.ascontiguousarray(rot_T[plan.act].transpose(1, 0, 2))  # (4, K, F) active joint rotations
+    fk = _FK(plan, rot_T, extra=(("A", 9 * npts * npts), ("Ra", 9 * K), ("s_own", 3 * len(plan.parents)),
+                                 ("qa", 4 * K), ("qb", 4 * K), ("ex", 4 * K)))
+    q_all = fk.area("qa", (4, K))  # (4, K, F) active joint rotations
+    if q_start is None:
+        q_start = rot_T[plan.act].transpose(1, 0, 2)
+    q_all[:] = q_start
+    q_spare, q_exp = fk.area("qb", (4, K)), fk.area("ex", (4, K))
     work = None  # None: every frame; else the chunk indices still iterating (working copies below)
     w_root, w_tr, w_q = root_T, tr_T, q_all
     w_target, w_sw, w_refr, w_refa = target, sw, ref_root_T, ref_act
     lin = None
-    fk = _FK(plan, rot_T)
 
     def flush():
         if work is not None:
             root_T[:, work] = w_root
             q_all[:, :, work] = w_q
 
+    stopped = None  # (n,) frames of the working set whose last step was below step_tol (they stay put)
     for it in range(max_iters + 1):
         P, R, x = _evaluate(plan, w_root, None, w_tr, fk, w_q)
         e = w_target - x
@@ -841,53 +918,59 @@ def _solve_chunk(plan: _Plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, 
         else:
             x_final[:, :, work] = x
             converged[work] |= done
+        if stopped is not None:
+            done |= stopped
         if it == max_iters or done.all():
             break
         if lin is None or refresh:
-            lin = _linearize(plan, P, R, x, w_sw, fk.s_own if plan.has_com else None)
-        if it == 0 and start_is_reference:
-            eps, eps_t = None, None  # ε = 0 at the warm start: skip the log map and J ε
-        else:
-            eps, eps_t = _log_err_soa(w_q, w_refa), w_refr - w_root
-        dl, dt = _step(plan, lin, e, eps, eps_t, w_sw)
-        big = np.maximum(np.abs(dl).max(axis=(0, 1)), np.abs(dt).max(axis=0))
-        done |= big <= step_tol
-        if work is None:
-            converged |= done
-        else:
-            converged[work] |= done
+            lin = _linearize(plan, P, R, x, w_sw, fk.s_own if plan.has_com else None, fk)
         live = ~done
-        scale = np.where(live & np.isfinite(big), np.minimum(1.0, max_step / np.maximum(big, 1e-300)), 0.0)
-        dl *= scale
-        dt *= scale
-        w_q = _qmul_soa(w_q, _exp_soa(dl))  # products of unit quaternions: no renormalisation needed
-        w_root = w_root + dt
-        if work is None:
-            iterations += live
-            q_all = w_q
-            root_T[:] = w_root
-            w_root = root_T
-        else:
-            iterations[work] += live
-        if not live.any():
-            break
-        if live.sum() <= 0.5 * len(live):  # compact the working set
+        compacted = live.sum() <= 0.75 * len(live)
+        if compacted:
+            # compact the working set before the step: finished frames cost nothing from here on (a
+            # finished frame would only get a zero step: its pose, hence its errors, do not change)
             flush()
             keep = np.flatnonzero(live)
             work = keep if work is None else work[keep]
             w_root = root_T[:, work]
             w_tr = None if tr_T is None else tr_T[:, :, work]
             w_q = q_all[:, :, work]
+            q_spare, q_exp = np.empty_like(w_q), np.empty_like(w_q)
             w_target, w_sw, w_refr, w_refa = target[:, :, work], sw[:, work], ref_root_T[:, work], ref_act[:, :, work]
+            e = e[:, :, keep]
             levers, Ra, L = lin
-            lin = ([U[..., keep] for U in levers], Ra[..., keep], L[:, :, keep])
+            lin = ([np.take(U, keep, axis=-1) for U in levers], np.take(Ra, keep, axis=-1), _take_lower(L, keep))
             fk.compact(keep)
-            if refresh:
-                lin = None
+        if it == 0 and start_is_reference:
+            eps, eps_t = None, None  # ε = 0 at the warm start: skip the log map and J ε
+        else:
+            eps, eps_t = _log_err_soa(w_q, w_refa), w_refr - w_root
+        dl, dt = _step(plan, lin, e, eps, eps_t, w_sw)
+        big = np.maximum(np.abs(dl).max(axis=(0, 1)), np.abs(dt).max(axis=0))
+        stopped = big <= step_tol
+        if not compacted:
+            stopped |= done  # finished frames still in the working set: they keep their pose
+        if work is None:
+            converged |= stopped
+        else:
+            converged[work] |= stopped
+        live = ~stopped
+        scale = np.where(live & np.isfinite(big), np.minimum(1.0, max_step / np.maximum(big, 1e-300)), 0.0)
+        dl *= scale
+        dt *= scale
+        # products of unit quaternions: no renormalisation needed
+        w_q, q_spare = _qmul_soa(w_q, _exp_soa(dl, out=q_exp), out=q_spare), w_q
+        w_root += dt
+        if work is None:
+            iterations += live
+            q_all = w_q
+        else:
+            iterations[work] += live
+        if not live.any():
+            break
     flush()
-    rot_T[plan.act] = q_all.transpose(1, 0, 2)
     dot = np.abs((q_all * ref_act).sum(axis=0)).min(axis=0)
-    return iterations, converged, x_final, 2.0 * np.arccos(np.minimum(dot, 1.0))
+    return iterations, converged, x_final, 2.0 * np.arccos(np.minimum(dot, 1.0)), q_all
 
 
 # ---- the public entry point -------------------------------------------------------------------------
@@ -998,15 +1081,18 @@ def solve_ik(
     failed = np.zeros(F, bool)
     chunk = max(1, int(chunk))
     has_tr = motion.translations is not None
+    start_is_reference = ref_pose is motion and ref_root is motion
     for a in range(0, F, chunk):
         b = min(F, a + chunk)
         root_T = np.ascontiguousarray(out_root[a:b].T)
-        rot_T = np.ascontiguousarray(out_rot[a:b, plan.sub].transpose(1, 2, 0))
+        # the FK joints' input rotations as a (Jn, 4, f) view: only the frozen ones are read, once
+        rot_T = np.take(motion.rotations[a:b], plan.sub, axis=1).transpose(1, 2, 0)
         tr_T = np.ascontiguousarray(motion.translations[a:b, plan.sub].transpose(1, 2, 0)) if has_tr else None
         ref_root_T = np.ascontiguousarray(ref_root.root_positions[a:b].T)
-        ref_act = np.ascontiguousarray(ref_pose.rotations[a:b, plan.act_orig].transpose(2, 1, 0))
+        ref_act = _soa_quats(ref_pose.rotations[a:b], plan.act_orig)
         if ref_root is not ref_pose:
             ref_act[:, 0] = ref_root.rotations[a:b, 0].T
+        q_start = ref_act if start_is_reference else _soa_quats(motion.rotations[a:b], plan.act_orig)
         target = np.empty((npts, 3, b - a))
         sw = np.empty((npts, b - a))
         if com_task is not None:
@@ -1015,16 +1101,19 @@ def solve_ik(
         if len(mk_joint):
             target[npts - len(mk_joint):] = mk_target[a:b, plan.mk_order].transpose(1, 2, 0)
             sw[npts - len(mk_joint):] = np.sqrt(mk_w[a:b, plan.mk_order].T)
-        its, conv, x, dev = _solve_chunk(plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, sw,
-                                         tol, step_tol, max_iters, max_step, refresh_jacobian,
-                                         start_is_reference=ref_pose is motion and ref_root is motion)
+        its, conv, x, dev, q_act = _solve_chunk(plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, sw,
+                                                tol, step_tol, max_iters, max_step, refresh_jacobian,
+                                                start_is_reference, q_start)
         iterations[a:b] = its
         converged[a:b] = conv
         posture_dev[a:b] = dev
         # frames that did not move keep the input bit-for-bit
         moved = np.flatnonzero(its > 0)
         out_root[a + moved] = root_T.T[moved]
-        out_rot[np.ix_(a + moved, plan.act_orig)] = rot_T[plan.act][:, :, moved].transpose(2, 0, 1)
+        if len(moved) == b - a:
+            out_rot[a:b, plan.act_orig] = q_act.transpose(2, 1, 0)
+        else:
+            out_rot[np.ix_(a + moved, plan.act_orig)] = q_act[:, :, moved].transpose(2, 1, 0)
         err = np.sqrt(((target - x) ** 2).sum(axis=1)).T  # (f, npts) in plan order
         # only weighted points can fail (a zero weight switches a marker off for that frame)
         over = np.where(sw.T > 0, err, 0.0)

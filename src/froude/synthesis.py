@@ -111,10 +111,6 @@ class ReferenceCycle:
     def n_samples(self) -> int:
         return self.rotations.shape[0]
 
-    def foot_on_ground(self, phi: np.ndarray) -> np.ndarray:
-        """(…, 2) bool: which feet touch the ground (marker contact) at stride phases phi (…)."""
-        return _contact_mask(np.asarray(phi, float), self.contact_phase)
-
 
 def _phase_of_events(events: list[FootEvent], first_foot: int, fractions: np.ndarray) -> np.ndarray:
     """Unwrapped stride phase ψ of each event (ψ increases by 1 per stride; first A touchdown = 0)."""

@@ -967,19 +967,29 @@ def plan_speed_change(cycle, target_U: float, *, n_steps: int | None = None,
     return _plan_n(cyc, U_t, int(n_steps), table, comfort, policy, energy, lead_steps, hold_steps)
 
 
-def _plan_n(cyc, U_t, n, table, comfort, policy, energy, lead_steps, hold_steps):
-    modes = ("theta", "b") if energy == "auto" else (energy,)
-    tried = []
-    fail = None
-    for mode in modes:
+def _first_mode(energy: str, attempt):
+    """Try the energy modes in order ("auto": θ0 only, then θ0 + δb): (plan, tried notes, last _StepFail).
+
+    plan is the first that succeeds, with the failed attempts prepended to its notes, or None.
+    """
+    tried, fail = [], None
+    for mode in (("theta", "b") if energy == "auto" else (energy,)):
         try:
-            plan = _plan_change(cyc, U_t, n, table, comfort, policy, mode, lead_steps, hold_steps)
-            return replace(plan, notes=tuple(tried) + plan.notes)
+            plan = attempt(mode)
+            return replace(plan, notes=tuple(tried) + plan.notes), tried, fail
         except _StepFail as f:
             fail = f
             tried.append(f"{mode}: step {f.i + 1} failed ({f.why})")
         except PlanError as e:
             tried.append(f"{mode}: {e}")
+    return None, tried, fail
+
+
+def _plan_n(cyc, U_t, n, table, comfort, policy, energy, lead_steps, hold_steps):
+    plan, tried, fail = _first_mode(energy, lambda mode: _plan_change(cyc, U_t, n, table, comfort, policy, mode,
+                                                                      lead_steps, hold_steps))
+    if plan is not None:
+        return plan
     msg = _unreachable(cyc, U_t, n, fail, comfort, energy, f"in {n} step{'s' if n != 1 else ''}")
     if fail is None:
         msg += " [" + "; ".join(tried) + "]"
@@ -1150,17 +1160,10 @@ def plan_speed_profile(cycle, profile, *, duration: float | None = None, table=N
         raise PlanError(f"the profile must give finite speeds > 0 on [0, {duration:g}]")
     U_end = float(Us[-1])
 
-    modes = ("theta", "b") if energy == "auto" else (energy,)
-    tried, fail = [], None
-    for mode in modes:
-        try:
-            plan = _plan_profile(cyc, fn, duration, U_end, Us, table, comfort, mode, lead_steps, hold_steps)
-            return replace(plan, notes=tuple(tried) + plan.notes)
-        except _StepFail as f:
-            fail = f
-            tried.append(f"{mode}: step {f.i + 1} failed ({f.why})")
-        except PlanError as e:
-            tried.append(f"{mode}: {e}")
+    plan, tried, fail = _first_mode(energy, lambda mode: _plan_profile(cyc, fn, duration, U_end, Us, table, comfort,
+                                                                       mode, lead_steps, hold_steps))
+    if plan is not None:
+        return plan
     if fail is None:
         raise PlanError("cannot follow the speed profile: " + "; ".join(tried))
     lo, hi = one_step_range(fail.U, fail.H, cyc, energy="theta" if energy == "theta" else "b",

@@ -115,7 +115,32 @@ def test_studio_keeps_last_good_result_on_bad_edits(session):
         t = studio.apply(Params(speed=1.3))
         assert studio.good is not good and studio.good.params.speed == 1.3
         assert "status=ok" in studio.gui_state.content and studio.good.hash in studio.gui_state.content
-        assert t.preview_compute > 0 and t.result_compute > 0
+        assert t.result_compute > 0
+    finally:
+        studio.stop()
+
+
+def test_studio_previews_only_when_the_result_would_be_slow(session, monkeypatch):
+    """A quick result goes straight to the page; an expected-slow one shows the IK-free preview first."""
+    pytest.importorskip("viser")
+    from froude.studio import app
+    from froude.studio.app import Studio
+
+    studio = Studio(session.prep, port=_free_port())
+    shown = []
+    publish = studio._publish
+    monkeypatch.setattr(studio, "_publish", lambda solved, status=None: (shown.append(solved), publish(solved, status)))
+    try:
+        quick = studio.expected_seconds(Params(speed=1.1))
+        assert 0 < quick < app.SLOW_RESULT_S  # 4 strides of the sample: the last solve was quick
+        assert studio.expected_seconds(Params(speed=1.1, strides=400)) > app.SLOW_RESULT_S  # scales with length
+        t = studio.apply(Params(speed=1.1))
+        assert np.isnan(t.preview_compute) and [s.preview for s in shown] == [False, False]  # result, then report
+        shown.clear()
+        monkeypatch.setattr(app, "SLOW_RESULT_S", 0.0)
+        t = studio.apply(Params(speed=1.15))
+        assert t.preview_compute > 0 and [s.preview for s in shown] == [True, False, False]
+        assert studio.good.params.speed == 1.15 and "status=ok" in studio.gui_state.content
     finally:
         studio.stop()
 

@@ -313,15 +313,29 @@ class BodyModel:
         return acc / self.total_mass
 
     def joint_positions(self, motion: Motion, joints) -> np.ndarray:
-        """(F, len(joints), 3) world positions [m] of some joints (FK in chunks of FK_CHUNK frames)."""
+        """(F, len(joints), 3) world positions [m] of some joints (FK in chunks of FK_CHUNK frames).
+
+        Only the joints and their ancestors are evaluated (the hips cost two joints, not the skeleton).
+        """
+        joints = [int(j) for j in joints]
+        parents = self.skeleton.parents
+        keep = np.zeros(len(parents), bool)
+        for j in joints:
+            while j >= 0 and not keep[j]:
+                keep[j] = True
+                j = parents[j]
+        sub = np.flatnonzero(keep)  # parents come before their children, so the order is kept
+        new = -np.ones(len(parents), np.int64)
+        new[sub] = np.arange(len(sub))
+        sub_parents = np.where(parents[sub] >= 0, new[np.maximum(parents[sub], 0)], -1)
         F = motion.n_frames
         out = np.empty((F, len(joints), 3))
         for a in range(0, max(F, 1), FK_CHUNK):
             b = min(a + FK_CHUNK, F)
-            tr = None if motion.translations is None else motion.translations[a:b]
-            rp, rot, tr = to_soa(motion.root_positions[a:b], motion.rotations[a:b], tr)
-            P, _ = fk_soa(self.skeleton.parents, self.skeleton.offsets, rp, rot, tr)
-            out[a:b] = P[list(joints)].transpose(2, 0, 1)
+            tr = None if motion.translations is None else motion.translations[a:b, sub]
+            rp, rot, tr = to_soa(motion.root_positions[a:b], motion.rotations[a:b, sub], tr)
+            P, _ = fk_soa(sub_parents, self.skeleton.offsets[sub], rp, rot, tr)
+            out[a:b] = P[new[joints]].transpose(2, 0, 1)
         return out
 
     def com(self, motion: Motion) -> np.ndarray:

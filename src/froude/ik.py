@@ -37,6 +37,7 @@ keep the input rotations and cost nothing.
 """
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
@@ -247,6 +248,7 @@ class IkResult:
     failed: (F,) a COM or marker error above ``max_error`` (only returned with on_failure="flag").
     com_error: (F,) |COM target − COM| [m] (None without a ComTask).
     marker_error: (F, P) |marker target − marker| [m], markers of all MarkerTasks in order (None without).
+    com: (F, 3) the COM of each solved pose [m] (the solver's last evaluation; None without a ComTask).
     residuals: task name -> (F,) largest residual per frame: [m] for the COM, each MarkerTask (largest
         marker) and the root translation; [rad] for the posture (largest deviation of any active joint,
         root orientation included).
@@ -263,6 +265,7 @@ class IkResult:
     residuals: Mapping[str, np.ndarray]
     frozen: tuple[str, ...] = field(default=())
     active: tuple[int, ...] = field(default=())
+    com: np.ndarray | None = None  # (F, 3) the whole-body COM at the solved pose [m] (None without a ComTask)
 
     @property
     def ok(self) -> bool:
@@ -505,6 +508,26 @@ class _Plan:
     subtree: np.ndarray  # (K, Jn) 1.0 where joint j is in the subtree of active joint k
 
 
+#: Plans already made, per body model (the studio and long batches solve the same body many times; a plan
+#: costs about a millisecond of Python). Weak keys: a plan goes with its body.
+_PLANS: "weakref.WeakKeyDictionary[BodyModel, dict]" = weakref.WeakKeyDictionary()
+
+
+def _cached_plan(skel: Skeleton, body: BodyModel | None, frozen, w_pos: float, w_rot: np.ndarray,
+                 mk_joint: np.ndarray, mk_local: np.ndarray, has_com: bool) -> "_Plan":
+    """``_make_plan``, remembered per body model for the same skeleton, joints, weights and markers."""
+    if body is None:
+        return _make_plan(skel, body, frozen, w_pos, w_rot, mk_joint, mk_local, has_com)
+    key = (np.asarray(skel.parents).tobytes(), np.asarray(skel.offsets, float).tobytes(), tuple(int(j) for j in frozen),
+           float(w_pos), np.asarray(w_rot, float).tobytes(), np.asarray(mk_joint, np.int64).tobytes(),
+           np.asarray(mk_local, float).tobytes(), bool(has_com))
+    plans = _PLANS.setdefault(body, {})
+    plan = plans.get(key)
+    if plan is None:
+        plan = plans[key] = _make_plan(skel, body, frozen, w_pos, w_rot, mk_joint, mk_local, has_com)
+    return plan
+
+
 def _make_plan(skel: Skeleton, body: BodyModel | None, frozen: list[int], w_pos: float, w_rot: np.ndarray,
                mk_joint: np.ndarray, mk_local: np.ndarray, has_com: bool) -> _Plan:
     J = skel.n_joints
@@ -626,26 +649,38 @@ class _FK:
         self.F = F
         frozen = np.ones(Jn, bool)
         frozen[plan.act] = False
-        self.slot = -np.ones(Jn, np.int64)  # frozen joint -> row of R_frozen; active -> -1 - position
-        self.slot[plan.act] = -1 - np.arange(K)
         fro = np.flatnonzero(frozen)
-        self.slot[fro] = np.arange(len(fro))
+        self.K = K
+        # Local rotations of all FK joints in one (K + frozen, 9, F) store: the active joints' rows first
+        # (rewritten every call), then the frozen ones' (converted once). lrow[j]: joint j's row.
+        self.lrow = np.empty(Jn, np.int64)
+        self.lrow[plan.act] = np.arange(K)
+        self.lrow[fro] = K + np.arange(len(fro))
+        # Joints by depth below the root: all joints of one depth are one batch of array operations
+        # (their parents are done), ~8 batches instead of ~25 joints' worth of small operations.
+        depth = np.zeros(Jn, np.int64)
+        for j in range(1, Jn):
+            depth[j] = depth[plan.parents[j]] + 1
+        self.levels = []
+        for d in range(1, int(depth.max(initial=0)) + 1):
+            js = np.flatnonzero(depth == d)
+            off = np.asarray(plan.offsets, float)[js]
+            self.levels.append((js, plan.parents[js], self.lrow[js], off[:, 0, None, None], off[:, 1, None, None],
+                                off[:, 2, None, None]))
         # One work area for the whole chunk (FK outputs and temporaries, plus the ``extra`` (name, rows)
         # areas of the caller: the system matrix, ...), each region re-viewed contiguous over its first
         # n frames when the working set shrinks. One allocation instead of a dozen: freshly mapped memory
         # costs a page fault per 4 kB, as much as the arithmetic on it.
-        regions = [("T", Jn * 12), ("RA", 9 * K), ("tq", 3 * K), ("t33", 9), ("t3", 3), ("Rf", 9 * len(fro))]
+        regions = [("T", Jn * 12), ("L", 9 * (K + len(fro))), ("tq", 3 * K), ("t33", 9), ("t3", 3)]
         regions += list(extra)
         self._work = np.empty(sum(r for _, r in regions) * F)
         self._regions, off = {}, 0
         for name, r in regions:
             self._regions[name] = (off, r)
             off += r * F
-        self.R_frozen = self.area("Rf", (len(fro), 9))
-        tmp = self.area("t3", (3,))
-        for i, j in enumerate(fro):
-            _quat_rows(rot_T[j], self.R_frozen[i], tmp)
         self._view(F)
+        for i, j in enumerate(fro):
+            _quat_rows(rot_T[j], self.L[K + i], self.t3)
 
     def area(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
         """The work area ``name`` as a contiguous (*shape, n) array over the current n frames."""
@@ -659,7 +694,7 @@ class _FK:
         Jn, K = len(self.plan.parents), len(self.plan.act)
         self.n = n
         self.T = self.area("T", (Jn, 12))
-        self.RA = self.area("RA", (9, K))
+        self.L = self.area("L", (Jn, 9))
         self.tq = self.area("tq", (3, K))
         self.t33 = self.area("t33", (3, 3))
         self.t3 = self.area("t3", (3,))
@@ -674,54 +709,60 @@ class _FK:
 
     def compact(self, keep: np.ndarray) -> None:
         """Keep only the frames ``keep`` (the working set shrank)."""
-        self.R_frozen = np.ascontiguousarray(self.R_frozen[:, :, keep])
+        frozen = self.L[self.K:][:, :, keep]  # a copy: the store is re-viewed over fewer frames below
         self._view(len(keep))
+        self.L[self.K:] = frozen
 
     def __call__(self, root_T, rot_T, tr_T, q_act=None):
         """FK of the plan's joints: P (Jn, 3, F) [m], R (Jn, 9, F) (views of ``T``). The active joints'
         local rotations come from ``q_act`` (4, K, F) when given, else from rot_T (Jn, 4, F)."""
-        plan, T, t33, t3 = self.plan, self.T, self.t33, self.t3
+        plan, T, L = self.plan, self.T, self.L
         n = self.n
         if q_act is None:
             q_act = rot_T[plan.act].transpose(1, 0, 2)
-        _quat_rows(q_act, self.RA, self.tq)
-        slot = self.slot
-        T[0, :9] = self.RA[:, 0]
+        _quat_rows(q_act, L[:self.K].transpose(1, 0, 2), self.tq)
+        T[0, :9] = L[self.lrow[0]]
         T[0, 9:] = root_T
+        if tr_T is not None:
+            return self._per_joint(tr_T)
+        for js, ps, rows, ox, oy, oz in self.levels:
+            m = len(js)
+            A = T[ps, :9].reshape(m, 3, 3, n)  # parents' world rotations (a gathered copy)
+            B = L[rows].reshape(m, 3, 3, n)  # the joints' local rotations
+            # C[r, c] = A[r, 0] B[0, c] + A[r, 1] B[1, c] + A[r, 2] B[2, c], in fk_soa's order
+            C = A[:, :, 0:1] * B[:, 0:1]
+            C += A[:, :, 1:2] * B[:, 1:2]
+            C += A[:, :, 2:3] * B[:, 2:3]
+            T[js, :9] = C.reshape(m, 9, n)
+            P = A[:, :, 0] * ox  # p_j = A o + p_parent (terms of zero offsets add an exact zero)
+            P += T[ps, 9:]
+            P += A[:, :, 1] * oy
+            P += A[:, :, 2] * oz
+            T[js, 9:] = P
+        return self.P, self.R
+
+    def _per_joint(self, tr_T):
+        """The joint-by-joint FK with per-frame local translations tr_T (Jn, 3, F) [m]."""
+        plan, T, L, t33, t3 = self.plan, self.T, self.L, self.t33, self.t3
+        n = self.n
         for j in range(1, len(plan.parents)):
             pj = plan.parents[j]
             A = T[pj, :9].reshape(3, 3, n)
-            s = slot[j]
-            B = self.R_frozen[s].reshape(3, 3, n) if s >= 0 else self.RA[:, -1 - s].reshape(3, 3, n)
+            B = L[self.lrow[j]].reshape(3, 3, n)
             C = T[j, :9].reshape(3, 3, n)
-            # C[r, c] = A[r, 0] B[0, c] + A[r, 1] B[1, c] + A[r, 2] B[2, c]
             np.multiply(A[:, 0:1], B[0:1], out=C)
             np.multiply(A[:, 1:2], B[1:2], out=t33)
             C += t33
             np.multiply(A[:, 2:3], B[2:3], out=t33)
             C += t33
             Pj, Pp = T[j, 9:], T[pj, 9:]
-            if tr_T is None:
-                ox, oy, oz = plan.offsets[j]
-                if ox:
-                    np.multiply(A[:, 0], ox, out=Pj)
-                    Pj += Pp
-                else:
-                    Pj[:] = Pp
-                if oy:
-                    np.multiply(A[:, 1], oy, out=t3)
-                    Pj += t3
-                if oz:
-                    np.multiply(A[:, 2], oz, out=t3)
-                    Pj += t3
-            else:
-                t = tr_T[j]
-                np.multiply(A[:, 0], t[0], out=t3)
-                np.add(Pp, t3, out=Pj)
-                np.multiply(A[:, 1], t[1], out=t3)
-                Pj += t3
-                np.multiply(A[:, 2], t[2], out=t3)
-                Pj += t3
+            t = tr_T[j]
+            np.multiply(A[:, 0], t[0], out=t3)
+            np.add(Pp, t3, out=Pj)
+            np.multiply(A[:, 1], t[1], out=t3)
+            Pj += t3
+            np.multiply(A[:, 2], t[2], out=t3)
+            Pj += t3
         return self.P, self.R
 
 
@@ -1069,7 +1110,7 @@ def solve_ik(
         raise IkError("the input motion is not finite")
     frozen = _resolve_frozen(skel, body, freeze, ref_pose)
     w_pos, w_rot = dof_weights(skel, posture, root)
-    plan = _make_plan(skel, body, frozen, w_pos, w_rot, mk_joint, mk_local, com_task is not None)
+    plan = _cached_plan(skel, body, frozen, w_pos, w_rot, mk_joint, mk_local, com_task is not None)
 
     out_root = np.array(motion.root_positions, float)
     out_rot = np.array(motion.rotations, float)
@@ -1077,6 +1118,7 @@ def solve_ik(
     converged = np.zeros(F, bool)
     npts = (1 if com_task is not None else 0) + len(mk_joint)
     errors = np.zeros((F, npts))
+    com_out = np.zeros((F, 3)) if com_task is not None else None
     posture_dev = np.zeros(F)
     failed = np.zeros(F, bool)
     chunk = max(1, int(chunk))
@@ -1115,6 +1157,8 @@ def solve_ik(
         else:
             out_rot[np.ix_(a + moved, plan.act_orig)] = q_act[:, :, moved].transpose(2, 1, 0)
         err = np.sqrt(((target - x) ** 2).sum(axis=1)).T  # (f, npts) in plan order
+        if com_out is not None:
+            com_out[a:b] = x[0].T
         # only weighted points can fail (a zero weight switches a marker off for that frame)
         over = np.where(sw.T > 0, err, 0.0)
         if len(mk_joint):  # back to the caller's marker order
@@ -1153,4 +1197,4 @@ def solve_ik(
     residuals[posture.name] = posture_dev
     residuals[root.name] = np.linalg.norm(out_root - ref_root.root_positions, axis=1)
     return IkResult(out, ref_pose, iterations, converged, failed, com_err, mk_err, residuals,
-                    tuple(skel.names[j] for j in frozen), tuple(int(j) for j in plan.act_orig))
+                    tuple(skel.names[j] for j in frozen), tuple(int(j) for j in plan.act_orig), com_out)

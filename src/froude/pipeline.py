@@ -10,6 +10,7 @@ the reference's direction of travel.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,14 +38,26 @@ SWING_MARKER_WEIGHT = 1e-2
 #: then made exact by shifting the root (a root translation moves the COM one to one).
 IK_TOL = 1e-3
 IK_ITERS = 4
+#: Gauss-Newton steps (fresh Jacobian each) of the repair pass. Frames that missed their targets need few:
+#: on the 108 scale outputs of the 9 clips, 2 meet every bar as 6 do (same worst skate, penetration and
+#: joint jump; 0 does not). A frame that flipped to another branch needs more to come back (accelerating
+#: 09_04 to 1.3x keeps a 20 deg knee jump with 3).
+IK_REPAIR_ITERS = 3
+IK_UNFLIP_ITERS = IK_ITERS + 2
 #: Posture weight [1/rad²] of the trunk, arms and head (the legs take the solver's default, 1e-4).
 UPPER_BODY_POSTURE_WEIGHT = 1e-2
 #: Joints IK leaves alone: hands, fingers, mass-less joints and the head and neck (kept from the reference).
 IK_FREEZE = "auto+head"
 #: A joint changing this much more between two frames than in the reference pose there is a branch flip.
 BRANCH_JUMP_DEG = 10.0
-#: Frames whose COM error after the fast pass exceeds this [m] are solved again, harder.
+#: Frames whose COM error, or the error of a foot marker the IK is asked to hold, exceeds this [m] after
+#: the fast pass are solved again, harder.
 RETRY_COM_ERROR = 3e-3
+RETRY_MARKER_ERROR = 3e-3
+#: A foot marker the IK is asked to hold has at least this weight (before the per-size factor); lighter
+#: ones only guide a swinging foot and may stay centimetres off (their floor is SWING_MARKER_WEIGHT): that
+#: is neither a reason to solve again nor a failure.
+HELD_MARKER_WEIGHT = 1.0
 #: Time [s] over which a foot's marker weight ramps between swing and stance around its events.
 WEIGHT_RAMP_S = 0.04
 
@@ -64,6 +77,42 @@ class Prepared:
     cycle: ReferenceCycle
     source: str = ""
     fit: object = None  # froude.machine.fit.FitResult: everything the fit measured (plots, tables)
+    #: Retargets already built for this clip, by (preset name or None, character numbers): an editor asks
+    #: for the same character again and again (every speed change) and building one costs milliseconds.
+    retargets: dict = field(default_factory=dict, repr=False)
+    #: Machines re-solved for a faster speed, by speed factor (the studio's speed slider revisits values).
+    faster_machines: dict = field(default_factory=dict, repr=False)
+
+    def faster_machine(self, speed: float):
+        """``machine.speed.faster_machine(self.machine, speed)``, remembered per speed factor."""
+        from .machine.speed import faster_machine
+
+        key = float(speed)
+        hit = self.faster_machines.get(key)
+        if hit is None:
+            hit = self.faster_machines[key] = faster_machine(self.machine, key)
+        return hit
+
+    def retarget(self, character=None, **character_numbers) -> Retarget:
+        """``apply_character(resolve_character(character, **numbers), self.body)``, remembered for the
+        built-in presets and the reference's own body (files and Character objects are built each time)."""
+        key = None
+        if character is None or (isinstance(character, str) and character in _preset_names()):
+            key = (character, tuple(sorted((k, v) for k, v in character_numbers.items() if v is not None)))
+            hit = self.retargets.get(key)
+            if hit is not None:
+                return hit
+        rt = apply_character(resolve_character(character, **character_numbers), self.body)
+        if key is not None:
+            self.retargets[key] = rt
+        return rt
+
+
+@functools.cache
+def _preset_names() -> frozenset:
+    from .characters import list_presets
+
+    return frozenset(list_presets())
 
 
 def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, length_scale=None) -> Prepared:
@@ -484,37 +533,41 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
     """§6: whole-body IK toward the machine COM and the foot targets, pulled toward the reference pose.
 
     All frames are solved together with the solver's fast chord iterations. Then one repair pass solves
-    again, with a fresh Jacobian every iteration, the few frames that stayed above RETRY_COM_ERROR or
-    jumped to another branch (a knee flipping near full extension), warm-started from the neighbouring
+    again, with a fresh Jacobian every iteration, the few frames whose COM or held foot markers stayed
+    above RETRY_COM_ERROR / RETRY_MARKER_ERROR or that jumped to another branch (a knee flipping near full extension), warm-started from the neighbouring
     frame's solution where they jumped; frames are independent problems, so this is the same problem
     solved harder where needed. Finally the COM is made exact by a root translation.
     """
     from dataclasses import replace as _replace
 
     from . import quat
-    from .ik import ComTask, MarkerTask, PostureTask, solve_ik
+    from .ik import DEFAULT_MAX_ERROR, ComTask, MarkerTask, PostureTask, solve_ik
 
     tasks = [ComTask(body, targets.com, targets.com_weight),
              MarkerTask.feet(body, targets.markers, targets.marker_weight), PostureTask(weight=posture_weights(body))]
     res = solve_ik(targets.initial, tasks, body=body, freeze=IK_FREEZE, on_failure="flag", tol=IK_TOL,
                    max_iters=IK_ITERS)
+    held = _held_markers(targets)
+    res = _replace(res, failed=_missed(res, held, DEFAULT_MAX_ERROR))
     rot = res.motion.rotations
     init_jump = np.degrees(quat.angle_between(targets.initial.rotations[1:], targets.initial.rotations[:-1]).max(axis=1))
     jump = np.degrees(quat.angle_between(rot[1:], rot[:-1]).max(axis=1))
     flip = np.zeros(len(rot), bool)
     flip[1:] = jump > init_jump + BRANCH_JUMP_DEG
-    bad = np.flatnonzero(flip | (res.com_error > RETRY_COM_ERROR) | res.failed)
+    bad = np.flatnonzero(flip | (res.com_error > RETRY_COM_ERROR) | _missed(res, held, RETRY_MARKER_ERROR))
     if bad.size:
         src = np.where(flip[bad], bad - 1, bad)  # a jumped frame starts from its neighbour's solution
         start = res.motion.with_(root_positions=res.motion.root_positions[src], rotations=rot[src])
         sub = Targets(targets.initial.with_(root_positions=targets.initial.root_positions[bad],
                                             rotations=targets.initial.rotations[bad]),
                       targets.com[bad], targets.markers[bad], targets.marker_weight[bad], targets.com_weight[bad])
-        again = _solve_from(sub, start, body)
+        again = _solve_from(sub, start, body, IK_UNFLIP_ITERS if flip[bad].any() else IK_REPAIR_ITERS)
+        again = _replace(again, failed=_missed(again, held[bad], DEFAULT_MAX_ERROR))
         prev = rot[np.maximum(bad - 1, 0)]
         old_jump = np.degrees(quat.angle_between(rot[bad], prev).max(axis=1))
         new_jump = np.degrees(quat.angle_between(again.motion.rotations, prev).max(axis=1))
-        better = np.where(flip[bad], new_jump < old_jump, again.com_error < res.com_error[bad])
+        better = np.where(flip[bad], new_jump < old_jump,
+                          _worst_held(again, held[bad]) < _worst_held(res, held)[bad])
         better &= again.com_error <= np.maximum(res.com_error[bad], RETRY_COM_ERROR)
         root = res.motion.root_positions.copy()
         rot = rot.copy()
@@ -522,21 +575,40 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
         rot[bad[better]] = again.motion.rotations[better]
         com_err = res.com_error.copy()
         com_err[bad[better]] = again.com_error[better]
+        com = res.com.copy()
+        com[bad[better]] = again.com[better]
         failed = res.failed.copy()
         failed[bad[better]] = again.failed[better]
         res = _replace(res, motion=res.motion.with_(root_positions=root, rotations=rot), com_error=com_err,
-                       failed=failed)
+                       failed=failed, com=com)
     # Make the COM exact: the remaining sub-millimetre error is removed by a root translation (the COM
     # moves one to one with it), which moves the feet by as little, so the flight parabola is exact.
-    shift = targets.com - body.com(res.motion)
+    shift = targets.com - res.com  # the solver's COM of the solved poses (no second FK)
     res = _replace(res, motion=res.motion.with_(root_positions=res.motion.root_positions + shift),
-                   com_error=np.zeros(len(shift)))
+                   com_error=np.zeros(len(shift)), com=targets.com.copy())
     if on_failure == "raise" and not res.ok:
         from .errors import IkError
 
         f = int(np.flatnonzero(res.failed)[0])
         raise IkError(f"IK cannot reach its targets at frame {f} (COM error {1000 * res.com_error[f]:.1f} mm)")
     return res
+
+
+def _held_markers(targets: Targets) -> np.ndarray:
+    """(F, 6) the foot markers the IK is asked to hold (weight >= HELD_MARKER_WEIGHT, per size)."""
+    per_size = targets.com_weight / COM_WEIGHT  # (F,): the weights' (reference / target leg)² factor
+    return targets.marker_weight.reshape(len(per_size), -1) >= HELD_MARKER_WEIGHT * per_size[:, None]
+
+
+def _worst_held(res, held: np.ndarray) -> np.ndarray:
+    """(F,) the largest of the COM error and the held foot markers' errors [m]."""
+    return np.maximum(res.com_error, np.where(held, res.marker_error, 0.0).max(axis=1))
+
+
+def _missed(res, held: np.ndarray, limit: float) -> np.ndarray:
+    """(F,) frames whose COM or a held foot marker (held (F, 6)) is more than ``limit`` [m] off its target
+    (NaN-safe: a non-finite error misses)."""
+    return ~(res.com_error <= limit) | np.any(held & ~(res.marker_error <= limit), axis=1)
 
 
 def posture_weights(body: BodyModel) -> np.ndarray:
@@ -563,14 +635,15 @@ def posture_weights(body: BodyModel) -> np.ndarray:
     return w
 
 
-def _solve_from(t: Targets, start: Motion, body: BodyModel):
-    """IK of some frames warm-started from ``start`` while still pulled toward the targets' reference pose."""
+def _solve_from(t: Targets, start: Motion, body: BodyModel, max_iters: int):
+    """IK of some frames warm-started from ``start`` while still pulled toward the targets' reference pose,
+    re-linearised at every one of at most ``max_iters`` steps."""
     from .ik import ComTask, MarkerTask, PostureTask, RootTask, solve_ik
 
     tasks = [ComTask(body, t.com, t.com_weight), MarkerTask.feet(body, t.markers, t.marker_weight),
              PostureTask(weight=posture_weights(body), reference=t.initial), RootTask(reference=t.initial)]
     return solve_ik(start, tasks, body=body, freeze=IK_FREEZE, on_failure="flag", tol=IK_TOL,
-                    max_iters=IK_ITERS + 2, refresh_jacobian=True)
+                    max_iters=max_iters, refresh_jacobian=True)
 
 
 def resolve_character(character=None, *, height=None, mass=None, leg_scale=None, arm_scale=None,
@@ -637,8 +710,7 @@ def plan_scale(
     **character_numbers,
 ) -> ScalePlan:
     """The first half of ``scale`` (same arguments): character, machine, path. Cheap: no IK."""
-    char = resolve_character(character, **character_numbers)
-    retarget = apply_character(char, prep.body)
+    retarget = prep.retarget(character, **character_numbers)
     fps = prep.motion.fps if fps is None else float(fps)
     if not (np.isfinite(fps) and fps > 0):
         raise FroudeError(f"fps must be > 0, got {fps}")
@@ -674,9 +746,7 @@ def plan_scale(
     if speed_model not in ("auto", "stretch", "resolve"):
         raise FroudeError(f"unknown speed model '{speed_model}' (auto, stretch or resolve)")
     if speed_model == "resolve" or (speed_model == "auto" and speed > 1.0 + 1e-9):
-        from .machine.speed import faster_machine
-
-        machine = faster_machine(prep.machine, speed)
+        machine = prep.faster_machine(speed)
         stretch = 1.0
         method = "physical (cycle re-solved at the new speed)"
     else:
@@ -710,8 +780,7 @@ def accelerate(
     """
     from .machine.planner import plan_speed_change
 
-    char = resolve_character(character, **character_numbers)
-    retarget = apply_character(char, prep.body)
+    retarget = prep.retarget(character, **character_numbers)
     m = prep.machine.scaled(retarget.L, retarget.M)
     v_unit = m.speed_unit
     start_speed = m.U * v_unit  # apex speed of the cycle [m/s]

@@ -2,9 +2,11 @@
 machine drawn over them, controls that recompute through the pipeline, numbers, plots and downloads.
 
 Threads: viser calls the GUI handlers on its pool; they only post the latest parameters to the worker
-thread, which computes a cheap preview (machine + time-warped reference, no IK), pushes it, then the IK
-result, and pushes that (a newer request makes it skip the stale one). The player thread draws one frame
-at the display rate by indexing arrays precomputed once per result (FK is never run per frame).
+thread, which computes the IK result and pushes it, then its physics report (a newer request makes it skip
+the stale one). When the result would be slow (long outputs) it first pushes a cheap preview (machine +
+time-warped reference, no IK). The player thread draws one frame at the display rate by indexing arrays
+precomputed once per result (FK is never run per frame); it holds its frames while a quick change is
+computed, so that the change reaches the page sooner.
 """
 from __future__ import annotations
 
@@ -27,8 +29,14 @@ from .tracks import Track
 DISPLAY_HZ = 30.0
 #: Sideways distance [m] between the reference and the result when side by side.
 SIDE_BY_SIDE_M = 1.2
-#: Quiet time [s] after a change before the IK result is computed (a slider drag sends many changes).
+#: A change whose IK result is expected to take longer than this [s] (the last result of its mode, per
+#: stride) first shows a preview — the machine's motion on the new body, no IK — and waits DEBOUNCE_S of
+#: quiet before solving (a slider drag sends many changes). Quicker ones go straight to the result: during
+#: a drag the worker then solves the newest value back to back (the latest request wins).
+SLOW_RESULT_S = 0.1
 DEBOUNCE_S = 0.08
+#: Pause [s] after pushing a result, so the websocket thread sends it before the report is computed.
+YIELD_S = 0.003
 
 COLOR_RESULT = (20, 80, 200)
 COLOR_PREVIEW = (120, 130, 145)
@@ -47,6 +55,8 @@ class Timing:
     result_compute: float = float("nan")
     result_push: float = float("nan")
     report_compute: float = float("nan")
+    started_at: float = float("nan")  # perf_counter when the worker took the change up [s]
+    result_flushed_at: float = float("nan")  # perf_counter when the result was handed to the server [s]
 
 
 class _Runner:
@@ -105,6 +115,7 @@ class Studio:
         self.session = Session(prep)
         self.params = params or Params()
         self._stop = threading.Event()
+        self._busy = threading.Event()  # set while a change is computed: the player then skips its frames
         self._wake = threading.Condition()
         self._pending: tuple[Params, float] | None = None
         self._draw_lock = threading.RLock()
@@ -113,7 +124,9 @@ class Studio:
         self._rate = 1.0
         self.timing = Timing()
         self.message = ""
-        self.good = self.session.solve(self.params)  # the last good result (raises on a bad start)
+        first = self.session.solve(self.params, report=False)  # raises on a bad start
+        self._result_s = {first.params.mode: (first.seconds, first.params.strides)}  # last compute, strides
+        self.good = with_report(prep, first)  # the last good result
         self.shown = self.good
         frame = prep.cycle.frame  # rows: forward, up, lateral (heading frame)
         self._lateral = np.asarray(frame[2], float)
@@ -353,27 +366,38 @@ class Studio:
     def apply(self, params: Params, *, debounce: float = 0.0) -> Timing:
         """Preview → push → (debounce) → result → push, for one change; returns its timing. Never raises
         a FroudeError: a bad change shows its message and the last good result stays."""
-        timing = Timing()
+        timing = Timing(started_at=time.perf_counter())
+        slow = self.expected_seconds(params) > SLOW_RESULT_S
+        if not slow:
+            self._busy.set()  # a quick change: the player holds its frames until it is on screen
         try:
-            t0 = time.perf_counter()
-            pre = self.session.preview(params)
-            if pre is not None:
-                timing.preview_compute = time.perf_counter() - t0
-                t1 = time.perf_counter()
-                self._publish(pre, status=f"preview ({pre.seconds * 1e3:.0f} ms); solving IK ...")
-                timing.preview_push = time.perf_counter() - t1
-            if debounce > 0 and self._stop.wait(debounce):
-                return timing
-            if self._newer_pending():
-                return timing  # superseded: go straight to the newer change
+            if slow:
+                t0 = time.perf_counter()
+                pre = self.session.preview(params)
+                if pre is not None:
+                    timing.preview_compute = time.perf_counter() - t0
+                    t1 = time.perf_counter()
+                    self._publish(pre, status=f"preview ({pre.seconds * 1e3:.0f} ms); solving IK ...")
+                    timing.preview_push = time.perf_counter() - t1
+                if debounce > 0 and self._stop.wait(debounce):
+                    return timing
+                if self._newer_pending():
+                    return timing  # superseded: go straight to the newer change
             t0 = time.perf_counter()
             res = self.session.solve(params, report=False)  # the corrected motion first ...
             timing.result_compute = time.perf_counter() - t0
+            self._result_s[params.mode] = (timing.result_compute, params.strides)
             if self._newer_pending():
                 return timing
             t1 = time.perf_counter()
             self._publish(res, status="computing the physics report ...")
-            timing.result_push = time.perf_counter() - t1
+            timing.result_flushed_at = time.perf_counter()
+            timing.result_push = timing.result_flushed_at - t1
+            # let the server's event loop thread take the GIL and send the new runner before the report's
+            # arithmetic holds it (CPython hands the GIL over only every few milliseconds otherwise)
+            time.sleep(YIELD_S)
+            if self._newer_pending():
+                return timing  # the next change first; this one's report would be stale
             t2 = time.perf_counter()
             res = with_report(self.session.prep, res)  # ... then its numbers
             timing.report_compute = time.perf_counter() - t2
@@ -386,8 +410,19 @@ class Studio:
         except Exception as e:  # never let a bug in one change kill the studio; say it and carry on
             traceback.print_exc(file=sys.stderr)
             self._show_error(f"internal error: {type(e).__name__}: {e}")
+        finally:
+            self._busy.clear()
         self.timing = timing
         return timing
+
+    def expected_seconds(self, params: Params) -> float:
+        """What the IK result of ``params`` should take to compute [s]: the last result of its mode (per
+        stride when scaling), or forever (a preview first) when there was none yet."""
+        last = self._result_s.get(params.mode)
+        if last is None:
+            return float("inf")
+        seconds, strides = last
+        return seconds * (params.strides / max(strides, 1) if params.mode == "scale" else 1.0)
 
     def _work_loop(self) -> None:
         while not self._stop.is_set():
@@ -406,11 +441,9 @@ class Studio:
             if self._t >= dur:
                 self._t = self._t % dur
             self.gui_time.max = round(dur, 2)
-            if not solved.preview:
-                t, fm, fb = self._force_series(solved.track)
-                self.gui_plot.data = (t, fm, fb)
-                if solved.result.report is not None:
-                    self.gui_numbers.content = self._numbers_md(solved)
+            if not solved.preview and solved.result.report is not None:  # numbers and plot follow the runner
+                self.gui_plot.data = self._force_series(solved.track)
+                self.gui_numbers.content = self._numbers_md(solved)
             self.gui_status.content = self._status_md()
             self.gui_state.content = self._state_md()
             self._draw()
@@ -469,10 +502,14 @@ class Studio:
                 if self._playing:
                     dur = self.result.track.duration
                     self._t = (self._t + (now - last) * self._rate) % dur
-                    self._draw()
-                    if now - last_slider > 0.25:  # the scrubber follows, a few times a second
-                        self.gui_time.value = round(min(self._t, self.gui_time.max), 2)
-                        last_slider = now
+                    # While a quick change is computed the clock runs on but frames are not sent: drawing
+                    # and sending them takes the GIL and a core from the solve (measured: +10-15 ms on a
+                    # 40 ms change); the new result is drawn at the current time the moment it is ready.
+                    if not self._busy.is_set():
+                        self._draw()
+                        if now - last_slider > 0.25:  # the scrubber follows, a few times a second
+                            self.gui_time.value = round(min(self._t, self.gui_time.max), 2)
+                            last_slider = now
             except Exception:  # a drawing hiccup (e.g. a client leaving) must not stop playback
                 traceback.print_exc(file=sys.stderr)
             last = now

@@ -118,7 +118,8 @@ class Session:
             res = pipeline.accelerate(self.prep, spec, to_factor=params.to_factor, steps=int(params.steps),
                                       report=report, **nums)
         _require_finite(res.motion)
-        track = machine_track(res.motion, res.retarget.body, res.path)
+        # the corrected COM is the machine's (correct() makes it exact), so the track needs no COM pass
+        track = machine_track(res.motion, res.retarget.body, res.path, body_com=res.targets.com)
         return Solved(params, track, res, False, time.perf_counter() - t0, motion_hash(res.motion),
                       res.motion.n_frames)
 

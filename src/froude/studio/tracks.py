@@ -6,6 +6,7 @@ legs (COM → contact point while a foot is in stance), the contact points and t
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 from dataclasses import dataclass
@@ -29,7 +30,8 @@ class Track:
     zero length at the COM when that foot is not in stance; contacts: (n, 3) contact points [m] with
     contact_foot (n,) 0/1; trail: (K, 2, 3) float32 COM path segments [m];
     force_t: (T,) [s], force_bw: (T,) machine vertical leg force [body weights] (empty if none);
-    body_force_bw: (F,) vertical force the body's COM implies [body weights];
+    body_com: (F, 3) the body's whole-body COM [m], whose implied vertical force ``body_force_bw`` (F,)
+    [body weights] is worked out when first asked for (the plot is drawn after the runner);
     loop_shift: (3,) horizontal displacement over one pass, added per loop so a short clip keeps running.
     """
 
@@ -42,8 +44,12 @@ class Track:
     trail: np.ndarray
     force_t: np.ndarray
     force_bw: np.ndarray
-    body_force_bw: np.ndarray
+    body_com: np.ndarray
     loop_shift: np.ndarray
+
+    @functools.cached_property
+    def body_force_bw(self) -> np.ndarray:
+        return body_force_bw(self.body_com, self.frame_time)
 
     @property
     def n_frames(self) -> int:
@@ -123,19 +129,24 @@ def body_force_bw(com: np.ndarray, frame_time: float) -> np.ndarray:
         return np.full(len(com), np.nan)
 
 
-def machine_track(motion: Motion, body, path) -> Track:
-    """A result (or preview) on its target skeleton with its machine path drawn over it."""
+def machine_track(motion: Motion, body, path, body_com: np.ndarray | None = None) -> Track:
+    """A result (or preview) on its target skeleton with its machine path drawn over it.
+
+    body_com: (F, 3) the motion's whole-body COM [m] when known (an IK result's is the machine's, exactly);
+    computed from the FK otherwise.
+    """
     seg, P, R = bone_segments(motion)
     F = seg.shape[0]
     com_path = np.asarray(path.com[:F], float)
-    body_com = np.ascontiguousarray(body.com_soa(P, R).T)
+    if body_com is None:
+        body_com = np.ascontiguousarray(body.com_soa(P, R).T)
     f_bw = path.force[:, UP_AXIS] / (path.mass * GRAVITY)
     return Track(
         frame_time=float(motion.frame_time), segments=seg, com=com_path,
         legs=spring_legs(com_path, path_stance_contacts(path, F)),
         contacts=np.asarray(path.contacts, float), contact_foot=np.asarray(path.foot_of_step, int),
         trail=trail_segments(com_path), force_t=np.asarray(path.times, float), force_bw=f_bw,
-        body_force_bw=body_force_bw(body_com, motion.frame_time), loop_shift=np.zeros(3),
+        body_com=body_com, loop_shift=np.zeros(3),
     )
 
 
@@ -158,8 +169,7 @@ def reference_track(prep) -> Track:
         frame_time=float(motion.frame_time), segments=seg, com=com, legs=spring_legs(com, contact),
         contacts=np.array([s.contact_point for s in stances]).reshape(-1, 3),
         contact_foot=np.array([s.foot for s in stances], int), trail=trail_segments(com),
-        force_t=np.zeros(0), force_bw=np.zeros(0), body_force_bw=body_force_bw(com, motion.frame_time),
-        loop_shift=shift,
+        force_t=np.zeros(0), force_bw=np.zeros(0), body_com=com, loop_shift=shift,
     )
 
 

@@ -125,7 +125,7 @@ def main() -> None:
     tab = _Tab(f"ws://127.0.0.1:{studio.server.get_port()}", viser.__version__)
     time.sleep(1.0)  # the initial scene
     print(f"result: {studio.good.n_frames} frames at {prep.motion.fps:.0f} Hz (4 strides), "
-          f"{studio.good.track.segments.shape[1]} bones; player at 30 Hz")
+          f"{studio.good.track.n_bones} bones; player at 30 Hz")
 
     # the speed slider's own grid (step 0.05), every value once, slower and faster than the clip in turn
     speeds = [1.05, 1.15, 1.0, 1.2, 0.95, 1.25, 0.9, 1.3, 0.85, 1.35, 0.8, 1.4, 0.75, 1.45, 1.1]

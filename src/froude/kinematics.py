@@ -58,6 +58,8 @@ def fk_soa(
     """
     J = len(parents)
     F = rotations_T.shape[2]
+    if F <= FEW_FRAMES and translations_T is None:
+        return _fk_by_depth(parents, offsets, root_positions_T, rotations_T)
     R_local = np.empty((J, 9, F))
     tmp = np.empty((3, F))
     for j in range(J):
@@ -95,6 +97,60 @@ def fk_soa(
             t = translations_T[j]
             for r in range(3):
                 P[j, r] = P[pj, r] + A[3 * r] * t[0] + A[3 * r + 1] * t[1] + A[3 * r + 2] * t[2]
+    return P, R
+
+
+#: Up to this many frames, ``fk_soa`` works joint depth by joint depth (all joints of one depth in one
+#: batch of array operations: ~8 batches instead of ~30 joints' ~60 row operations each). With few frames
+#: the cost is the count of NumPy calls, not the arithmetic (measured on a 31-joint CMU skeleton: one
+#: frame 0.4 ms instead of 3.7 ms, 353 frames 1.2 instead of 3.8 ms); from about 800 frames on, row
+#: operations on long contiguous rows are as fast. Same arithmetic in the same order either way.
+FEW_FRAMES = 768
+
+
+def _depth_batches(parents: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """[(joints, their parents)] of each depth below the root, root's children first."""
+    key = np.asarray(parents, np.int64).tobytes()
+    hit = _DEPTHS.get(key)
+    if hit is None:
+        depth = np.zeros(len(parents), np.int64)
+        for j in range(1, len(parents)):
+            depth[j] = depth[parents[j]] + 1
+        hit = []
+        for d in range(1, int(depth.max(initial=0)) + 1):
+            js = np.flatnonzero(depth == d)
+            hit.append((js, np.asarray(parents, np.int64)[js]))
+        _DEPTHS[key] = hit
+    return hit
+
+
+_DEPTHS: dict[bytes, list] = {}
+
+
+def _fk_by_depth(parents, offsets, root_positions_T, rotations_T) -> tuple[np.ndarray, np.ndarray]:
+    """``fk_soa`` (no translations) one depth of the tree at a time; same outputs, entry for entry."""
+    J, _, F = rotations_T.shape
+    R_local = np.empty((J, 9, F))
+    _quat_rows(rotations_T.transpose(1, 0, 2), R_local.transpose(1, 0, 2), np.empty((3, J, F)))
+    R = np.empty((J, 9, F))
+    P = np.empty((J, 3, F))
+    R[0] = R_local[0]
+    P[0] = root_positions_T
+    off = np.asarray(offsets, float)
+    for js, ps in _depth_batches(parents):
+        m = len(js)
+        A = R[ps].reshape(m, 3, 3, F)
+        B = R_local[js].reshape(m, 3, 3, F)
+        C = A[:, :, 0:1] * B[:, 0:1]  # C[r, c] = A[r, 0] B[0, c] + A[r, 1] B[1, c] + A[r, 2] B[2, c]
+        C += A[:, :, 1:2] * B[:, 1:2]
+        C += A[:, :, 2:3] * B[:, 2:3]
+        R[js] = C.reshape(m, 9, F)
+        o = off[js][:, :, None, None]  # (m, 3, 1, 1): a zero offset adds an exact zero
+        Pj = A[:, :, 0] * o[:, 0]
+        Pj += P[ps]
+        Pj += A[:, :, 1] * o[:, 1]
+        Pj += A[:, :, 2] * o[:, 2]
+        P[js] = Pj
     return P, R
 
 

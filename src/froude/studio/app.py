@@ -64,7 +64,7 @@ class _Runner:
 
     def __init__(self, scene, root: str, track: Track, color):
         self.root = scene.add_frame(root, show_axes=False)
-        self.body = scene.add_line_segments(f"{root}/body", track.segments[0], _colors(track.segments, color),
+        self.body = scene.add_line_segments(f"{root}/body", track.segments_at(0), _colors(track, color),
                                             thickness=0.04)
         self.com = scene.add_icosphere(f"{root}/com", radius=0.06, color=COLOR_COM, position=track.com[0],
                                        subdivisions=2, cast_shadow=False, receive_shadow=False)
@@ -77,7 +77,7 @@ class _Runner:
     def set_track(self, track: Track, color) -> None:
         """New precomputed arrays (one message per static node; per-frame nodes follow in draw)."""
         self.track = track
-        self.body.colors = _colors(track.segments, color)
+        self.body.colors = _colors(track, color)
         pts, cols = _contact_points(track)
         self.contacts.points, self.contacts.colors = pts, cols
         self.trail.points = track.trail
@@ -85,7 +85,7 @@ class _Runner:
     def draw(self, t: float, offset: np.ndarray, machine: bool) -> None:
         i, shift = self.track.frame_at(t)
         self.root.position = offset + shift
-        self.body.points = self.track.segments[i]
+        self.body.points = self.track.segments_at(i)
         self.com.position = self.track.com[i]
         self.legs.points = self.track.legs[i]
         for node in (self.com, self.legs, self.contacts, self.trail):
@@ -95,8 +95,8 @@ class _Runner:
         self.root.visible = visible
 
 
-def _colors(segments: np.ndarray, color) -> np.ndarray:
-    return np.broadcast_to(np.asarray(color, np.uint8), segments.shape[1:]).copy()
+def _colors(track: Track, color) -> np.ndarray:
+    return np.broadcast_to(np.asarray(color, np.uint8), (track.n_bones, 2, 3)).copy()
 
 
 def _contact_points(track: Track) -> tuple[np.ndarray, np.ndarray]:
@@ -396,9 +396,11 @@ class Studio:
             # let the server's event loop thread take the GIL and send the new runner before the report's
             # arithmetic holds it (CPython hands the GIL over only every few milliseconds otherwise)
             time.sleep(YIELD_S)
+            self._busy.clear()  # the runner is on the page: playback goes on while the rest is worked out
             if self._newer_pending():
                 return timing  # the next change first; this one's report would be stale
             t2 = time.perf_counter()
+            res.track.segments  # noqa: B018 -- all frames' bones, so the player only indexes from here on
             res = with_report(self.session.prep, res)  # ... then its numbers
             timing.report_compute = time.perf_counter() - t2
             if self._newer_pending():

@@ -1,8 +1,9 @@
 """What the studio draws, precomputed once per motion: pure NumPy, no viser.
 
 A ``Track`` holds everything the playback loop needs for one runner at every frame, so that a frame
-update is only array indexing: bone segments from one batched FK, the simple machine's COM, the spring
-legs (COM → contact point while a foot is in stance), the contact points and the COM trail.
+update is only array indexing: bone segments from one batched FK (worked out after the first frame is on
+screen), the simple machine's COM, the spring legs (COM → contact point while a foot is in stance), the
+contact points and the COM trail.
 """
 from __future__ import annotations
 
@@ -25,8 +26,9 @@ TRAIL_STRIDE = 3
 class Track:
     """One runner ready to play.
 
-    frame_time [s]; segments: (F, B, 2, 3) float32 bone segments [m] (joint→child, joint→end site);
-    com: (F, 3) simple-machine (or body) COM [m]; legs: (F, 2, 2, 3) float32 spring-leg segment per foot,
+    frame_time [s]; motion: the runner's poses, whose bone segments ``segments`` (F, B, 2, 3) float32 [m]
+    (joint→child, joint→end site) are worked out by one batched FK when first needed (``segments_at``
+    gives one frame before that: a new result is drawn without waiting for all its frames); com: (F, 3) simple-machine (or body) COM [m]; legs: (F, 2, 2, 3) float32 spring-leg segment per foot,
     zero length at the COM when that foot is not in stance; contacts: (n, 3) contact points [m] with
     contact_foot (n,) 0/1; trail: (K, 2, 3) float32 COM path segments [m];
     force_t: (T,) [s], force_bw: (T,) machine vertical leg force [body weights] (empty if none);
@@ -36,7 +38,7 @@ class Track:
     """
 
     frame_time: float
-    segments: np.ndarray
+    motion: Motion
     com: np.ndarray
     legs: np.ndarray
     contacts: np.ndarray
@@ -51,9 +53,23 @@ class Track:
     def body_force_bw(self) -> np.ndarray:
         return body_force_bw(self.body_com, self.frame_time)
 
+    @functools.cached_property
+    def segments(self) -> np.ndarray:
+        return bone_segments(self.motion)[0]
+
+    def segments_at(self, i: int) -> np.ndarray:
+        """(B, 2, 3) float32 bone segments of frame i [m] (one frame's FK until all frames are done)."""
+        done = self.__dict__.get("segments")
+        return done[i] if done is not None else bone_segments(self.motion[i:i + 1])[0][0]
+
+    @property
+    def n_bones(self) -> int:
+        sk = self.motion.skeleton
+        return int(np.count_nonzero(sk.parents >= 0)) + len(sk.end_sites)
+
     @property
     def n_frames(self) -> int:
-        return int(self.segments.shape[0])
+        return int(self.motion.n_frames)
 
     @property
     def duration(self) -> float:
@@ -135,26 +151,29 @@ def machine_track(motion: Motion, body, path, body_com: np.ndarray | None = None
     body_com: (F, 3) the motion's whole-body COM [m] when known (an IK result's is the machine's, exactly);
     computed from the FK otherwise.
     """
-    seg, P, R = bone_segments(motion)
-    F = seg.shape[0]
+    F = motion.n_frames
     com_path = np.asarray(path.com[:F], float)
-    if body_com is None:
+    seg = None
+    if body_com is None:  # one FK for the COM and the bones
+        seg, P, R = bone_segments(motion)
         body_com = np.ascontiguousarray(body.com_soa(P, R).T)
     f_bw = path.force[:, UP_AXIS] / (path.mass * GRAVITY)
-    return Track(
-        frame_time=float(motion.frame_time), segments=seg, com=com_path,
+    track = Track(
+        frame_time=float(motion.frame_time), motion=motion, com=com_path,
         legs=spring_legs(com_path, path_stance_contacts(path, F)),
         contacts=np.asarray(path.contacts, float), contact_foot=np.asarray(path.foot_of_step, int),
         trail=trail_segments(com_path), force_t=np.asarray(path.times, float), force_bw=f_bw,
         body_com=body_com, loop_shift=np.zeros(3),
     )
+    if seg is not None:
+        track.__dict__["segments"] = seg  # already computed: fill the cached property
+    return track
 
 
 def reference_track(prep) -> Track:
     """The reference clip with its own COM, detected contacts and legs; loops with its displacement."""
     motion = prep.motion
-    seg, _, _ = bone_segments(motion)
-    F = seg.shape[0]
+    F = motion.n_frames
     com = np.asarray(prep.com, float)
     contact = np.full((F, 2, 3), np.nan)
     for s in prep.gait.stances:  # loop over contacts, not frames
@@ -165,12 +184,14 @@ def reference_track(prep) -> Track:
         shift = shift + (com[-1] - com[-2])
     shift[UP_AXIS] = 0.0
     stances = prep.gait.stances
-    return Track(
-        frame_time=float(motion.frame_time), segments=seg, com=com, legs=spring_legs(com, contact),
+    track = Track(
+        frame_time=float(motion.frame_time), motion=motion, com=com, legs=spring_legs(com, contact),
         contacts=np.array([s.contact_point for s in stances]).reshape(-1, 3),
         contact_foot=np.array([s.foot for s in stances], int), trail=trail_segments(com),
         force_t=np.zeros(0), force_bw=np.zeros(0), body_com=com, loop_shift=shift,
     )
+    _ = track.segments  # played from start to end for the whole session: all frames now
+    return track
 
 
 def motion_hash(motion: Motion) -> str:

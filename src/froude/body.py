@@ -8,6 +8,7 @@ motion is a weighted sum of transformed points (see ``kinematics``).
 """
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -99,6 +100,16 @@ def find_roles(skeleton: Skeleton, joint_map: Mapping[str, str] | None = None) -
 
     Raises JointMapError naming every required role that could not be found.
     """
+    # Remembered by names: every retarget of a clip (an editor makes one per slider step) has its names.
+    jm = tuple(sorted(joint_map.items())) if joint_map else None
+    return dict(_roles_of_names(tuple(skeleton.names), jm))
+
+
+@functools.lru_cache(maxsize=64)
+def _roles_of_names(names: tuple[str, ...], joint_map: tuple[tuple[str, str], ...] | None) -> dict[str, int]:
+    """``find_roles`` for joint names and a joint map as sorted (role, name) pairs (callers copy the dict)."""
+    skeleton = _Names(names)
+    joint_map = dict(joint_map) if joint_map else None
     roles: dict[str, int] = {"pelvis": 0}
     parsed = [_side_and_core(n) for n in skeleton.names]
     for side in SIDES:
@@ -132,6 +143,13 @@ def find_roles(skeleton: Skeleton, joint_map: Mapping[str, str] | None = None) -
             + " (give a joint map YAML 'role: JointName'; joints are: " + ", ".join(skeleton.names) + ")"
         )
     return roles
+
+
+@dataclass(frozen=True)
+class _Names:
+    """What role finding reads of a skeleton: its joint names."""
+
+    names: tuple[str, ...]
 
 
 def load_joint_map(path: str | Path) -> dict[str, str]:

@@ -550,8 +550,8 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
     held = _held_markers(targets)
     res = _replace(res, failed=_missed(res, held, DEFAULT_MAX_ERROR))
     rot = res.motion.rotations
-    init_jump = np.degrees(quat.angle_between(targets.initial.rotations[1:], targets.initial.rotations[:-1]).max(axis=1))
-    jump = np.degrees(quat.angle_between(rot[1:], rot[:-1]).max(axis=1))
+    init_jump = _largest_joint_step_deg(targets.initial.rotations)
+    jump = _largest_joint_step_deg(rot)
     flip = np.zeros(len(rot), bool)
     flip[1:] = jump > init_jump + BRANCH_JUMP_DEG
     bad = np.flatnonzero(flip | (res.com_error > RETRY_COM_ERROR) | _missed(res, held, RETRY_MARKER_ERROR))
@@ -598,6 +598,13 @@ def _held_markers(targets: Targets) -> np.ndarray:
     """(F, 6) the foot markers the IK is asked to hold (weight >= HELD_MARKER_WEIGHT, per size)."""
     per_size = targets.com_weight / COM_WEIGHT  # (F,): the weights' (reference / target leg)² factor
     return targets.marker_weight.reshape(len(per_size), -1) >= HELD_MARKER_WEIGHT * per_size[:, None]
+
+
+def _largest_joint_step_deg(rotations: np.ndarray) -> np.ndarray:
+    """(F-1,) the largest rotation of any joint between consecutive frames [deg] of rotations (F, J, 4):
+    2 acos of the smallest |q_t · q_t+1| (acos falls, so one per frame pair instead of one per joint)."""
+    dot = np.abs(np.einsum("fjc,fjc->fj", rotations[1:], rotations[:-1])).min(axis=1)
+    return np.degrees(2.0 * np.arccos(np.minimum(dot, 1.0)))
 
 
 def _worst_held(res, held: np.ndarray) -> np.ndarray:

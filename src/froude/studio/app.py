@@ -73,11 +73,14 @@ class _Runner:
                                               point_shape="circle")
         self.trail = scene.add_line_segments(f"{root}/trail", track.trail, COLOR_COM, thickness=0.008)
         self.track = track
+        self._colored = (color, track.n_bones)
 
     def set_track(self, track: Track, color) -> None:
         """New precomputed arrays (one message per static node; per-frame nodes follow in draw)."""
         self.track = track
-        self.body.colors = _colors(track, color)
+        if (color, track.n_bones) != self._colored:  # each message costs the push a little: only changes
+            self.body.colors = _colors(track, color)
+            self._colored = (color, track.n_bones)
         pts, cols = _contact_points(track)
         self.contacts.points, self.contacts.colors = pts, cols
         self.trail.points = track.trail

@@ -267,3 +267,22 @@ def test_kept_buffer_fk_matches_fk_soa(clip, body):
         P, R = fk(root_T, rot_T, tr)
         P0, R0 = fk_soa(plan.parents, plan.offsets, root_T, rot_T, tr)
         assert np.abs(P - P0).max() < 1e-14 and np.abs(R - R0).max() < 1e-14
+
+
+def test_folded_subtrees_keep_the_com(clip, body):
+    """Frozen subtrees that only carry mass (the hands; the neck and head with "auto+head") are folded into
+    the joint they hang from instead of being part of every FK pass: the solver's COM of the unchanged
+    pose is still the body model's, with the skeleton's offsets and with per-frame joint translations."""
+    m = clip[:40]
+    w_pos, w_rot = ik.dof_weights(m.skeleton, ik.PostureTask(), ik.RootTask())
+    plan = ik._make_plan(m.skeleton, body, ik.default_frozen_joints(body, m, freeze_head=True), w_pos, w_rot,
+                         body.marker_joint.reshape(6), body.marker_local.reshape(6, 3), True)
+    assert {"Head", "LeftHand", "RightHand"} <= {m.skeleton.names[j] for j in plan.fold_orig}
+    rng = np.random.default_rng(4)
+    tr = np.asarray(m.skeleton.offsets, float) * rng.uniform(0.9, 1.1, (m.n_frames, m.skeleton.n_joints, 1))
+    for motion in (m, m.with_(translations=tr)):
+        com, mk = body.com_and_markers(motion)
+        res = ik.solve_ik(motion, [ik.ComTask(body, com), ik.MarkerTask.feet(body, mk)], freeze="auto+head",
+                          max_iters=0)
+        assert np.abs(res.com - com).max() < 1e-12
+        assert res.marker_error.max() < 1e-12

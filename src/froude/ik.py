@@ -24,7 +24,10 @@ posture weight is isotropic, the 3 × 3 blocks of J̃ D⁻¹ J̃ᵀ need no join
 Σ_k d_k ((ũ_p·ũ_q) I − ũ_q ũ_pᵀ) over the joints k moving both points, ũ the (weighted) lever from the
 joint to the point (for the COM the subtree mass moment, see ``kinematics.com_jacobian``). All frames of
 a chunk are processed together in the component-major layout of ``kinematics.fk_soa`` (each NumPy
-operation on contiguous (F,) rows), with a batched Cholesky factorisation written the same way.
+operation on contiguous (F,) rows), with a batched Cholesky factorisation written the same way. With few
+frames the cost is the number of NumPy calls rather than the arithmetic, so the kernels work on whole
+blocks: FK one tree depth per einsum, the cross products of all three axes of a group of points in one
+einsum, the triangular solves by 3 × 3 blocks (one task point each).
 
 Iterations: the first step linearises at the warm start (the reference pose); later steps reuse that
 factorisation with fresh errors (a chord / modified Gauss-Newton iteration: the corrections are small,
@@ -33,7 +36,9 @@ once every weighted COM/marker error is below ``tol`` (the paper's "visually imp
 frames leave the working set, so late iterations cost in proportion to the frames that need them.
 
 Joints that move no mass and no marker (fingers, thumbs) and, by default, the hands are frozen: they
-keep the input rotations and cost nothing.
+keep the input rotations and cost nothing. Frozen subtrees that still carry mass (the hands, the head with
+"auto+head") are folded into the joint they hang from: their mass moment about it is fixed per frame,
+computed once per chunk, so the iterations' FK passes skip them.
 """
 from __future__ import annotations
 
@@ -365,19 +370,20 @@ def dof_weights(skeleton: Skeleton, posture: PostureTask, root: RootTask) -> tup
 
 
 # ---- component-major (SOA) helpers ---------------------------------------------------------------------
-def _qmul_soa(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """Hamilton product of quaternion rows a, b (4, ...) -> (4, ...), written into ``out`` when given
-    (which must not overlap a or b)."""
+def _qmul_soa(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None, conj_a: bool = False) -> np.ndarray:
+    """Hamilton product of quaternion rows a, b (4, ...) -> (4, ...) (conj(a) b with ``conj_a``), written into
+    ``out`` when given (which must not overlap a or b)."""
     aw, ax, ay, az = a
     bw, bx, by, bz = b
     if out is None:
         out = np.empty(np.broadcast_shapes(a.shape, b.shape))
     t = np.empty(out.shape[1:])
+    flip = -1 if conj_a else 1  # conj(a) negates the terms of ax, ay, az
     # each row left to right, as written: w = aw bw − ax bx − ay by − az bz, ...
-    for o, terms in ((out[0], ((aw, bw, 1), (ax, bx, -1), (ay, by, -1), (az, bz, -1))),
-                     (out[1], ((aw, bx, 1), (ax, bw, 1), (ay, bz, 1), (az, by, -1))),
-                     (out[2], ((aw, by, 1), (ax, bz, -1), (ay, bw, 1), (az, bx, 1))),
-                     (out[3], ((aw, bz, 1), (ax, by, 1), (ay, bx, -1), (az, bw, 1)))):
+    for o, terms in ((out[0], ((aw, bw, 1), (ax, bx, -flip), (ay, by, -flip), (az, bz, -flip))),
+                     (out[1], ((aw, bx, 1), (ax, bw, flip), (ay, bz, flip), (az, by, -flip))),
+                     (out[2], ((aw, by, 1), (ax, bz, -flip), (ay, bw, flip), (az, bx, flip))),
+                     (out[3], ((aw, bz, 1), (ax, by, flip), (ay, bx, -flip), (az, bw, flip)))):
         np.multiply(terms[0][0], terms[0][1], out=o)
         for u, v, sgn in terms[1:]:
             np.multiply(u, v, out=t)
@@ -389,19 +395,20 @@ def _qmul_soa(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np
 
 
 def _log_err_soa(q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
-    """log(q⁻¹ q_ref) for rows (4, ...) -> (3, ...) [rad]."""
-    qw, qx, qy, qz = q
-    rw, rx, ry, rz = q_ref
-    w = qw * rw + qx * rx + qy * ry + qz * rz
-    x = qw * rx - qx * rw - qy * rz + qz * ry
-    y = qw * ry + qx * rz - qy * rw - qz * rx
-    z = qw * rz - qx * ry + qy * rx - qz * rw
-    s = np.sqrt(x * x + y * y + z * z)
-    sign = np.where(w < 0, -1.0, 1.0)
-    angle = 2.0 * np.arctan2(s, np.abs(w))
+    """log(q⁻¹ q_ref) for rows (4, ...) -> (3, ...) [rad] (the shorter way round: q and −q are one rotation)."""
+    d = _qmul_soa(q, q_ref, conj_a=True)
+    w, v = d[0], d[1:]
+    s = np.sqrt(np.einsum("a...,a...->...", v, v))
+    half = np.arctan2(s, np.abs(w))  # half the angle
     small = s < 1e-12
-    scale = np.where(small, 2.0, angle / np.where(small, 1.0, s)) * sign
-    return np.stack([x * scale, y * scale, z * scale])
+    if small.any():
+        scale = np.where(small, 1.0, half / np.where(small, 1.0, s))
+    else:
+        scale = np.divide(half, s, out=half)
+    scale *= 2.0
+    np.negative(scale, out=scale, where=w < 0)
+    v *= scale
+    return v
 
 
 def _exp_soa(v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -442,33 +449,57 @@ def _cholesky_soa(A: np.ndarray) -> np.ndarray:
     m = A.shape[0]
     L = A
     for j in range(m):
-        Lj = L[j, :j]
-        d = L[j, j]
-        if j:
-            d -= np.einsum("kf,kf->f", Lj, Lj)
-        np.sqrt(d, out=d)
+        if j:  # column j from the diagonal down, less its products with the columns done (one einsum)
+            L[j:, j] -= np.einsum("ikf,kf->if", L[j:, :j], L[j, :j])
+        d = np.sqrt(L[j, j], out=L[j, j])
         if j < m - 1:
-            col = L[j + 1:, j]
-            if j:
-                col -= np.einsum("ikf,kf->if", L[j + 1:, :j], Lj)
-            col /= d
+            L[j + 1:, j] /= d
     return L
 
 
-def _cho_solve_soa(L: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solve L Lᵀ x = b for (m, m, F) factors and (m, F) right-hand sides."""
-    m = L.shape[0]
+def _block_inverses(L: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """(nb, 3, 3, F) inverses of the 3 × 3 diagonal blocks of lower Cholesky factors L (3 nb, 3 nb, F): lower
+    triangular, from the closed-form inverse of a triangular 3 × 3 matrix, all blocks at once (written into
+    ``out`` when given)."""
+    nb, F = L.shape[0] // 3, L.shape[2]
+    i = 3 * np.arange(nb)
+    inv = np.empty((nb, 3, 3, F)) if out is None else out
+    inv[:, 0, 1:] = 0.0
+    inv[:, 1, 2] = 0.0
+    for k in range(3):
+        np.divide(1.0, L[i + k, i + k], out=inv[:, k, k])
+    inv[:, 1, 0] = -L[i + 1, i] * inv[:, 0, 0] * inv[:, 1, 1]
+    inv[:, 2, 1] = -L[i + 2, i + 1] * inv[:, 1, 1] * inv[:, 2, 2]
+    inv[:, 2, 0] = -(L[i + 2, i] * inv[:, 0, 0] + L[i + 2, i + 1] * inv[:, 1, 0]) * inv[:, 2, 2]
+    return inv
+
+
+def _cho_solve_soa(L: np.ndarray, inv: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Solve L Lᵀ x = b for (m, m, F) lower factors and (m, F) right-hand sides, by 3 × 3 blocks (one task
+    point each; ``inv``: ``_block_inverses(L)``): per block and sweep one einsum against the solved blocks
+    and one with the block's inverse, instead of three NumPy calls per row."""
+    nb, F = L.shape[0] // 3, b.shape[1]
+    r = np.empty((3, F))
     y = np.empty_like(b)
-    for j in range(m):
-        v = b[j] - np.einsum("kf,kf->f", L[j, :j], y[:j]) if j else b[j].copy()
-        v /= L[j, j]
-        y[j] = v
-    x = np.empty_like(b)
-    for j in range(m - 1, -1, -1):
-        v = y[j] - np.einsum("kf,kf->f", L[j + 1:, j], x[j + 1:]) if j < m - 1 else y[j].copy()
-        v /= L[j, j]
-        x[j] = v
+    for B in range(nb):  # L y = b
+        s = slice(3 * B, 3 * B + 3)
+        if B:
+            np.subtract(b[s], np.einsum("ikf,kf->if", L[s, :s.start], y[:s.start]), out=r)
+        np.einsum("ikf,kf->if", inv[B], r if B else b[s], out=y[s])
+    x = y  # Lᵀ x = y from the bottom up: block B of y is read before it is written
+    for B in range(nb - 1, -1, -1):
+        s = slice(3 * B, 3 * B + 3)
+        if B < nb - 1:
+            np.subtract(y[s], np.einsum("kif,kf->if", L[s.stop:, s], x[s.stop:]), out=r)
+        else:
+            r[:] = y[s]
+        np.einsum("kif,kf->if", inv[B], r, out=x[s])
     return x
+
+
+#: Cyclic axis pairs (a + 1, a + 2) mod 3 for a = x, y, z: gathering a vector's rows with these gives the
+#: (2, 3) layout that ``_Lin.pairs`` contracts with (v × u over all three axes in one einsum).
+_CYC = np.array([[1, 2, 0], [2, 0, 1]])
 
 
 # ---- the solver plan: which joints, which levers ------------------------------------------------------
@@ -482,6 +513,16 @@ class _Group:
     joints: np.ndarray  # (u,) indices into the active joints
     mask: np.ndarray  # (g, u, 1, 1) 1.0 where the joint moves the point
     rows: slice  # rows of the group's points in the reduced system
+    span: slice = field(init=False)  # the points as a slice (they are consecutive in plan order)
+    runs: tuple = field(init=False)  # (active joints, group joints) slice pairs of consecutive joints
+
+    def __post_init__(self):
+        object.__setattr__(self, "span", slice(self.rows.start // 3, self.rows.stop // 3))
+        j = np.asarray(self.joints)
+        cut = np.flatnonzero(np.diff(j) != 1) + 1  # per-joint sums go back in a few slice additions
+        runs = [(slice(int(j[a]), int(j[b - 1]) + 1), slice(int(a), int(b)))
+                for a, b in zip(np.r_[0, cut], np.r_[cut, len(j)])]
+        object.__setattr__(self, "runs", tuple(runs))
 
 
 @dataclass(frozen=True, eq=False)
@@ -493,10 +534,10 @@ class _Plan:
     act_orig: np.ndarray  # (K,) original indices
     d_rot: np.ndarray  # (K,) inverse rotation weights [rad²]
     d_pos: float  # inverse root position weight [m²]
-    seg_joint: np.ndarray  # (S,) sub numbering
+    seg_joint: np.ndarray  # (S,) the FK joint carrying each segment, sub numbering (folded: the attach joint)
     seg_local: np.ndarray  # (S, 3)
     seg_mass: np.ndarray  # (S,)
-    m_sub: np.ndarray  # (Jn,) subtree mass [kg]
+    m_sub: np.ndarray  # (Jn,) subtree mass [kg] (folded segments included)
     has_com: bool
     mk_order: np.ndarray  # (P,) marker indices (caller's order) in plan (group) order
     mk_joint: np.ndarray  # (P,) sub numbering, plan order
@@ -504,8 +545,20 @@ class _Plan:
     groups: tuple  # of _Group
     pairs: tuple  # (g1, g2, i1, i2): common joints of groups g1 <= g2 as positions in each union
     w_own: np.ndarray  # (Jn, 3, 12) first mass moment of each joint's own segments from its FK rows [kg m]
+    w_com: np.ndarray  # (3, 12 Jn) the same summed over joints, plus the folded masses at their attach joints
     w_mk: np.ndarray  # (P, 3, 12) each marker from its joint's FK rows (R entries, then P) [m]
     subtree: np.ndarray  # (K, Jn) 1.0 where joint j is in the subtree of active joint k
+    cyc_rows: np.ndarray  # (Σu, 2, 3) rows v[_CYC] of (K, 3) per-joint vectors v, every group's joints
+    cyc_spans: tuple  # per group its slice of cyc_rows
+    fk_frozen: np.ndarray  # FK joints (sub numbering) not active: their local rotations are converted once
+    fk_levels: tuple  # ``_depth_levels`` of the FK joints (local rotation rows: active ones, then fk_frozen)
+    # Folded joints (needed only for the mass they carry, see _make_plan), as a small skeleton whose
+    # root 0 stands for the FK joint each subtree hangs from:
+    fold_orig: np.ndarray  # (Nf,) original indices of the folded joints (small-skeleton joints 1..Nf)
+    fold_levels: tuple  # ``_depth_levels`` of the small skeleton (local rotation rows: its joint indices)
+    fold_attach: np.ndarray  # (Na,) sub numbering: the joints folded subtrees hang from
+    fold_w: np.ndarray  # (3 Na, 12 (Nf + 1)) their folded segments' first mass moment from the small FK rows
+    fold_mass: np.ndarray  # (Na,) folded mass per attach joint [kg]
 
 
 #: Plans already made, per body model (the studio and long batches solve the same body many times; a plan
@@ -547,7 +600,21 @@ def _make_plan(skel: Skeleton, body: BodyModel | None, frozen: list[int], w_pos:
     for j in range(J - 1, 0, -1):  # close under ancestors
         if needed[j]:
             needed[skel.parents[j]] = True
-    sub = np.flatnonzero(needed)
+    # Subtrees without an active joint or a marker (the head, the hands when frozen) only add mass at
+    # a fixed pose relative to the joint they hang from: they are folded into that joint's mass moment
+    # once per chunk (``_fold_moments``) instead of being part of every FK pass.
+    steered = active.copy()
+    steered[mk_joint] = True
+    for j in range(J - 1, 0, -1):
+        steered[skel.parents[j]] |= steered[j]
+    folded = needed & ~steered if has_com else np.zeros(J, bool)
+    # FK joints numbered depth by depth (then in skeleton order): each depth is a contiguous block of
+    # rows, which ``_fk_levels`` writes in place
+    depth = np.zeros(J, np.int64)
+    for j in range(1, J):
+        depth[j] = depth[skel.parents[j]] + 1
+    sub = np.flatnonzero(needed & ~folded)
+    sub = sub[np.argsort(depth[sub], kind="stable")]
     new = -np.ones(J, np.int64)
     new[sub] = np.arange(len(sub))
     parents = np.array([-1] + [new[skel.parents[j]] for j in sub[1:]], np.int64)
@@ -592,24 +659,56 @@ def _make_plan(skel: Skeleton, body: BodyModel | None, frozen: list[int], w_pos:
                 i2 = np.searchsorted(groups[g2].joints, common)
                 pairs.append((g1, g2, i1, i2))
     if has_com:
-        seg_joint = new[body.seg_joint]
+        seg_all = np.asarray(body.seg_joint, np.int64)
         seg_local, seg_mass = np.asarray(body.seg_local, float), np.asarray(body.seg_mass, float)
     else:
-        seg_joint, seg_local, seg_mass = np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0)
+        seg_all, seg_local, seg_mass = np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0)
+    # folded joints: a small skeleton of their own under a fixed root (index 0) standing for the joint
+    # they hang from ("attach" joint, in sub numbering)
+    fold_depth = np.zeros(J, np.int64)  # depth below the attach joint
+    for j in range(1, J):
+        fold_depth[j] = fold_depth[skel.parents[j]] + 1 if folded[j] else 0
+    fold_orig = np.flatnonzero(folded)
+    fold_orig = fold_orig[np.argsort(fold_depth[fold_orig], kind="stable")]
+    in_fold = -np.ones(J, np.int64)
+    in_fold[fold_orig] = 1 + np.arange(len(fold_orig))
+    fold_parents = np.zeros(len(fold_orig) + 1, np.int64)
+    fold_parents[0] = -1
+    attach_of = np.zeros(J, np.int64)  # per folded joint: its attach joint (sub numbering)
+    for i, j in enumerate(fold_orig):
+        pj = skel.parents[j]
+        fold_parents[i + 1] = in_fold[pj] if folded[pj] else 0
+        attach_of[j] = attach_of[pj] if folded[pj] else new[pj]
+    fold_attach = np.unique(attach_of[fold_orig])
+    seg_fold = folded[seg_all]
+    seg_joint = np.where(seg_fold, attach_of[seg_all], new[seg_all])  # the FK joint carrying each segment
     m_sub = np.zeros(len(sub))
     np.add.at(m_sub, seg_joint, seg_mass)
     for j in range(len(sub) - 1, 0, -1):
         m_sub[parents[j]] += m_sub[j]
+    # per attach joint the folded segments' moment Σ m (R l + p) over the small skeleton's FK rows
+    fold_w = np.zeros((len(fold_attach), 3, len(fold_orig) + 1, 12))
+    fold_mass = np.zeros(len(fold_attach))
+    for seg in np.flatnonzero(seg_fold):
+        a, q, m = np.searchsorted(fold_attach, seg_joint[seg]), in_fold[seg_all[seg]], seg_mass[seg]
+        fold_mass[a] += m
+        for r in range(3):
+            fold_w[a, r, q, 3 * r:3 * r + 3] += m * seg_local[seg]
+            fold_w[a, r, q, 9 + r] += m
     mk_order = np.array(order, np.int64)
     # Task points are linear in a joint's FK rows (R row-major, then P): x = R l + p. Per joint, the
     # own segments' mass moment Σ m (p + R l) = W_own [R; p]; per marker W_mk [R; p].
     Jn = len(sub)
     w_own = np.zeros((Jn, 3, 12))
-    for seg in range(len(seg_mass)):
+    for seg in np.flatnonzero(~seg_fold):
         j, m = seg_joint[seg], seg_mass[seg]
         for r in range(3):
             w_own[j, r, 3 * r:3 * r + 3] += m * seg_local[seg]
             w_own[j, r, 9 + r] += m
+    w_com = w_own.copy()
+    for a, m in zip(fold_attach, fold_mass):  # the folded segments' m_a p_a (their R_a v_a varies per frame)
+        w_com[a, :, 9:] += m * np.eye(3)
+    w_com = np.ascontiguousarray(w_com.transpose(1, 0, 2).reshape(3, 12 * Jn))
     mk_local_plan = np.asarray(mk_local, float)[mk_order] if len(mk_order) else np.zeros((0, 3))
     w_mk = np.zeros((len(mk_order), 3, 12))
     for k in range(len(mk_order)):
@@ -620,58 +719,104 @@ def _make_plan(skel: Skeleton, body: BodyModel | None, frozen: list[int], w_pos:
     for j in range(Jn - 1, 0, -1):  # children have larger indices than their parents
         in_sub[parents[j]] = np.maximum(in_sub[parents[j]], in_sub[j])
     subtree = np.ascontiguousarray(in_sub[new[act_orig]])
+    fk_frozen = np.setdiff1d(np.arange(Jn), new[act_orig])
+    lrow = np.empty(Jn, np.int64)
+    lrow[new[act_orig]] = np.arange(K)
+    lrow[fk_frozen] = K + np.arange(len(fk_frozen))
+    fk_levels = _depth_levels(parents, np.asarray(skel.offsets, float)[sub], lrow)
+    fold_offsets = np.concatenate([np.zeros((1, 3)), np.asarray(skel.offsets, float)[fold_orig]])
+    fold_levels = _depth_levels(fold_parents, fold_offsets, np.arange(len(fold_parents)))
+    cyc_rows = np.concatenate([3 * g.joints[:, None, None] + _CYC for g in groups])
+    ends = np.cumsum([len(g.joints) for g in groups])
+    cyc_spans = tuple(slice(int(e - len(g.joints)), int(e)) for g, e in zip(groups, ends))
     return _Plan(
         sub, parents, np.asarray(skel.offsets)[sub], new[act_orig], act_orig, 1.0 / w_rot[act_orig], 1.0 / w_pos,
         seg_joint, seg_local, seg_mass, m_sub, has_com, mk_order,
         new[np.asarray(mk_joint, np.int64)[mk_order]] if len(mk_order) else np.zeros(0, np.int64),
         np.asarray(mk_local, float)[mk_order] if len(mk_order) else np.zeros((0, 3)),
-        tuple(groups), tuple(pairs), w_own, w_mk, subtree,
+        tuple(groups), tuple(pairs), w_own, w_com, w_mk, subtree, cyc_rows, cyc_spans, fk_frozen, fk_levels,
+        fold_orig, fold_levels, fold_attach, fold_w.reshape(3 * len(fold_attach), 12 * (len(fold_orig) + 1)),
+        fold_mass,
     )
 
 
 # ---- one chunk of frames -----------------------------------------------------------------------------
+def _depth_levels(parents: np.ndarray, offsets: np.ndarray, lrow: np.ndarray) -> tuple:
+    """Joints by depth below the root, for ``_fk_levels``: per depth (its joints as a slice: the joints must
+    be numbered depth by depth, their parents, their rows in the local rotation store (``lrow``), both as
+    slices where consecutive, their offsets (m, 3) [m]). All joints of one depth are one batch of array
+    operations (their parents are done): ~7 batches instead of ~20 joints' worth of small ones."""
+    parents = np.asarray(parents)
+    depth = np.zeros(len(parents), np.int64)
+    for j in range(1, len(parents)):
+        depth[j] = depth[parents[j]] + 1
+    if np.any(np.diff(depth) < 0):
+        raise ValueError("joints must be numbered depth by depth")
+    levels = []
+    for d in range(1, int(depth.max(initial=0)) + 1):
+        js = np.flatnonzero(depth == d)
+        levels.append((_as_slice(js), _as_slice(parents[js]), _as_slice(np.asarray(lrow)[js]),
+                       np.ascontiguousarray(np.asarray(offsets, float)[js])))
+    return tuple(levels)
+
+
+def _as_slice(idx: np.ndarray):
+    """Indices idx as a slice when they are consecutive (indexing then gives a view, not a copy)."""
+    idx = np.asarray(idx, np.int64)
+    if len(idx) and np.all(np.diff(idx) == 1):
+        return slice(int(idx[0]), int(idx[-1]) + 1)
+    return idx
+
+
+def _fk_levels(T: np.ndarray, L: np.ndarray, levels: tuple, tr_T: np.ndarray | None = None) -> None:
+    """Forward kinematics below the root, in place: T (J, 12, n) world rows (rotation row-major, then
+    position [m]) from the root's rows T[0], the local rotation rows L (9, ·, n) and ``_depth_levels``;
+    tr_T: per-frame local translations (J, 3, n) [m] instead of the offsets. Each depth is two einsums
+    written straight into its block of T: the rotations R_j = R_p B_j (sums over k = 0, 1, 2 in order, as
+    fk_soa's) and the positions p_j = R_p o_j + p_p."""
+    n = T.shape[2]
+    for js, ps, rows, off in levels:
+        m = len(off)
+        A = T[ps, :9].reshape(m, 3, 3, n)  # the parents' world rotations (a view or a gathered copy)
+        B = L[:, rows].reshape(3, 3, m, n)  # the joints' local rotations
+        np.einsum("mrkf,kcmf->mrcf", A, B, out=T[js, :9].reshape(m, 3, 3, n))
+        P = T[js, 9:]
+        if tr_T is None:
+            np.einsum("mrkf,mk->mrf", A, off, out=P)
+        else:
+            np.einsum("mrkf,mkf->mrf", A, tr_T[js], out=P)
+        P += T[ps, 9:]
+
+
 class _FK:
     """``kinematics.fk_soa`` with buffers kept across the iterations of a chunk: the outputs are written in
     place (fresh multi-megabyte arrays every iteration cost as much in page faults as the arithmetic) and
-    the local rotation matrices of frozen joints, which never change, are converted once. The arithmetic
-    is fk_soa's, entry for entry and in the same order (checked against it in the tests), but each joint's
-    3 × 3 product and offset are a handful of broadcast operations on (3, 3, F) / (3, F) blocks, and the
-    active joints' local rotations are converted in one batch from (4, K, F) quaternion rows.
+    the local rotation matrices of frozen joints, which never change, are converted once. Joints of one
+    depth are one batch (``_fk_levels``) and the active joints' local rotations are converted in one batch
+    from (4, K, F) quaternion rows. Same rotations as fk_soa entry for entry; positions sum the same terms
+    in another order (checked against it in the tests).
 
     Outputs live in one (Jn, 12, F) array T: rows 0-8 the world rotation (row-major), rows 9-11 the
     world position [m], so task points and mass moments are small matrix products over T's rows.
     """
 
-    def __init__(self, plan: "_Plan", rot_T: np.ndarray, extra: Sequence[tuple[str, int]] = ()):
+    def __init__(self, plan: "_Plan", rot_T: np.ndarray, extra: Sequence[tuple[str, int]] = (),
+                 fold: np.ndarray | None = None):
         Jn, F = len(plan.parents), rot_T.shape[-1]
+        self.fold = fold  # (Na, 3, F) ``_fold_moments`` of the frames (needed by _evaluate when the plan folds)
         K = len(plan.act)
         self.plan = plan
         self.F = F
-        frozen = np.ones(Jn, bool)
-        frozen[plan.act] = False
-        fro = np.flatnonzero(frozen)
         self.K = K
-        # Local rotations of all FK joints in one (K + frozen, 9, F) store: the active joints' rows first
-        # (rewritten every call), then the frozen ones' (converted once). lrow[j]: joint j's row.
-        self.lrow = np.empty(Jn, np.int64)
-        self.lrow[plan.act] = np.arange(K)
-        self.lrow[fro] = K + np.arange(len(fro))
-        # Joints by depth below the root: all joints of one depth are one batch of array operations
-        # (their parents are done), ~8 batches instead of ~25 joints' worth of small operations.
-        depth = np.zeros(Jn, np.int64)
-        for j in range(1, Jn):
-            depth[j] = depth[plan.parents[j]] + 1
-        self.levels = []
-        for d in range(1, int(depth.max(initial=0)) + 1):
-            js = np.flatnonzero(depth == d)
-            off = np.asarray(plan.offsets, float)[js]
-            self.levels.append((js, plan.parents[js], self.lrow[js], off[:, 0, None, None], off[:, 1, None, None],
-                                off[:, 2, None, None]))
+        # Local rotations of all FK joints in one (9, K + frozen, F) store, entry-major so that each
+        # conversion step writes one contiguous block: the active joints first (rewritten every call), then
+        # the frozen ones (converted once); plan.fk_levels index it.
+        fro = plan.fk_frozen
         # One work area for the whole chunk (FK outputs and temporaries, plus the ``extra`` (name, rows)
         # areas of the caller: the system matrix, ...), each region re-viewed contiguous over its first
         # n frames when the working set shrinks. One allocation instead of a dozen: freshly mapped memory
         # costs a page fault per 4 kB, as much as the arithmetic on it.
-        regions = [("T", Jn * 12), ("L", 9 * (K + len(fro))), ("tq", 3 * K), ("t33", 9), ("t3", 3)]
+        regions = [("T", Jn * 12), ("L", 9 * (K + len(fro))), ("tq", 3 * K)]
         regions += list(extra)
         self._work = np.empty(sum(r for _, r in regions) * F)
         self._regions, off = {}, 0
@@ -679,8 +824,8 @@ class _FK:
             self._regions[name] = (off, r)
             off += r * F
         self._view(F)
-        for i, j in enumerate(fro):
-            _quat_rows(rot_T[j], self.L[K + i], self.t3)
+        if len(fro):  # all frozen joints in one batch: (4, f, F) rows -> (9, f, F) rows
+            _quat_rows(rot_T[fro].transpose(1, 0, 2), self.L[:, K:], np.empty((3, len(fro), F)))
 
     def area(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
         """The work area ``name`` as a contiguous (*shape, n) array over the current n frames."""
@@ -694,10 +839,8 @@ class _FK:
         Jn, K = len(self.plan.parents), len(self.plan.act)
         self.n = n
         self.T = self.area("T", (Jn, 12))
-        self.L = self.area("L", (Jn, 9))
+        self.L = self.area("L", (9, Jn))
         self.tq = self.area("tq", (3, K))
-        self.t33 = self.area("t33", (3, 3))
-        self.t3 = self.area("t3", (3,))
 
     @property
     def P(self) -> np.ndarray:
@@ -709,189 +852,217 @@ class _FK:
 
     def compact(self, keep: np.ndarray) -> None:
         """Keep only the frames ``keep`` (the working set shrank)."""
-        frozen = self.L[self.K:][:, :, keep]  # a copy: the store is re-viewed over fewer frames below
+        frozen = self.L[:, self.K:][:, :, keep]  # a copy: the store is re-viewed over fewer frames below
         self._view(len(keep))
-        self.L[self.K:] = frozen
+        self.L[:, self.K:] = frozen
+        if self.fold is not None:
+            self.fold = self.fold[:, :, keep]
 
     def __call__(self, root_T, rot_T, tr_T, q_act=None):
         """FK of the plan's joints: P (Jn, 3, F) [m], R (Jn, 9, F) (views of ``T``). The active joints'
-        local rotations come from ``q_act`` (4, K, F) when given, else from rot_T (Jn, 4, F)."""
+        local rotations come from ``q_act`` (4, K, F) when given, else from rot_T (Jn, 4, F); tr_T: per-frame
+        local translations (Jn, 3, F) [m] or None (the skeleton's offsets)."""
         plan, T, L = self.plan, self.T, self.L
-        n = self.n
         if q_act is None:
             q_act = rot_T[plan.act].transpose(1, 0, 2)
-        _quat_rows(q_act, L[:self.K].transpose(1, 0, 2), self.tq)
-        T[0, :9] = L[self.lrow[0]]
+        _quat_rows(q_act, L[:, :self.K], self.tq)
+        T[0, :9] = L[:, 0]  # the root is active joint 0
         T[0, 9:] = root_T
-        if tr_T is not None:
-            return self._per_joint(tr_T)
-        for js, ps, rows, ox, oy, oz in self.levels:
-            m = len(js)
-            A = T[ps, :9].reshape(m, 3, 3, n)  # parents' world rotations (a gathered copy)
-            B = L[rows].reshape(m, 3, 3, n)  # the joints' local rotations
-            # C[r, c] = A[r, 0] B[0, c] + A[r, 1] B[1, c] + A[r, 2] B[2, c], in fk_soa's order
-            C = A[:, :, 0:1] * B[:, 0:1]
-            C += A[:, :, 1:2] * B[:, 1:2]
-            C += A[:, :, 2:3] * B[:, 2:3]
-            T[js, :9] = C.reshape(m, 9, n)
-            P = A[:, :, 0] * ox  # p_j = A o + p_parent (terms of zero offsets add an exact zero)
-            P += T[ps, 9:]
-            P += A[:, :, 1] * oy
-            P += A[:, :, 2] * oz
-            T[js, 9:] = P
-        return self.P, self.R
-
-    def _per_joint(self, tr_T):
-        """The joint-by-joint FK with per-frame local translations tr_T (Jn, 3, F) [m]."""
-        plan, T, L, t33, t3 = self.plan, self.T, self.L, self.t33, self.t3
-        n = self.n
-        for j in range(1, len(plan.parents)):
-            pj = plan.parents[j]
-            A = T[pj, :9].reshape(3, 3, n)
-            B = L[self.lrow[j]].reshape(3, 3, n)
-            C = T[j, :9].reshape(3, 3, n)
-            np.multiply(A[:, 0:1], B[0:1], out=C)
-            np.multiply(A[:, 1:2], B[1:2], out=t33)
-            C += t33
-            np.multiply(A[:, 2:3], B[2:3], out=t33)
-            C += t33
-            Pj, Pp = T[j, 9:], T[pj, 9:]
-            t = tr_T[j]
-            np.multiply(A[:, 0], t[0], out=t3)
-            np.add(Pp, t3, out=Pj)
-            np.multiply(A[:, 1], t[1], out=t3)
-            Pj += t3
-            np.multiply(A[:, 2], t[2], out=t3)
-            Pj += t3
+        _fk_levels(T, L, plan.fk_levels, tr_T)
         return self.P, self.R
 
 
-def _evaluate(plan: _Plan, root_T, rot_T, tr_T, fk=None, q_act=None):
-    """FK of the needed joints and the task points (``fk``: a _FK with kept buffers, else a fresh one).
+def _evaluate(plan: _Plan, root_T, rot_T, tr_T, fk: _FK, q_act=None, moments: bool = True):
+    """FK of the needed joints and the task points (``fk``: the chunk's _FK, with its kept buffers and, when
+    the plan folds joints, their ``_fold_moments``).
 
-    Returns P (Jn, 3, F), R (Jn, 9, F) and x (npts, 3, F) task points (COM first) [m]; with a ComTask,
-    ``fk.s_own`` (Jn, 3, F) holds each joint's own segments' first mass moment [kg m] at this pose.
+    Returns P (Jn, 3, F), R (Jn, 9, F) and x (npts, 3, F) task points (COM first) [m]. With a ComTask and
+    ``moments``, ``fk.s_own`` (Jn, 3, F) holds each joint's own (and folded) segments' first mass moment
+    [kg m] at this pose (``_linearize`` needs them); without, the COM is one matrix product.
     """
-    if fk is None:
-        fk = _FK(plan, rot_T)
     P, R = fk(root_T, rot_T, tr_T, q_act)
     T = fk.T
-    F = T.shape[2]
+    Jn, _, F = T.shape
     npts = (1 if plan.has_com else 0) + len(plan.mk_joint)
     x = np.empty((npts, 3, F))
     if plan.has_com:
-        s_own = fk.area("s_own", (T.shape[0], 3)) if "s_own" in fk._regions else None
-        fk.s_own = np.matmul(plan.w_own, T, out=s_own)  # (Jn, 3, F): one stacked matrix product
-        np.add.reduce(fk.s_own, axis=0, out=x[0])
+        a = plan.fold_attach
+        if moments:
+            s_own = fk.area("s_own", (Jn, 3)) if "s_own" in fk._regions else None
+            fk.s_own = np.matmul(plan.w_own, T, out=s_own)  # (Jn, 3, F): one stacked matrix product
+            if len(a):  # folded subtrees: R_a v_a + m_a p_a at their attach joints a
+                fold = np.einsum("arcf,acf->arf", T[a, :9].reshape(len(a), 3, 3, F), fk.fold)
+                fold += plan.fold_mass[:, None, None] * T[a, 9:]
+                fk.s_own[a] += fold
+            np.add.reduce(fk.s_own, axis=0, out=x[0])
+        else:  # Σ_j W_own,j T_j + Σ_a m_a p_a in one product, plus Σ_a R_a v_a
+            np.matmul(plan.w_com, T.reshape(Jn * 12, F), out=x[0])
+            if len(a):
+                x[0] += np.einsum("arcf,acf->rf", T[a, :9].reshape(len(a), 3, 3, F), fk.fold)
         x[0] *= 1.0 / plan.m_sub[0]
-    n0 = npts - len(plan.mk_joint)
-    for k in range(len(plan.mk_joint)):
-        np.matmul(plan.w_mk[k], T[plan.mk_joint[k]], out=x[n0 + k])
+    if len(plan.mk_joint):  # the markers: one stacked matrix product over their joints' FK rows
+        np.matmul(plan.w_mk, T[plan.mk_joint], out=x[npts - len(plan.mk_joint):])
     return P, R, x
 
 
-def _com_levers(plan: _Plan, P, R, s_own=None) -> np.ndarray:
-    """(K, 3, F) COM levers of the active joints: (s_k − m_k p_k) / M with s_k the first mass moment of
-    joint k's subtree (``kinematics.com_jacobian``'s trick: the cost is O(J F), not O(J S F)).
-    s_own: (Jn, 3, F) each joint's own segments' mass moment (``_evaluate``'s), computed when None."""
-    Jn, _, F = P.shape
-    if s_own is None:
-        T = np.concatenate([R, P], axis=1)
-        s_own = np.matmul(plan.w_own, T)
+def _fold_moments(plan: _Plan, rotations: np.ndarray, translations: np.ndarray | None) -> np.ndarray | None:
+    """(Na, 3, f) first mass moment [kg m] of the folded subtrees hanging from each of ``plan.fold_attach``,
+    in that joint's frame (their joints keep the input rotations, so it is fixed per frame).
+    rotations: (f, J, 4) input rotations; translations: (f, J, 3) local translations [m] or None."""
+    n = len(plan.fold_orig)
+    if not n:
+        return None
+    f = rotations.shape[0]
+    L = np.empty((9, n + 1, f))  # local rotation rows of the small skeleton (joint 0 unused)
+    q = np.ascontiguousarray(np.take(rotations, plan.fold_orig, axis=1).transpose(2, 1, 0))  # (4, n, f) rows
+    _quat_rows(q, L[:, 1:], np.empty((3, n, f)))
+    T = np.empty((n + 1, 12, f))
+    T[0] = np.array([1.0, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0])[:, None]  # the attach joint's own frame
+    tr = None
+    if translations is not None:
+        tr = np.zeros((n + 1, 3, f))
+        tr[1:] = np.take(translations, plan.fold_orig, axis=1).transpose(1, 2, 0)
+    _fk_levels(T, L, plan.fold_levels, tr)
+    return (plan.fold_w @ T.reshape(-1, f)).reshape(-1, 3, f)
+
+
+def _com_levers(plan: _Plan, P_act, s_own, scale) -> np.ndarray:
+    """(K, 3, F) COM levers of the active joints times ``scale`` (F,): (s_k − m_k p_k) / M with s_k the first
+    mass moment of joint k's subtree (``kinematics.com_jacobian``'s trick: the cost is O(J F), not O(J S F)).
+    P_act: (K, 3, F) the active joints' positions [m]; s_own: (Jn, 3, F) each joint's own (and folded)
+    segments' mass moment (``_evaluate``'s)."""
+    Jn, _, F = s_own.shape
     out = (plan.subtree @ s_own.reshape(Jn, 3 * F)).reshape(-1, 3, F)
-    out -= plan.m_sub[plan.act][:, None, None] * P[plan.act]
-    out *= 1.0 / plan.m_sub[0]
+    out -= plan.m_sub[plan.act][:, None, None] * P_act
+    out *= scale * (1.0 / plan.m_sub[0])
     return out
 
 
-def _linearize(plan: _Plan, P, R, x, sw, s_own=None, fk=None):
-    """Linearise at a pose: per group the weighted levers ũ (g, u, 3, F), the active joints' world
-    rotations (K, 9, F) and the Cholesky factor of K' = J̃ D⁻¹ J̃ᵀ + I (``fk``: a _FK whose work area
-    has regions "A" (m × m rows) and "Ra" (9 K rows) to hold the last two; fresh arrays when None)."""
+@dataclass(frozen=True, eq=False)
+class _Lin:
+    """A linearisation of the tasks at one pose, reused by the chord steps (frame axis last).
+
+    pairs: per group (g, u, 2, 3, F) the weighted levers ũ as cross-product pairs: [..., 0, a] = ũ[a+2],
+        [..., 1, a] = −ũ[a+1] (a = x, y, z, indices mod 3). With vectors v gathered as v[_CYC] (rows
+        v[a+1], v[a+2]), one einsum gives Σ_u v_u × ũ_pu (or −Σ_p ũ_pu × v_p) for all three axes [m].
+    R: (K, 3, 3, F) world rotations of the active joints.
+    L: (m, m, F) the lower Cholesky factor of K' (``_cholesky_soa``; the strict upper triangle is unset).
+    inv: (m / 3, 3, 3, F) the inverses of L's 3 × 3 diagonal blocks (``_block_inverses``).
+    """
+
+    pairs: list
+    R: np.ndarray
+    L: np.ndarray
+    inv: np.ndarray
+
+    def take(self, keep: np.ndarray) -> "_Lin":
+        """The frames ``keep``."""
+        return _Lin([np.take(c, keep, axis=-1) for c in self.pairs], np.take(self.R, keep, axis=-1),
+                    _take_lower(self.L, keep), np.take(self.inv, keep, axis=-1))
+
+
+def _lin_regions(plan: _Plan, npts: int) -> list[tuple[str, int]]:
+    """The work-area regions (name, rows per frame) a linearisation lives in: K' and its factor (m × m), the
+    active joints' rotations (9 K), the lever pairs (6 per point and joint of each group) and the factor's
+    3 × 3 block inverses (9 per point)."""
+    pairs = 6 * sum(len(g.points) * len(g.joints) for g in plan.groups)
+    return [("A", 9 * npts * npts), ("Ra", 9 * len(plan.act)), ("pairs", pairs), ("inv", 9 * npts)]
+
+
+def _linearize(plan: _Plan, P, R, x, sw, s_own=None, fk=None) -> _Lin:
+    """Linearise at a pose: per group the weighted levers ũ (as ``_Lin.pairs``), the active joints' world
+    rotations and the factorisation of K' = J̃ D⁻¹ J̃ᵀ + I. ``fk``: a _FK whose work area has the regions
+    ``_lin_regions`` to hold them (fresh arrays when None). s_own: ``_evaluate``'s mass moments (needed
+    with a ComTask)."""
     F = x.shape[2]
     npts = x.shape[0]
     m = 3 * npts
-    d = plan.d_rot
-    lev_com = _com_levers(plan, P, R, s_own) if plan.has_com else None
-    levers, dlevers = [], []
+    neg_d = -plan.d_rot
+    P_act = P[plan.act]
+    levers, neg_dlevers = [], []
     for g in plan.groups:
         if plan.has_com and g.points[0] == 0:
-            U = lev_com[None] * sw[0]  # (1, K, 3, F)
+            U = _com_levers(plan, P_act, s_own, sw[0])[None]  # (1, K, 3, F)
         else:
-            U = x[g.points][:, None] - P[plan.act[g.joints]][None]  # (g, u, 3, F)
+            U = x[g.span][:, None] - P_act[g.joints][None]  # (g, u, 3, F)
             U *= g.mask
-            U *= sw[g.points][:, None, None, :]
+            U *= sw[g.span][:, None, None, :]
         levers.append(U)
-        dlevers.append(U * d[g.joints][None, :, None, None])
+        neg_dlevers.append(U * neg_d[g.joints][None, :, None, None])
     # K' blocks Σ_k d_k ((ũ_p·ũ_q) I − ũ_q ũ_pᵀ) + d_pos √(w_p w_q) I (+ I on the diagonal), written
-    # straight into the lower triangle: rows of group g2, columns of group g1 (g1 <= g2).
+    # straight into the lower triangle: rows of group g2, columns of group g1 (g1 <= g2). Every pair of
+    # groups shares the root, so the blocks cover the lower triangle (else it starts from zeros).
+    ng = len(plan.groups)
+    K = len(plan.act)
+    n_pairs = dict(_lin_regions(plan, npts))["pairs"]
     if fk is None:
         A = np.zeros((m, m, F))
         Ra = R[plan.act]
-    else:
+        pair_rows = np.empty((n_pairs, F))
+        inv = None
+    else:  # the chunk's work area: no fresh multi-megabyte arrays per linearisation
         A = fk.area("A", (m, m))
-        A.fill(0.0)
-        Ra = np.take(R, plan.act, axis=0, out=fk.area("Ra", (len(plan.act), 9)))
+        if len(plan.pairs) < ng * (ng + 1) // 2:
+            A.fill(0.0)
+        Ra = np.take(R, plan.act, axis=0, out=fk.area("Ra", (K, 9)), mode="clip")  # unbuffered: valid indices
+        pair_rows = fk.area("pairs", (n_pairs,))
+        inv = fk.area("inv", (npts, 3, 3))
     for g1, g2, i1, i2 in plan.pairs:
         G1, G2 = plan.groups[g1], plan.groups[g2]
         n1, n2 = len(G1.points), len(G2.points)
         V = A[G2.rows, G1.rows].reshape(n2, 3, n1, 3, F)  # V[q, b, p, a]: row (q, b), column (p, a)
-        # row (q, b), column (p, a) = δ_ab (ũ_p·ũ_q) − ũ_q[a] ũ_p[b], summed with weights d over common joints
-        np.einsum("quaf,pubf->qbpaf", dlevers[g2][:, i2], levers[g1][:, i1], out=V)
-        tr = V[:, 0, :, 0] + V[:, 1, :, 1] + V[:, 2, :, 2]
-        V *= -1.0
-        V2 = A[G2.rows, G1.rows].reshape(n2, 3, n1, 3, F)
+        # −Σ_k d_k ũ_q[a] ũ_p[b] over the common joints, then the diagonal a = b gets
+        # Σ_k d_k ũ_p·ũ_q (minus the trace of the former) + d_pos √(w_p w_q) (+ 1 for p = q)
+        np.einsum("quaf,pubf->qbpaf", neg_dlevers[g2][:, i2], levers[g1][:, i1], out=V)
+        diag = sw[G2.span][:, None] * sw[G1.span][None]
+        diag *= plan.d_pos
+        diag -= V[:, 0, :, 0]
+        diag -= V[:, 1, :, 1]
+        diag -= V[:, 2, :, 2]
+        if g1 == g2:
+            diag.reshape(n1 * n1, F)[::n1 + 1] += 1.0
         for c in range(3):
-            V2[:, c, :, c] += tr
-    # the root translation couples every pair of points: d_pos √(w_p w_q) I; the identity on the diagonal
-    for c in range(3):
-        blkdiag = A[c::3, c::3]  # (npts, npts, F) view
-        blkdiag += plan.d_pos * sw[:, None, :] * sw[None, :, :]
-    for r in range(m):
-        A[r, r] += 1.0
-    return levers, Ra, _cholesky_soa(A)
+            V[:, c, :, c] += diag
+    pairs, row = [], 0
+    for U in levers:
+        g, u = U.shape[:2]
+        c = pair_rows[row:row + 6 * g * u].reshape(g, u, 2, 3, F)
+        row += 6 * g * u
+        np.take(U, _CYC[::-1], axis=2, out=c, mode="clip")  # [ũ[a+2], ũ[a+1]] ...
+        np.negative(c[:, :, 1], out=c[:, :, 1])  # ... [ũ[a+2], −ũ[a+1]]
+        pairs.append(c)
+    L = _cholesky_soa(A)
+    return _Lin(pairs, Ra.reshape(K, 3, 3, F), L, _block_inverses(L, inv))
 
 
-def _step(plan: _Plan, lin, e, eps, eps_t, sw):
+def _step(plan: _Plan, lin: _Lin, e, eps, eps_t, sw):
     """One damped-least-squares step dq = ε + D⁻¹ J̃ᵀ K'⁻¹ W½ (e − J ε) at a linearisation ``lin``.
 
     e: (npts, 3, F) task errors [m]; eps: (3, K, F) posture errors [rad]; eps_t: (3, F) root position
     error [m]; sw: (npts, F) square-root task weights. Returns dl (3, K, F) local rotation increments
     [rad] and dt (3, F) root translation increment [m].
     """
-    levers, Ra, L = lin
     K = len(plan.act)
-    F = e.shape[2]
+    npts, _, F = e.shape
     rhs = e * sw[:, None, :] if eps is None else (e - eps_t[None]) * sw[:, None, :]
     if eps is not None:
-        # J̃ ε = Σ_u (R_u ε_u) × ũ_pu: world posture rotations first, then one cross product per group
-        w0 = np.empty((K, 3, F))
-        for r in range(3):
-            np.einsum("kcf,ckf->kf", Ra[:, 3 * r:3 * r + 3], eps, out=w0[:, r])
-        for g, U in zip(plan.groups, levers):
-            w = w0[g.joints]
-            out = rhs[g.points]
-            for a in range(3):
-                i, j = (a + 1) % 3, (a + 2) % 3
-                out[:, a] -= np.einsum("uf,puf->pf", w[:, i], U[:, :, j])
-                out[:, a] += np.einsum("uf,puf->pf", w[:, j], U[:, :, i])
-            rhs[g.points] = out
-    z = _cho_solve_soa(L, rhs.reshape(-1, F)).reshape(-1, 3, F)
-    # J̃ᵀ z: world torque-like ω_u = Σ_p ũ_pu × z_p, then back to each joint's local axes
-    omega = np.zeros((K, 3, F))
-    for g, U in zip(plan.groups, levers):
-        zg = z[g.points]
-        o = np.empty((len(g.joints), 3, F))
-        for a in range(3):
-            i, j = (a + 1) % 3, (a + 2) % 3
-            np.einsum("puf,pf->uf", U[:, :, i], zg[:, j], out=o[:, a])
-            o[:, a] -= np.einsum("puf,pf->uf", U[:, :, j], zg[:, i])
-        omega[g.joints] += o
-    dl = np.empty((3, K, F))
-    for c in range(3):
-        np.einsum("kbf,kbf->kf", Ra[:, c::3], omega, out=dl[c])
-    dt = plan.d_pos * (z * sw[:, None, :]).sum(axis=0)
-    dl *= plan.d_rot[None, :, None]
+        # J̃ ε = Σ_u (R_u ε_u) × ũ_pu: world posture rotations, then one contraction per group
+        w = np.einsum("krcf,ckf->krf", lin.R, eps)
+        wc = np.take(w.reshape(3 * K, F), plan.cyc_rows, axis=0)  # (Σu, 2, 3, F) as ``_Lin.pairs`` needs
+        for g, c, span in zip(plan.groups, lin.pairs, plan.cyc_spans):
+            rhs[g.span] -= np.einsum("usaf,pusaf->paf", wc[span], c)
+    z = _cho_solve_soa(lin.L, lin.inv, rhs.reshape(-1, F))
+    # J̃ᵀ z: world torque-like ω_u = Σ_p ũ_pu × z_p (the contraction gives −ω), then to local axes
+    zc = np.take(z, 3 * np.arange(npts)[:, None, None] + _CYC, axis=0)  # (npts, 2, 3, F)
+    neg_omega = np.zeros((K, 3, F))
+    for g, c in zip(plan.groups, lin.pairs):
+        o = np.einsum("pusaf,psaf->uaf", c, zc[g.span])
+        for dst, src in g.runs:
+            neg_omega[dst] += o[src]
+    dl = np.einsum("kbcf,kbf->ckf", lin.R, neg_omega)
+    dl *= -plan.d_rot[None, :, None]
+    dt = np.einsum("paf,pf->af", z.reshape(npts, 3, F), sw)
+    dt *= plan.d_pos
     if eps is not None:
         dt += eps_t
         dl += eps
@@ -904,13 +1075,13 @@ def _take_lower(L: np.ndarray, keep: np.ndarray) -> np.ndarray:
     m = L.shape[0]
     out = np.empty((m, m, len(keep)))
     for r in range(m):
-        np.take(L[r, :r + 1], keep, axis=1, out=out[r, :r + 1])
+        np.take(L[r, :r + 1], keep, axis=1, out=out[r, :r + 1], mode="clip")  # unbuffered: valid indices
     return out
 
 
 def _solve_chunk(plan: _Plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, sw,
                  tol: float, step_tol: float, max_iters: int, max_step: float, refresh: bool,
-                 start_is_reference: bool = False, q_start=None):
+                 start_is_reference: bool = False, q_start=None, fold=None):
     """Gauss-Newton on one chunk, in place on root_T (3, F).
 
     rot_T: (Jn, 4, F) input rotations of the FK joints (any strides; read only: the frozen joints' are
@@ -920,9 +1091,9 @@ def _solve_chunk(plan: _Plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, 
     step is below ``step_tol``. The first step linearises at the warm start; later steps reuse that
     factorisation (a chord / modified Gauss-Newton iteration) unless ``refresh``. Frames that have stopped
     drop out of the working set (compacted when at most three quarters remain), so late iterations cost in
-    proportion to the frames that still need them. Returns iterations (F,), converged (F,), the final task
-    points (npts, 3, F), the largest active-joint deviation (F,) [rad] and the active joints' rotations
-    (4, K, F).
+    proportion to the frames that still need them. fold: (Na, 3, F) ``_fold_moments`` (None when the plan
+    folds no joint). Returns iterations (F,), converged (F,), the final task points (npts, 3, F), the
+    largest active-joint deviation (F,) [rad] and the active joints' rotations (4, K, F).
     """
     F = root_T.shape[1]
     K = len(plan.act)
@@ -930,8 +1101,8 @@ def _solve_chunk(plan: _Plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, 
     iterations = np.zeros(F, np.int64)
     converged = np.zeros(F, bool)
     x_final = np.empty_like(target)
-    fk = _FK(plan, rot_T, extra=(("A", 9 * npts * npts), ("Ra", 9 * K), ("s_own", 3 * len(plan.parents)),
-                                 ("qa", 4 * K), ("qb", 4 * K), ("ex", 4 * K)))
+    fk = _FK(plan, rot_T, extra=_lin_regions(plan, npts) + [("s_own", 3 * len(plan.parents)), ("qa", 4 * K),
+                                                            ("qb", 4 * K), ("ex", 4 * K)], fold=fold)
     q_all = fk.area("qa", (4, K))  # (4, K, F) active joint rotations
     if q_start is None:
         q_start = rot_T[plan.act].transpose(1, 0, 2)
@@ -949,7 +1120,7 @@ def _solve_chunk(plan: _Plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, 
 
     stopped = None  # (n,) frames of the working set whose last step was below step_tol (they stay put)
     for it in range(max_iters + 1):
-        P, R, x = _evaluate(plan, w_root, None, w_tr, fk, w_q)
+        P, R, x = _evaluate(plan, w_root, None, w_tr, fk, w_q, moments=lin is None or refresh)
         e = w_target - x
         err2 = np.where(w_sw > 0, (e * e).sum(axis=1), 0.0).max(axis=0)  # (n,) largest squared error
         done = err2 <= tol * tol
@@ -979,8 +1150,7 @@ def _solve_chunk(plan: _Plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, 
             q_spare, q_exp = np.empty_like(w_q), np.empty_like(w_q)
             w_target, w_sw, w_refr, w_refa = target[:, :, work], sw[:, work], ref_root_T[:, work], ref_act[:, :, work]
             e = e[:, :, keep]
-            levers, Ra, L = lin
-            lin = ([np.take(U, keep, axis=-1) for U in levers], np.take(Ra, keep, axis=-1), _take_lower(L, keep))
+            lin = lin.take(keep)
             fk.compact(keep)
         if it == 0 and start_is_reference:
             eps, eps_t = None, None  # ε = 0 at the warm start: skip the log map and J ε
@@ -1145,7 +1315,9 @@ def solve_ik(
             sw[npts - len(mk_joint):] = np.sqrt(mk_w[a:b, plan.mk_order].T)
         its, conv, x, dev, q_act = _solve_chunk(plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, sw,
                                                 tol, step_tol, max_iters, max_step, refresh_jacobian,
-                                                start_is_reference, q_start)
+                                                start_is_reference, q_start,
+                                                _fold_moments(plan, motion.rotations[a:b],
+                                                              motion.translations[a:b] if has_tr else None))
         iterations[a:b] = its
         converged[a:b] = conv
         posture_dev[a:b] = dev

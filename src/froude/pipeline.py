@@ -39,10 +39,10 @@ SWING_MARKER_WEIGHT = 1e-2
 IK_TOL = 1e-3
 IK_ITERS = 4
 #: Gauss-Newton steps (fresh Jacobian each) of the repair pass. Frames that missed their targets need few:
-#: on the 108 scale outputs of the 9 clips, 2 meet every bar as 6 do (same worst skate, penetration and
-#: joint jump; 0 does not). A frame that flipped to another branch needs more to come back (accelerating
+#: on the 108 scale outputs of the 9 clips, 2 meet every bar as 6 do (same worst skate 4.5 mm, penetration
+#: 2.8 mm and joint jump 1.37x the reference's; 0 steps leave 5.9 mm penetration and 5.1 mm skate). A frame that flipped to another branch needs more to come back (accelerating
 #: 09_04 to 1.3x keeps a 20 deg knee jump with 3).
-IK_REPAIR_ITERS = 3
+IK_REPAIR_ITERS = 2
 IK_UNFLIP_ITERS = IK_ITERS + 2
 #: Posture weight [1/rad²] of the trunk, arms and head (the legs take the solver's default, 1e-4).
 UPPER_BODY_POSTURE_WEIGHT = 1e-2

@@ -108,10 +108,9 @@ def find_roles(skeleton: Skeleton, joint_map: Mapping[str, str] | None = None) -
 @functools.lru_cache(maxsize=64)
 def _roles_of_names(names: tuple[str, ...], joint_map: tuple[tuple[str, str], ...] | None) -> dict[str, int]:
     """``find_roles`` for joint names and a joint map as sorted (role, name) pairs (callers copy the dict)."""
-    skeleton = _Names(names)
     joint_map = dict(joint_map) if joint_map else None
     roles: dict[str, int] = {"pelvis": 0}
-    parsed = [_side_and_core(n) for n in skeleton.names]
+    parsed = [_side_and_core(n) for n in names]
     for side in SIDES:
         for role, words in _CORE_WORDS.items():
             for w in words:
@@ -133,23 +132,16 @@ def _roles_of_names(names: tuple[str, ...], joint_map: tuple[tuple[str, str], ..
                 raise JointMapError(
                     f"unknown role '{role}' in the joint map; roles are: {', '.join(REQUIRED_ROLES + OPTIONAL_ROLES)}"
                 )
-            if name not in skeleton.names:
+            if name not in names:
                 raise JointMapError(f"joint map: role '{role}' names joint '{name}', which the skeleton lacks")
-            roles[role] = skeleton.names.index(name)
+            roles[role] = names.index(name)
     missing = [r for r in REQUIRED_ROLES if r not in roles]
     if missing:
         raise JointMapError(
             "cannot map joints for roles: " + ", ".join(missing)
-            + " (give a joint map YAML 'role: JointName'; joints are: " + ", ".join(skeleton.names) + ")"
+            + " (give a joint map YAML 'role: JointName'; joints are: " + ", ".join(names) + ")"
         )
     return roles
-
-
-@dataclass(frozen=True)
-class _Names:
-    """What role finding reads of a skeleton: its joint names."""
-
-    names: tuple[str, ...]
 
 
 def load_joint_map(path: str | Path) -> dict[str, str]:

@@ -51,7 +51,7 @@ import numpy as np
 from . import quat
 from .body import BodyModel
 from .errors import IkError
-from .kinematics import _quat_rows, com_jacobian, forward_kinematics, point_jacobian
+from .kinematics import _quat_rows, com_jacobian, forward_kinematics, joint_depths, point_jacobian
 from .motion import Motion
 from .skeleton import Skeleton
 
@@ -747,9 +747,7 @@ def _depth_levels(parents: np.ndarray, offsets: np.ndarray, lrow: np.ndarray) ->
     slices where consecutive, their offsets (m, 3) [m]). All joints of one depth are one batch of array
     operations (their parents are done): ~7 batches instead of ~20 joints' worth of small ones."""
     parents = np.asarray(parents)
-    depth = np.zeros(len(parents), np.int64)
-    for j in range(1, len(parents)):
-        depth[j] = depth[parents[j]] + 1
+    depth = joint_depths(parents)
     if np.any(np.diff(depth) < 0):
         raise ValueError("joints must be numbered depth by depth")
     levels = []

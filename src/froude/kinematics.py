@@ -108,14 +108,20 @@ def fk_soa(
 FEW_FRAMES = 768
 
 
+def joint_depths(parents: np.ndarray) -> np.ndarray:
+    """(J,) each joint's depth below the root (root 0) for parents (J,) listed before their children."""
+    depth = np.zeros(len(parents), np.int64)
+    for j in range(1, len(parents)):
+        depth[j] = depth[parents[j]] + 1
+    return depth
+
+
 def _depth_batches(parents: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     """[(joints, their parents)] of each depth below the root, root's children first."""
     key = np.asarray(parents, np.int64).tobytes()
     hit = _DEPTHS.get(key)
     if hit is None:
-        depth = np.zeros(len(parents), np.int64)
-        for j in range(1, len(parents)):
-            depth[j] = depth[parents[j]] + 1
+        depth = joint_depths(parents)
         hit = []
         for d in range(1, int(depth.max(initial=0)) + 1):
             js = np.flatnonzero(depth == d)

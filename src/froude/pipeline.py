@@ -40,8 +40,9 @@ IK_TOL = 1e-3
 IK_ITERS = 4
 #: Gauss-Newton steps (fresh Jacobian each) of the repair pass. Frames that missed their targets need few:
 #: on the 108 scale outputs of the 9 clips, 2 meet every bar as 6 do (same worst skate 4.5 mm, penetration
-#: 2.8 mm and joint jump 1.37x the reference's; 0 steps leave 5.9 mm penetration and 5.1 mm skate). A frame that flipped to another branch needs more to come back (accelerating
-#: 09_04 to 1.3x keeps a 20 deg knee jump with 3).
+#: 2.8 mm and joint jump 1.37x the reference's; 0 steps leave 5.9 mm penetration and 5.1 mm skate). A
+#: frame that flipped to another branch needs more to come back (accelerating 09_04 to 1.3x keeps a 20 deg
+#: knee jump with 3).
 IK_REPAIR_ITERS = 2
 IK_UNFLIP_ITERS = IK_ITERS + 2
 #: Posture weight [1/rad²] of the trunk, arms and head (the legs take the solver's default, 1e-4).
@@ -534,13 +535,12 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
 
     All frames are solved together with the solver's fast chord iterations. Then one repair pass solves
     again, with a fresh Jacobian every iteration, the few frames whose COM or held foot markers stayed
-    above RETRY_COM_ERROR / RETRY_MARKER_ERROR or that jumped to another branch (a knee flipping near full extension), warm-started from the neighbouring
-    frame's solution where they jumped; frames are independent problems, so this is the same problem
-    solved harder where needed. Finally the COM is made exact by a root translation.
+    above RETRY_COM_ERROR / RETRY_MARKER_ERROR or that jumped to another branch (a knee flipping near full
+    extension), warm-started from the neighbouring frame's solution where they jumped; frames are
+    independent problems, so this is the same problem solved harder where needed. Finally the COM is made exact by a root translation.
     """
     from dataclasses import replace as _replace
 
-    from . import quat
     from .ik import DEFAULT_MAX_ERROR, ComTask, MarkerTask, PostureTask, solve_ik
 
     tasks = [ComTask(body, targets.com, targets.com_weight),
@@ -550,8 +550,8 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
     held = _held_markers(targets)
     res = _replace(res, failed=_missed(res, held, DEFAULT_MAX_ERROR))
     rot = res.motion.rotations
-    init_jump = _largest_joint_step_deg(targets.initial.rotations)
-    jump = _largest_joint_step_deg(rot)
+    init_jump = _largest_joint_angle_deg(targets.initial.rotations[1:], targets.initial.rotations[:-1])
+    jump = _largest_joint_angle_deg(rot[1:], rot[:-1])
     flip = np.zeros(len(rot), bool)
     flip[1:] = jump > init_jump + BRANCH_JUMP_DEG
     bad = np.flatnonzero(flip | (res.com_error > RETRY_COM_ERROR) | _missed(res, held, RETRY_MARKER_ERROR))
@@ -564,8 +564,8 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
         again = _solve_from(sub, start, body, IK_UNFLIP_ITERS if flip[bad].any() else IK_REPAIR_ITERS)
         again = _replace(again, failed=_missed(again, held[bad], DEFAULT_MAX_ERROR))
         prev = rot[np.maximum(bad - 1, 0)]
-        old_jump = np.degrees(quat.angle_between(rot[bad], prev).max(axis=1))
-        new_jump = np.degrees(quat.angle_between(again.motion.rotations, prev).max(axis=1))
+        old_jump = _largest_joint_angle_deg(rot[bad], prev)
+        new_jump = _largest_joint_angle_deg(again.motion.rotations, prev)
         better = np.where(flip[bad], new_jump < old_jump,
                           _worst_held(again, held[bad]) < _worst_held(res, held)[bad])
         better &= again.com_error <= np.maximum(res.com_error[bad], RETRY_COM_ERROR)
@@ -600,10 +600,10 @@ def _held_markers(targets: Targets) -> np.ndarray:
     return targets.marker_weight.reshape(len(per_size), -1) >= HELD_MARKER_WEIGHT * per_size[:, None]
 
 
-def _largest_joint_step_deg(rotations: np.ndarray) -> np.ndarray:
-    """(F-1,) the largest rotation of any joint between consecutive frames [deg] of rotations (F, J, 4):
-    2 acos of the smallest |q_t · q_t+1| (acos falls, so one per frame pair instead of one per joint)."""
-    dot = np.abs(np.einsum("fjc,fjc->fj", rotations[1:], rotations[:-1])).min(axis=1)
+def _largest_joint_angle_deg(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """(F,) the largest rotation of any joint between two poses per frame [deg], rotations (F, J, 4) each:
+    2 acos of the smallest |q0 · q1| (acos falls, so one acos per frame instead of one per joint)."""
+    dot = np.abs(np.einsum("fjc,fjc->fj", q0, q1)).min(axis=1)
     return np.degrees(2.0 * np.arccos(np.minimum(dot, 1.0)))
 
 

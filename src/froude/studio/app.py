@@ -5,8 +5,8 @@ Threads: viser calls the GUI handlers on its pool; they only post the latest par
 thread, which computes the IK result and pushes it, then its physics report (a newer request makes it skip
 the stale one). When the result would be slow (long outputs) it first pushes a cheap preview (machine +
 time-warped reference, no IK). The player thread draws one frame at the display rate by indexing arrays
-precomputed once per result (FK is never run per frame); it holds its frames while a quick change is
-computed, so that the change reaches the page sooner.
+precomputed once per result (until a new result's bones are done, one frame's FK); it holds its frames
+while a quick change is computed, so that the change reaches the page sooner.
 """
 from __future__ import annotations
 

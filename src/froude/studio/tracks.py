@@ -28,7 +28,8 @@ class Track:
 
     frame_time [s]; motion: the runner's poses, whose bone segments ``segments`` (F, B, 2, 3) float32 [m]
     (joint→child, joint→end site) are worked out by one batched FK when first needed (``segments_at``
-    gives one frame before that: a new result is drawn without waiting for all its frames); com: (F, 3) simple-machine (or body) COM [m]; legs: (F, 2, 2, 3) float32 spring-leg segment per foot,
+    gives one frame before that: a new result is drawn without waiting for all its frames);
+    com: (F, 3) simple-machine (or body) COM [m]; legs: (F, 2, 2, 3) float32 spring-leg segment per foot,
     zero length at the COM when that foot is not in stance; contacts: (n, 3) contact points [m] with
     contact_foot (n,) 0/1; trail: (K, 2, 3) float32 COM path segments [m];
     force_t: (T,) [s], force_bw: (T,) machine vertical leg force [body weights] (empty if none);

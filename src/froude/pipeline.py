@@ -537,7 +537,8 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
     again, with a fresh Jacobian every iteration, the few frames whose COM or held foot markers stayed
     above RETRY_COM_ERROR / RETRY_MARKER_ERROR or that jumped to another branch (a knee flipping near full
     extension), warm-started from the neighbouring frame's solution where they jumped; frames are
-    independent problems, so this is the same problem solved harder where needed. Finally the COM is made exact by a root translation.
+    independent problems, so this is the same problem solved harder where needed. Finally the COM is made
+    exact by a root translation.
     """
     from dataclasses import replace as _replace
 

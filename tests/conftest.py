@@ -18,24 +18,42 @@ REPO = Path(__file__).resolve().parents[1]
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 
 
-def _find_mocap() -> Path | None:
-    candidates = [os.environ.get("FROUDE_MOCAP_DIR"), REPO.parent / "shared" / "data" / "mocap",
-                  Path("/work/shared/data/mocap")]
+def _find_data(kind: str, probe: str) -> Path | None:
+    """The folder of real clips of one kind ("mocap": CMU, "bandai": Bandai Namco), or None.
+
+    Looked for in $FROUDE_<KIND>_DIR, then ../shared/data/<kind> beside the repository (a worktree one
+    level deeper is covered too), then /work/shared/data/<kind>.
+    """
+    candidates = [os.environ.get(f"FROUDE_{kind.upper()}_DIR"), REPO.parent / "shared" / "data" / kind,
+                  REPO.parent.parent / "shared" / "data" / kind, Path("/work/shared/data") / kind]
     for c in candidates:
-        if c and Path(c, "09_01.bvh").is_file():
+        if c and Path(c, probe).is_file():
             return Path(c)
     return None
 
 
-MOCAP = _find_mocap()
+MOCAP = _find_data("mocap", "09_01.bvh")
+BANDAI = _find_data("bandai", "dataset-1_dash_normal_001.bvh")
 RUNNING = ("09_01", "09_02", "09_03", "09_04", "09_05", "09_06", "09_07", "09_08", "02_03")
 WALKING = ("02_01", "07_01")
 ALL_CLIPS = tuple(sorted(p.stem for p in MOCAP.glob("*.bvh"))) if MOCAP else ()
+# Bandai Namco Research Motion Dataset 1 (CC BY-NC 4.0: tests only, never shipped): 30 Hz, centimetres,
+# folded bind-pose rest pose, six channels per joint, a static joint_Root. dash_normal is a one-stride loop.
+BANDAI_RUNS = ("dataset-1_dash_active_001", "dataset-1_dash_feminine_001", "dataset-1_dash_normal_001",
+               "dataset-1_dash_old_001", "dataset-1_run_tired_001")
+BANDAI_WALKS = ("dataset-1_walk_normal_001",)
 NO_DATA = "real clips not found: set FROUDE_MOCAP_DIR to the folder holding 09_01.bvh"
+NO_BANDAI = ("Bandai clips not found: set FROUDE_BANDAI_DIR to the folder holding "
+             "dataset-1_dash_normal_001.bvh")
 
 
 def clip(name: str) -> Path:
-    """Path of a real clip, skipping the test (with the reason) when the data folder is absent."""
+    """Path of a real clip (CMU "09_01" or Bandai "dataset-1_…"), skipping the test with the reason when
+    its data folder is absent."""
+    if name.startswith("dataset-"):
+        if BANDAI is None:
+            pytest.skip(NO_BANDAI)
+        return BANDAI / f"{name}.bvh"
     if MOCAP is None:
         pytest.skip(NO_DATA)
     return MOCAP / f"{name}.bvh"
@@ -43,9 +61,11 @@ def clip(name: str) -> Path:
 
 def clip_params(names=None):
     """pytest parameters over real clips; a single skipping parameter when the data is absent."""
-    if MOCAP is None:
-        return [pytest.param(None, marks=pytest.mark.skip(reason=NO_DATA))]
-    return list(names or ALL_CLIPS)
+    names = list(names or ALL_CLIPS)
+    bandai = any(n.startswith("dataset-") for n in names)
+    if (MOCAP is None and not bandai) or (bandai and BANDAI is None) or not names:
+        return [pytest.param(None, marks=pytest.mark.skip(reason=NO_BANDAI if bandai else NO_DATA))]
+    return names
 
 
 # ---- an independent BVH reader and FK (the oracle) -----------------------------------------------

@@ -297,8 +297,9 @@ def test_studio_in_the_browser(tmp_path):
                 _type(page, "Height [m]", "1.1")
                 s4 = _wait_state(page, status="ok", hash=lambda h: h != s2["hash"])
                 _pick(page, "Mode", "accelerate")
-                _type(page, "Steps to change", "1")
+                s4 = _wait_state(page, status="ok", mode="accelerate", steps="16")
                 _type(page, "Goal speed factor", "2")
+                _type(page, "Steps to change", "1")
                 _wait_state(page, status="error", hash=s4["hash"])
                 page.wait_for_selector("text=cannot go from", timeout=10000)
                 page.wait_for_timeout(500)
@@ -306,7 +307,7 @@ def test_studio_in_the_browser(tmp_path):
                 _type(page, "Steps to change", "16")
                 _type(page, "Goal speed factor", "1.1")
                 s5 = _wait_state(page, status="ok", mode="accelerate", to_factor="1.1")
-                assert int(s5["n_frames"]) > int(s4["n_frames"])  # 16 steps of change + lead + hold
+                assert int(s5["n_frames"]) > int(s2["n_frames"])  # 16 steps of change + lead + hold
                 page.screenshot(path=str(shots / "studio_accelerate.png"))
                 page.get_by_text("vertical leg force").scroll_into_view_if_needed()
                 page.screenshot(path=str(shots / "studio_numbers.png"))

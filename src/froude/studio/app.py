@@ -577,15 +577,6 @@ def serve(prep, *, host: str = "127.0.0.1", port: int = 8080, params: Params | N
     """Run the studio until Ctrl-C (or SIGTERM); returns 0 after a clean shutdown."""
     import signal
 
-    studio = Studio(prep, host=host, port=port, params=params).start()
-    announce(f"froude studio: {studio.url}  (Ctrl-C to stop)")
-    for other in studio.urls[1:]:
-        announce(f"froude studio: also {other}")
-    if open_browser:
-        import webbrowser
-
-        webbrowser.open(studio.url)
-
     def _interrupt(signum, frame):
         raise KeyboardInterrupt
 
@@ -594,13 +585,24 @@ def serve(prep, *, host: str = "127.0.0.1", port: int = 8080, params: Params | N
     old = {}
     if threading.current_thread() is threading.main_thread():
         old = {sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
+    studio = None
     try:
+        studio = Studio(prep, host=host, port=port, params=params).start()
+        # the handlers are in place before the address is out: a Ctrl-C from then on is a clean stop
+        announce(f"froude studio: {studio.url}  (Ctrl-C to stop)")
+        for other in studio.urls[1:]:
+            announce(f"froude studio: also {other}")
+        if open_browser:
+            import webbrowser
+
+            webbrowser.open(studio.url)
         while True:
             time.sleep(0.5)
     except KeyboardInterrupt:
         pass
     finally:
-        studio.stop()
+        if studio is not None:
+            studio.stop()
         for sig, handler in old.items():
             signal.signal(sig, handler)
     return 0

@@ -1,7 +1,6 @@
 """``froude info CLIP.bvh``: what is in a clip — skeleton, units, cleaning, speed, steps, phases."""
 from __future__ import annotations
 
-import json
 import math
 
 from .common import add_load_options, add_mass, check_inputs, load_clip
@@ -67,17 +66,6 @@ def _finite(v, digits: int = 4):
     return round(v, digits) if math.isfinite(v) else None
 
 
-def _nulls(obj):
-    """``obj`` with every non-finite float replaced by None (recursively)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _nulls(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_nulls(v) for v in obj]
-    return obj
-
-
 def _n(v, spec: str = ".3f") -> str:
     return "n/a" if v is None else format(v, spec)
 
@@ -96,9 +84,11 @@ def run(args) -> int:
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers)
     summary = summarize(motion, body, com, gait)
-    d = _nulls(info_dict(motion, body, summary, gait))
+    from ..io.jsonable import dumps, jsonable
+
+    d = jsonable(info_dict(motion, body, summary, gait))
     if args.json:
-        print(json.dumps(d, indent=2, allow_nan=False))
+        print(dumps(d, indent=2))
         return 0
     sk = d["skeleton"]
     rows = [

@@ -54,9 +54,12 @@ class Character:
     def __post_init__(self):
         def check(value, what: str, limits: tuple, unit: str) -> None:
             lo, hi = limits
-            if not (np.isfinite(value) and lo <= value <= hi):
-                raise CharacterError(f"character '{self.name}': {what} must be in {lo:g}-{hi:g}{unit} "
-                                     f"(what froude supports), got {value}")
+            if not (np.isfinite(value) and value > 0):
+                raise CharacterError(f"character '{self.name}': {what} must be > 0{unit} (froude supports "
+                                     f"{lo:g}-{hi:g}{unit}), got {value}")
+            if not lo <= value <= hi:
+                raise CharacterError(f"character '{self.name}': {what} {value:g}{unit} is outside what froude "
+                                     f"supports, {lo:g}-{hi:g}{unit}")
 
         if self.height is not None:
             check(self.height, "height", HEIGHT_RANGE_M, " m")

@@ -42,7 +42,7 @@ def run(args) -> int:
     if args.workers is not None and args.workers < 1:
         raise FroudeError(f"--workers must be >= 1, got {args.workers}")
     plan = batch.load_plan(args.plan)
-    clips = batch.find_clips(args.inputs)
+    clips = batch.find_clips(args.inputs, exclude=args.output)
     if args.dry_run:
         return _dry_run(clips, plan, args)
     say(f"{len(clips)} clip(s) x {len(plan.variations)} variation(s) = {len(clips) * len(plan.variations)} tasks "

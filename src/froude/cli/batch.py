@@ -42,7 +42,7 @@ def run(args) -> int:
     from .. import batch
 
     plan = batch.load_plan(args.plan)
-    clips = batch.find_clips(args.inputs)
+    clips = batch.find_clips(args.inputs, exclude=args.output)
     if args.dry_run:
         return _dry_run(clips, plan, args)
     say(f"{len(clips)} clip(s) x {len(plan.variations)} variation(s) = {len(clips) * len(plan.variations)} tasks "

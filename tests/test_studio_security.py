@@ -191,10 +191,16 @@ def test_crafted_control_values_are_refused_and_the_result_stays(studio, tmp_pat
 def test_view_refuses_out_of_range_start_values(capsys):
     from froude.cli import main as cli_main
 
-    assert cli_main(["view", "--strides", "3000", "--port", "0"]) == 2
+    from froude.cli.view import VIEW_SPEED_RANGE, VIEW_STRIDES
+
+    assert VIEW_SPEED_RANGE == (LIMITS["speed"].lo, LIMITS["speed"].hi)  # the CLI's ranges are the page's
+    assert VIEW_STRIDES == (LIMITS["strides"].lo, LIMITS["strides"].hi)
+    with pytest.raises(SystemExit) as e:
+        cli_main(["view", "--strides", "3000", "--port", "0"])
+    assert e.value.code == 2
     assert cli_main(["view", "--character", "/etc/passwd", "--port", "0"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 2 and "Strides 3000 is outside 1 to 12" in err[0] and "unknown character" in err[1]
+    assert len(err) == 2 and "strides" in err[0] and "3000" in err[0] and "unknown character" in err[1]
 
 
 def test_view_beyond_loopback_warns_and_prints_real_addresses():

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import time
 
-from .common import add_load_options, say
+from .common import add_load_options, add_range_option, say
 from .scale import add_character_options, character_kwargs, print_rows
 
 
@@ -34,6 +34,7 @@ def register(sub) -> None:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress or notes on stderr")
     add_character_options(p)
     add_load_options(p)
+    add_range_option(p)
     p.set_defaults(func=run)
 
 
@@ -63,9 +64,10 @@ def run(args) -> int:
         if v is not None and v < (1 if name == "--steps" else 0):
             raise FroudeError(f"{name} must be {'>= 1' if name == '--steps' else '>= 0'}, got {v}")
     steps = args.steps if (args.steps is not None or args.within is not None) else 8
+    time_range = pipeline.parse_time_range(args.range) if args.range else None
     t0 = time.perf_counter()
     say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale)
+    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale, time_range=time_range)
     say("planning the steps and synthesising ...", args.quiet)
     res = pipeline.accelerate(
         prep, args.character, to_speed=speed, to_factor=factor, steps=None if args.within else steps,
@@ -76,12 +78,15 @@ def run(args) -> int:
         say(f"note: {note}", args.quiet)
     bvh, rep = pipeline.write_result(res, args.output)
     plan = res.report.extras["plan"]
-    rows = res.summary_rows()[:2] + [
+    head = [r for r in res.summary_rows() if r[0] in ("character", "method", "modelled")]
+    tail = [r for r in res.summary_rows() if r[0] not in ("character", "method", "modelled", "speed",
+                                                         "Froude number U", "step frequency")]
+    rows = head + [
         ("start speed", f"{plan['start_speed_m_s']:.3f} m/s"),
         ("goal", f"{plan['target_speed_m_s']:.3f} m/s"),
         ("apex speed per step", " ".join(f"{v:.2f}" for v in plan["apex_speed_m_s"]) + " m/s"),
         ("touchdown angle per step", " ".join(f"{v:.1f}" for v in plan["theta0_deg"]) + " deg"),
-    ] + res.summary_rows()[5:]
+    ] + tail
     print_rows(rows)
     fails = res.report.check_bars()
     print(f"physics bars: {'all met' if not fails else 'NOT met: ' + '; '.join(fails)}")

@@ -27,3 +27,10 @@ def add_load_options(p) -> None:
                    help="metres per file unit (default: detected from the skeleton's height)")
     p.add_argument("--keep-all-frames", action="store_true",
                    help="do not drop a synthetic T-pose frame or invalid leading/trailing rows")
+
+
+def add_range_option(p) -> None:
+    p.add_argument("--range", default=None, metavar="T0:T1",
+                   help="model only this part of the take, in seconds (e.g. 1.2:3.0, or 1.2: to the end): its "
+                   "speed, cadence and strides; speed factors then refer to it (default: the whole take, "
+                   "said aloud when its speed changes)")

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from ..body import BodyModel
 from ..machine.fit import fit_machine_detailed
-from .common import add_load_options, load_clip, say
+from .common import add_load_options, add_range_option, load_clip, say
 
 
 def register(sub) -> None:
@@ -21,6 +21,7 @@ def register(sub) -> None:
     p.add_argument("--plot", default=None, metavar="PNG", help="also write Figure 2 of the paper for this clip")
     p.add_argument("--mass", type=float, default=70.0, help="body mass [kg] (default 70)")
     add_load_options(p)
+    add_range_option(p)
     p.set_defaults(func=run)
 
 
@@ -55,6 +56,10 @@ def fit_table(res) -> str:
 
 def run(args) -> int:
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames)
+    if args.range:
+        from ..pipeline import parse_time_range, select_range
+
+        motion = select_range(motion, parse_time_range(args.range), Path(args.clip).name)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
     res = fit_machine_detailed(motion, body, source=Path(args.clip).name)
     print(fit_table(res))

@@ -4,7 +4,7 @@ from __future__ import annotations
 import time
 
 from ..characters import list_presets
-from .common import add_load_options, say
+from .common import add_load_options, add_range_option, say
 
 
 def register(sub) -> None:
@@ -31,6 +31,7 @@ def register(sub) -> None:
     p.add_argument("--mass", type=float, default=70.0, help="the reference performer's mass [kg], default 70")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress or notes on stderr")
     add_load_options(p)
+    add_range_option(p)
     p.set_defaults(func=run)
 
 
@@ -83,9 +84,10 @@ def run(args) -> int:
         raise FroudeError(f"speed must be > 0 m/s, got {absolute}")
     if not str(args.output).lower().endswith(".bvh"):
         raise FroudeError(f"{args.output}: the output must be a .bvh file")
+    time_range = pipeline.parse_time_range(args.range) if args.range else None
     t0 = time.perf_counter()
     say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale)
+    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale, time_range=time_range)
     say(f"synthesising ({args.method}) ...", args.quiet)
     res = pipeline.scale(prep, args.character, speed=factor or 1.0, target_speed=absolute, strides=args.strides,
                          duration=args.duration, fps=args.fps, method=args.method, **character_kwargs(args))

@@ -61,6 +61,8 @@ RETRY_MARKER_ERROR = 3e-3
 HELD_MARKER_WEIGHT = 1.0
 #: Time [s] over which a foot's marker weight ramps between swing and stance around its events.
 WEIGHT_RAMP_S = 0.04
+#: Fraction of the stance marker weight every marker of a foot keeps around its contact (see _marker_weights).
+LANDING_WEIGHT = 0.1
 
 
 # ---- 1. prepare: load, body model, gait, fit, cycle --------------------------------------------------
@@ -542,6 +544,7 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float) -
     """
     t = path.times
     ramp = np.zeros((len(t), 2))
+    landing = np.zeros((len(t), 2))  # the ramp on the touchdown side of each contact only
     for foot in range(2):
         cols = np.flatnonzero(path.foot_of_step == foot)
         if cols.size == 0:
@@ -555,9 +558,15 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float) -
             kc = np.clip(kk, 0, cols.size - 1)
             u = np.clip(np.minimum(t - (a[kc] - WEIGHT_RAMP_S), (b[kc] + WEIGHT_RAMP_S) - t) / WEIGHT_RAMP_S, 0.0, 1.0)
             ramp[:, foot] = np.maximum(ramp[:, foot], np.where(ok, u, 0.0))
+            landing[:, foot] = np.maximum(landing[:, foot], np.where(ok & (t <= a[kc] + WEIGHT_RAMP_S), u, 0.0))
     height = markers[..., UP_AXIS]  # ground at 0
     lo, hi = 0.02 * leg_length, 0.05 * leg_length
     loaded = min_jerk((hi - height) / (hi - lo))  # 1 at or below lo, 0 at or above hi
+    # Around a touchdown every marker of the foot keeps at least LANDING_WEIGHT of the stance weight: a
+    # landing foot follows its targets down to the contact point instead of being left by the posture pull
+    # a centimetre lower and still sweeping forward (a scuff the report sees at touchdown). Not at lift-off:
+    # there the leg is nearly straight and a pulled toe can flip the knee.
+    loaded = np.maximum(loaded, LANDING_WEIGHT * min_jerk(landing)[..., None])
     return SWING_MARKER_WEIGHT + (STANCE_MARKER_WEIGHT - SWING_MARKER_WEIGHT) * min_jerk(ramp)[..., None] * loaded
 
 
@@ -592,7 +601,8 @@ class Result:
             ("stance / flight", f"{_mean(r.stance_times_s):.3f} s / {_mean(r.flight_times_s):.3f} s"),
             ("flight gravity", f"{r.flight_gravity_m_s2:.2f} m/s^2"),
             ("COM tracking", f"RMS {r.com_tracking_rms_mm:.2f} mm, max {r.com_tracking_max_mm:.2f} mm"),
-            ("foot skate / penetration", f"{r.foot_skate_mm:.2f} mm / {r.penetration_mm:.2f} mm"),
+            ("foot skate / penetration", f"{r.foot_skate_mm:.2f} mm / {r.penetration_mm:.2f} mm "
+             f"(ball and tip near the floor: {r.foot_skate_floor_mm:.2f} mm)"),
             ("joint jump", f"{r.max_joint_jump_deg:.1f} deg (reference {r.reference_max_joint_jump_deg:.1f})"),
         ]
         return rows

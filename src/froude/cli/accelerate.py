@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import time
 
-from .common import (add_character_options, add_range_option, add_fps, add_force, add_load_options, add_mass, add_quiet, bound_work,
-                     character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
-                     print_rows, say, speed)
+from .common import (add_character_options, add_force, add_fps, add_load_options, add_mass, add_quiet,
+                     add_range_option, bound_work, character_input, character_kwargs, check_character,
+                     check_inputs, guard_outputs, number, print_rows, say, speed)
 
 #: Steps of a speed change, and of the steady parts around it, froude plans at most.
 MAX_STEPS = 500

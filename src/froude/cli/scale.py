@@ -4,9 +4,9 @@ from __future__ import annotations
 import time
 
 from ..presets import list_presets
-from .common import (add_character_options, add_range_option, add_fps, add_force, add_load_options, add_mass, add_quiet, bound_work,
-                     character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
-                     print_rows, say, speed)
+from .common import (add_character_options, add_force, add_fps, add_load_options, add_mass, add_quiet,
+                     add_range_option, bound_work, character_input, character_kwargs, check_character,
+                     check_inputs, guard_outputs, number, print_rows, say, speed)
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
 MAX_STRIDES = 10_000

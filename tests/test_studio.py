@@ -106,15 +106,16 @@ def test_studio_keeps_last_good_result_on_bad_edits(session):
 
     studio = Studio(session.prep, port=_free_port())
     try:
-        good = studio.good
+        tab = studio.open_tab()
+        good = tab.good
         for bad in (Params(height=0.0), Params(mode="accelerate", to_factor=2.0, steps=1), Params(leg_scale=0.0)):
-            studio.apply(bad)
-            assert studio.good is good and studio.shown is good
-            assert "status=error" in studio.gui_state.content
-            assert studio.message.startswith("error: ")
-        t = studio.apply(Params(speed=1.3))
-        assert studio.good is not good and studio.good.params.speed == 1.3
-        assert "status=ok" in studio.gui_state.content and studio.good.hash in studio.gui_state.content
+            tab.apply(bad)
+            assert tab.good is good and tab.shown is good
+            assert "status=error" in tab.gui_state.content
+            assert tab.message.startswith("error: ")
+        t = tab.apply(Params(speed=1.3))
+        assert tab.good is not good and tab.good.params.speed == 1.3
+        assert "status=ok" in tab.gui_state.content and tab.good.hash in tab.gui_state.content
         assert t.result_compute > 0
     finally:
         studio.stop()
@@ -127,20 +128,63 @@ def test_studio_previews_only_when_the_result_would_be_slow(session, monkeypatch
     from froude.studio.app import Studio
 
     studio = Studio(session.prep, port=_free_port())
+    tab = studio.open_tab()
     shown = []
-    publish = studio._publish
-    monkeypatch.setattr(studio, "_publish", lambda solved, status=None: (shown.append(solved), publish(solved, status)))
+    publish = tab._publish
+    monkeypatch.setattr(tab, "_publish", lambda solved, status=None: (shown.append(solved), publish(solved, status)))
     try:
-        quick = studio.expected_seconds(Params(speed=1.1))
+        tab.apply(Params(speed=1.05))  # a warm solve sets the expectation
+        quick = tab.expected_seconds(Params(speed=1.1))
         assert 0 < quick < app.SLOW_RESULT_S  # 4 strides of the sample: the last solve was quick
-        assert studio.expected_seconds(Params(speed=1.1, strides=400)) > app.SLOW_RESULT_S  # scales with length
-        t = studio.apply(Params(speed=1.1))
+        assert tab.expected_seconds(Params(speed=1.1, strides=400)) > app.SLOW_RESULT_S  # scales with length
+        shown.clear()
+        t = tab.apply(Params(speed=1.1))
         assert np.isnan(t.preview_compute) and [s.preview for s in shown] == [False, False]  # result, then report
         shown.clear()
         monkeypatch.setattr(app, "SLOW_RESULT_S", 0.0)
-        t = studio.apply(Params(speed=1.15))
+        t = tab.apply(Params(speed=1.15))
         assert t.preview_compute > 0 and [s.preview for s in shown] == [True, False, False]
-        assert studio.good.params.speed == 1.15 and "status=ok" in studio.gui_state.content
+        assert tab.good.params.speed == 1.15 and "status=ok" in tab.gui_state.content
+    finally:
+        studio.stop()
+
+
+def test_naive_comparison_and_clip_facts(session):
+    """The naive retarget (engines' way) beside the physical one, with the numbers that tell them apart."""
+    pytest.importorskip("viser")
+    from froude.studio.app import Studio
+
+    studio = Studio(session.prep, port=_free_port())
+    try:
+        tab = studio.open_tab()
+        tab.apply(Params(character="child", speed=1.2))
+        tab._solve_naive()
+        assert tab.naive is not None and tab.naive.result.method == "naive"
+        assert tab.naive.track.body.stature == pytest.approx(tab.good.track.body.stature)
+        table = tab._table_md()
+        assert "| speed [m/s] |" in table and "| foot skate [mm] | — |" in table and len(table.splitlines()) == 9
+        facts = tab._facts_md()
+        assert "120 frames/s" in facts and "Froude number" in facts and "m/s" in facts
+        tab.apply(Params(mode="accelerate", to_factor=1.2, steps=8))
+        tab._solve_naive()
+        assert tab.naive is None and "scale only" in tab.message
+        v = tab.good.track.speed_m_s
+        assert v[-10:].mean() > 1.1 * v[:10].mean()  # the speed profile of the acceleration rises
+    finally:
+        studio.stop()
+
+
+def test_two_tabs_hold_two_sessions(session):
+    """Each tab its own parameters, result and scene (acceptance 15.4, without a browser)."""
+    pytest.importorskip("viser")
+    from froude.studio.app import Studio
+
+    studio = Studio(session.prep, port=_free_port())
+    try:
+        a, b = studio.open_tab(), studio.open_tab()
+        a.apply(Params(character="child"))
+        assert a.good.params.character == "child" and b.good.params.character == "same"
+        assert b.good is studio.first and a.result is not b.result
     finally:
         studio.stop()
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import time
 
-from .common import add_load_options, say
+from .common import add_load_options, load_clip, say
 from .scale import add_character_options, character_kwargs, print_rows
 
 
@@ -65,7 +65,8 @@ def run(args) -> int:
     steps = args.steps if (args.steps is not None or args.within is not None) else 8
     t0 = time.perf_counter()
     say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale)
+    clip = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.quiet, args.joint_map, args.up)
+    prep = pipeline.prepare(clip, mass=args.mass)
     say("planning the steps and synthesising ...", args.quiet)
     res = pipeline.accelerate(
         prep, args.character, to_speed=speed, to_factor=factor, steps=None if args.within else steps,

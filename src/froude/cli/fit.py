@@ -54,7 +54,7 @@ def fit_table(res) -> str:
 
 
 def run(args) -> int:
-    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames)
+    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, joint_map=args.joint_map, up=args.up)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
     res = fit_machine_detailed(motion, body, source=Path(args.clip).name)
     print(fit_table(res))

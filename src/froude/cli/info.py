@@ -69,7 +69,7 @@ def _fmt_list(values, unit="s") -> str:
 
 
 def run(args) -> int:
-    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, quiet=args.json)
+    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.json, args.joint_map, args.up)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers)

@@ -76,7 +76,8 @@ def run(args) -> int:
 
     from ..viz import render as R
 
-    motions = [load_clip(c, args.length_scale, args.keep_all_frames, quiet=args.quiet) for c in args.clips]
+    motions = [load_clip(c, args.length_scale, args.keep_all_frames, args.quiet, args.joint_map, args.up)
+               for c in args.clips]
     if labels is None:
         labels = [Path(c).stem for c in args.clips]
     if args.filmstrip:

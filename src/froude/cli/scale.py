@@ -4,7 +4,7 @@ from __future__ import annotations
 import time
 
 from ..characters import list_presets
-from .common import add_load_options, say
+from .common import add_load_options, load_clip, say
 
 
 def register(sub) -> None:
@@ -85,7 +85,8 @@ def run(args) -> int:
         raise FroudeError(f"{args.output}: the output must be a .bvh file")
     t0 = time.perf_counter()
     say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale)
+    clip = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.quiet, args.joint_map, args.up)
+    prep = pipeline.prepare(clip, mass=args.mass)
     say(f"synthesising ({args.method}) ...", args.quiet)
     res = pipeline.scale(prep, args.character, speed=factor or 1.0, target_speed=absolute, strides=args.strides,
                          duration=args.duration, fps=args.fps, method=args.method, **character_kwargs(args))

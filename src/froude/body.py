@@ -67,7 +67,7 @@ _CORE_WORDS = {
 _CENTRAL_WORDS = {
     "head": ("head",),
     "head_end": ("headtopend", "headend", "headtop", "headsite"),
-    "neck": ("neck", "neck1", "neck01"),
+    "neck": ("neck", "neck1", "neck01", "necktwist01"),
 }
 _SIDE_TOKENS = {"l": "left", "left": "left", "lf": "left", "r": "right", "right": "right", "rt": "right"}
 # Side inside a word: "LeftUpLeg", "upperlegleft"; a bare leading letter ("LThigh", "RShin") counts only

@@ -159,32 +159,26 @@ def reference_pose(motion: Motion, roles) -> tuple[np.ndarray, int]:
     return m.rotations[f].copy(), f + (motion.n_frames - m.n_frames) // 2
 
 
-def flight_gravity_units(com_up: np.ndarray, foot_low: np.ndarray, leg_length: float, frame_time: float):
-    """Gravity seen in the flight phases, in file units/s², or None when the motion has no flight.
+def flight_gravity_units(com: np.ndarray, foot_low: np.ndarray, leg_length: float, frame_time: float):
+    """Gravity seen in the flight phases, in file units/s², or None when the motion has no flight of
+    three frames or more.
 
-    com_up: (F,) COM height; foot_low: (F, 2) lowest foot marker height per foot; leg_length in the
-    same units. A frame is in flight when both feet are above the ground (5th percentile of the lower
-    foot) by 3 % of the leg. A parabola is fitted to each flight (widened to three frames by its
-    neighbouring contact frames at low frame rates); the duration-weighted median is returned.
+    com: (F, 3) COM; foot_low: (F, 2) lowest foot marker height per foot; leg_length in the same
+    units. A frame is in flight when both feet are above the ground (5th percentile of the lower foot)
+    by 3 % of the leg, a scale-free test. The curvature is fitted by ``metrics.flight_gravity`` (one
+    gravity shared by every flight, each its own height and vertical speed). Flights cut by the clip's
+    edges are left out (a jump off or a stumble).
     """
+    from .metrics import flight_gravity
+
     ground = np.percentile(foot_low.min(axis=1), 5)
     air = (foot_low > ground + 0.03 * leg_length).all(axis=1)
     d = np.diff(np.concatenate([[0], air.astype(np.int8), [0]]))
-    gs, ws = [], []
-    for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)):
-        if a == 0 or b == len(air):
-            continue  # a flight cut by the clip's edge may be a jump off or a stumble
-        if b - a < 3:
-            a, b = a - 1, b + 1
-        t = np.arange(b - a) * frame_time
-        gs.append(-2.0 * np.polyfit(t, com_up[a:b], 2)[0])
-        ws.append(b - a)
-    if not gs:
+    flights = [(a, b) for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)) if a > 0 and b < len(air)]
+    g, per_phase, _ = flight_gravity(com, frame_time, flights, min_frames=3)
+    if not per_phase or not np.isfinite(g):
         return None, 0
-    order = np.argsort(gs)
-    cw = np.cumsum(np.asarray(ws, float)[order])
-    g = float(np.asarray(gs)[order][np.searchsorted(cw, 0.5 * cw[-1])])
-    return g, len(gs)
+    return float(g), len(per_phase)
 
 
 def choose_unit(stature_units: float, gravity_units: float | None) -> tuple[float, str, str, bool]:
@@ -273,8 +267,7 @@ def understand(motion: Motion, *, joint_map=None, length_scale: float | None = N
             body = BodyModel.from_skeleton(motion.skeleton, joint_map=joint_map)
             m = _analysed(motion)
             com, mk = body.com_and_markers(m)
-            g_u, _ = flight_gravity_units(com[:, UP_AXIS], mk[..., UP_AXIS].min(axis=2), body.leg_length,
-                                          m.frame_time)
+            g_u, _ = flight_gravity_units(com, mk[..., UP_AXIS].min(axis=2), body.leg_length, m.frame_time)
             length_scale, name, units, ambiguous = choose_unit(body.stature, g_u)
         else:
             stature = motion.skeleton.standing_height()

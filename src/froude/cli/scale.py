@@ -6,7 +6,7 @@ import time
 from ..presets import list_presets
 from .common import (add_character_options, add_fps, add_force, add_load_options, add_mass, add_quiet, bound_work,
                      character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
-                     print_rows, say, speed)
+                     load_clip, print_rows, say, speed)
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
 MAX_STRIDES = 10_000

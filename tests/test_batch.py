@@ -36,6 +36,27 @@ def read_index(outdir) -> list[dict]:
         return list(csv.DictReader(f))
 
 
+def leftovers(outdir) -> list[str]:
+    """Hidden files under OUTDIR other than the driver's lock: what an interrupted write leaves. Independent
+    of batch.is_temporary on purpose (batch outputs never start with '.')."""
+    return sorted(str(p.relative_to(outdir)) for p in Path(outdir).rglob(".*")
+                  if p.is_file() and p.name != batch.LOCK_NAME)
+
+
+def killed_mid_write(path: Path) -> None:
+    """Leave what a process killed inside ``atomic_write(path)`` leaves: a subprocess starts the write, writes
+    half a file and is SIGKILLed while it sleeps."""
+    code = ("import sys, time\nfrom froude.io.atomic import atomic_write\n"
+            "def w(tmp):\n    open(tmp, 'w').write('HIERARCHY\\n')\n    print('writing', flush=True)\n    time.sleep(60)\n"
+            "atomic_write(sys.argv[1], w)\n")
+    proc = subprocess.Popen([sys.executable, "-c", code, str(path)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "writing"
+    finally:
+        proc.kill()
+        proc.wait()
+
+
 # ---- plans ---------------------------------------------------------------------------------------------
 def test_example_plan_parses_and_expands(tmp_path):
     (tmp_path / "chars").mkdir()
@@ -70,6 +91,13 @@ def test_example_plan_parses_and_expands(tmp_path):
     ("characters: [child]\naccelerations: [{to_factor: 1.2}]\n", "give exactly one length"),
     ("characters: [child]\naccelerations: [{steps: 8}]\n", "give exactly one goal"),
     ("characters: [child, child]\n", "listed twice"),
+    ("characters: [{name: Tall, height: 1.9}, {name: tall, height: 2.0}]\n", "ids are compared ignoring case"),
+    ("characters: [{name: '..', height: 1.9}]\n", "characters[0].name: letters, digits"),
+    ("characters: [{name: .hidden, height: 1.9}]\n", "starting with a letter or digit"),
+    ("characters: [{height: {from: 1.0, to: 2.2, steps: 100000000}}]\n", "characters[0]: expands to 1e+08"),
+    ("characters: [{height: {from: 1.0, to: 2.2, steps: 20000}}]\n", "at most 10,000 variations"),
+    ("characters: [{height: {from: 1, to: 2, steps: 200}, mass: {from: 50, to: 90, steps: 200}}]\n",
+     "expands to 4e+04 characters"),
     ("characters: [child]\nspeeds: []\n", "no variations"),
 ])
 def test_bad_plans_are_one_line_errors_with_exit_2(tmp_path, run_cli, text, words):
@@ -81,6 +109,91 @@ def test_bad_plans_are_one_line_errors_with_exit_2(tmp_path, run_cli, text, word
     assert code == 2 and out == ""
     assert len(err.strip().splitlines()) == 1 and words in err and "Traceback" not in err
     assert not (tmp_path / "out").exists()
+
+
+def test_runaway_plan_is_refused_at_once(tmp_path, run_cli):
+    """A height range of 1e8 steps (issue 14/18): one line, exit 2, in well under a second, with --dry-run too."""
+    plan = write(tmp_path / "plan.yaml", "characters: [{height: {from: 1.0, to: 2.2, steps: 100000000}}]\n")
+    t0 = time.perf_counter()
+    code, out, err = run_cli("batch", clip("09_01"), "--plan", plan, "-o", tmp_path / "out", "--dry-run")
+    assert code == 2 and out == "" and "at most 10,000 variations" in err, err
+    assert time.perf_counter() - t0 < 5.0  # unbounded, it grew 180 MB/s until it died
+    # tasks are bounded too: clips x variations
+    many = batch.parse_plan({"characters": [{"height": {"from": 1, "to": 5000, "steps": 5_000}}], "strides": [1, 2]})
+    clips = [batch.Clip(f"c{i}", f"c{i}.bvh") for i in range(101)]
+    with pytest.raises(BatchError, match="at most 1,000,000: split it"):
+        batch.make_tasks(clips, many)
+
+
+def test_clip_ids_cannot_collide_or_escape(tmp_path, run_cli):
+    """a.bvh and a.BVH would share one output (refused, naming both); '...bvh' gets a safe id inside OUTDIR."""
+    clips = tmp_path / "clips"
+    (clips / "sub").mkdir(parents=True)
+    text = clip("09_01").read_text()
+    write(clips / "a.bvh", text)
+    write(clips / "A.BVH", text)
+    plan = write(tmp_path / "plan.yaml", "characters: [child]\nstrides: 1\n")
+    code, out, err = run_cli("batch", clips, "--plan", plan, "-o", tmp_path / "out", "--dry-run")
+    assert code == 2 and out == "" and len(err.strip().splitlines()) == 1, err
+    assert "A.BVH" in err and "a.bvh" in err and "ignoring case" in err
+    (clips / "A.BVH").unlink()
+    write(clips / "...bvh", text)
+    write(clips / "sub" / "..bvh", text)
+    write(clips / "sub" / "my clip;rm.bvh", text)
+    ids = [c.id for c in batch.find_clips([clips])]
+    assert ids == ["__", "a", "sub/_", "sub/my_clip_rm"]
+    for c in batch.find_clips([clips]):
+        task = batch.make_tasks([c], batch.parse_plan({"characters": ["child"]}))[0]
+        dest = (tmp_path / "out" / task.output).resolve()
+        assert dest.is_relative_to(tmp_path / "out") and not any(p.startswith(".") for p in Path(task.output).parts)
+
+
+def test_outdir_is_never_an_input(tmp_path, run_cli):
+    """'froude batch same -o same' took the previous outputs for new clips on every rerun: now OUTDIR inside
+    an input folder is skipped, and OUTDIR itself (or a file in it) given as an input is refused."""
+    clips = tmp_path / "clips"
+    clips.mkdir()
+    write(clips / "run.bvh", clip("09_01").read_text())
+    out = clips / "out"
+    (out / "run").mkdir(parents=True)
+    write(out / "run" / "child_x1_1str.bvh", clip("09_02").read_text())  # what a previous run wrote
+    plan = write(tmp_path / "plan.yaml", "characters: [child]\nstrides: 1\n")
+    for inputs in ([clips], [str(clips / "**" / "*.bvh")]):
+        code, stdout, err = run_cli("batch", *inputs, "--plan", plan, "-o", out, "--dry-run")
+        assert code == 0, err
+        assert [l.split("\t")[0] for l in stdout.strip().splitlines()[1:]] == ["run"]
+    for inputs in ([out], [clips, out / "run" / "child_x1_1str.bvh"]):
+        code, stdout, err = run_cli("batch", *inputs, "--plan", plan, "-o", out, "--dry-run")
+        assert code == 2 and "output folder" in err and len(err.strip().splitlines()) == 1, err
+    code, stdout, err = run_cli("batch", clips, "--plan", plan, "-o", clips, "--dry-run")
+    assert code == 2 and "is the output folder" in err, err
+
+
+def test_unreachable_scheduler_creates_nothing(tmp_path, run_cli):
+    plan = write(tmp_path / "plan.yaml", "characters: [child]\nstrides: 1\n")
+    code, out, err = run_cli("batch", clip("09_01"), "--plan", plan, "-o", tmp_path / "out",
+                             "--scheduler", "tcp://127.0.0.1:1", "-q")
+    assert code == 2 and "cannot reach the Dask scheduler" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_temporaries_are_the_names_atomic_write_uses(tmp_path):
+    """The cleanup finds exactly the files atomic_write writes through (taken from real writes), none of the
+    outputs; it removes what a process killed mid-write leaves."""
+    from froude.io.atomic import atomic_write
+
+    names = []
+    for dest in ("child_x1_4str.bvh", "child_x1_4str.report.json", "child_x1_4str.done.json", "index.csv",
+                 "index.parquet", "noext"):
+        atomic_write(tmp_path / dest, lambda tmp: (names.append(Path(tmp).name), Path(tmp).write_text("x")))
+        assert not batch.is_temporary(dest)
+    assert len(names) == 6 and all(batch.is_temporary(n) for n in names), names
+    assert not batch.is_temporary(batch.LOCK_NAME) and batch.temporaries(tmp_path) == []
+    (tmp_path / "clip").mkdir()
+    killed_mid_write(tmp_path / "clip" / "child_x1_4str.bvh")
+    left = leftovers(tmp_path)
+    assert len(left) == 1 and [str(p.relative_to(tmp_path)) for p in batch.temporaries(tmp_path)] == left
+    assert batch.clean_stale_temporaries(tmp_path) == 1 and leftovers(tmp_path) == []
 
 
 def test_bad_inputs_exit_2(tmp_path, run_cli):
@@ -169,7 +282,7 @@ def test_acceptance_132_tasks(tmp_path, run_cli):
         assert m.n_frames == int(r["n_frames"])
         rep = json.loads(pipeline.report_path(out / r["output"]).read_text())
         assert rep["froude_U"] == pytest.approx(float(r["froude_U"]), rel=1e-5)
-    assert not list(out.rglob("*.tmp"))
+    assert leftovers(out) == []
     print(f"132-task batch on 2 local workers: {elapsed:.1f} s")
     # last: the physics bars (depend on the pipeline, not on the batch)
     assert all(r["bars_met"] == "yes" for r in running), _bars_failures(running)
@@ -221,7 +334,102 @@ def test_sigkill_midway_then_resume(tmp_path, run_cli):
     assert {p: after[p] for p in before} == before  # nothing finished was redone
     for p in out.rglob("*.bvh"):
         load_bvh(p)
-    assert not list(out.rglob("*.tmp"))
+    assert leftovers(out) == []
+
+
+def _group_workers(pgid: int) -> list[int]:
+    """Pids of the Dask worker processes (multiprocessing spawn children) in a process group."""
+    pids = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            stat = (d / "stat").read_text()
+            cmd = (d / "cmdline").read_bytes().decode(errors="replace")
+        except OSError:
+            continue
+        if int(stat.rsplit(")", 1)[1].split()[2]) == pgid and "spawn_main" in cmd:
+            pids.append(int(d.name))
+    return pids
+
+
+def _start_batch(inputs, plan, out):
+    cmd = [sys.executable, "-m", "froude.cli", "batch", *map(str, inputs), "--plan", str(plan), "-o", str(out),
+           "-q", "--workers", "2"]
+    return subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+
+def _wait_markers(proc, out, n, timeout=120.0) -> None:
+    deadline = time.monotonic() + timeout
+    while len(list(Path(out).rglob("*.done.json"))) < n:
+        assert proc.poll() is None, f"batch ended early: {proc.stderr.read()}"
+        assert time.monotonic() < deadline, f"fewer than {n} outputs after {timeout} s"
+        time.sleep(0.05)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="finds worker processes through /proc")
+def test_worker_killed_mid_write_then_rerun(tmp_path, run_cli):
+    """A worker SIGKILLed mid-batch and a temporary left by a write killed midway (a real atomic_write, as a
+    worker killed inside it leaves): the run and its rerun leave no temporary, and the index lists as done
+    exactly the tasks with done-markers."""
+    if MOCAP is None:
+        pytest.skip("real clips not found")
+    plan = write(tmp_path / "plan.yaml", "characters: [child, small]\nspeeds: [0.9, 1.0, 1.1]\nstrides: 2\n")
+    inputs = [MOCAP / f"{n}.bvh" for n in ("09_02", "09_03")]
+    out = tmp_path / "out"
+    (out / "09_02").mkdir(parents=True)
+    killed_mid_write(out / "09_02" / "small_x1_2str.bvh")
+    assert len(leftovers(out)) == 1
+    proc = _start_batch(inputs, plan, out)
+    try:
+        _wait_markers(proc, out, 2)
+        workers = _group_workers(proc.pid)
+        assert len(workers) == 2, workers
+        killed_mid_write(out / "09_03" / "child_x1_2str.bvh")  # what a worker killed inside a write leaves
+        os.kill(workers[0], signal.SIGKILL)
+        _, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode in (0, 1), err  # a task whose worker died may fail (KilledWorker); the rerun redoes it
+    assert leftovers(out) == []
+
+    def check_index():
+        done = {str(m.relative_to(out)).replace(".done.json", ".bvh") for m in out.rglob("*.done.json")}
+        rows = read_index(out)
+        assert len(rows) == 12
+        assert {r["output"] for r in rows if r["status"] in ("ok", "skipped")} == done
+
+    check_index()
+    code, _, err = run_cli("batch", *inputs, "--plan", plan, "-o", out, "--workers", 2, "-q")
+    assert code == 0, err
+    check_index()
+    assert {r["status"] for r in read_index(out)} <= {"ok", "skipped"}
+    assert leftovers(out) == []
+    for p in out.rglob("*.bvh"):
+        load_bvh(p)
+
+
+@pytest.mark.slow
+def test_workers_end_with_the_driver(tmp_path):
+    """SIGKILL of the driver alone (not its process group): the Dask worker processes end by themselves."""
+    if MOCAP is None:
+        pytest.skip("real clips not found")
+    plan = write(tmp_path / "plan.yaml", "characters: [child, small]\nspeeds: [0.9, 1.0, 1.1]\nstrides: 3\n")
+    proc = _start_batch([MOCAP / f"{n}.bvh" for n in ("09_02", "09_03")], plan, tmp_path / "out")
+    try:
+        _wait_markers(proc, tmp_path / "out", 1)
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+        t0 = time.monotonic()
+        _wait_group_gone(proc.pid, timeout=30.0)
+        print(f"workers gone {time.monotonic() - t0:.1f} s after the driver's SIGKILL")
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
 
 
 def _wait_group_gone(pgid: int, timeout: float = 20.0) -> None:
@@ -292,7 +500,7 @@ def test_ctrl_c_stops_cleanly(tmp_path):
     assert done <= bvhs
     for p in bvhs:  # complete, even one whose worker stopped before its marker
         load_bvh(out / p)
-    assert not list(out.rglob("*.tmp"))
+    assert leftovers(out) == []
 
 
 @pytest.mark.slow

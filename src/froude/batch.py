@@ -53,6 +53,12 @@ MARKER_SCHEMA = "froude.batch.done/1"
 INDEX_NAME = "index.csv"
 #: Seconds between index rewrites while a batch runs (always rewritten at the end and on interrupt).
 INDEX_INTERVAL_S = 1.0
+#: Largest plan and batch froude expands (a range of 1e8 steps is a typo, not a dataset): checked on the
+#: counts before any list is built, so a runaway plan is one line and exit 2 at once.
+MAX_VARIATIONS = 10_000
+MAX_TASKS = 1_000_000
+#: The file the running driver holds locked in OUTDIR.
+LOCK_NAME = ".froude-batch.lock"
 
 EXAMPLE_PLAN = """\
 # froude batch plan: every clip x every variation below
@@ -183,6 +189,9 @@ def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
         bad("speeds", "the plan has no variations: give speeds and/or accelerations")
 
     fps_arg = () if fps is None else (("fps", fps),)
+    n_var = len(characters) * (len(speed_args) * len(strides) + len(acc_args))
+    if n_var > MAX_VARIATIONS:
+        bad("characters", f"the plan expands to {n_var:,} variations; at most {MAX_VARIATIONS:,}")
     variations = []
     for label, spec, numbers in characters:
         for (sid, sarg), n in itertools.product(speed_args, strides):
@@ -192,11 +201,14 @@ def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
             variations.append(Variation(f"{label}_{aid}", "accelerate", label, spec, numbers, aarg + fps_arg))
     seen = {}
     for v in variations:
-        if v.id in seen:
-            if seen[v.id] == v.params():
+        key = v.id.lower()  # ids name files: on a case-insensitive filesystem "Tall" and "tall" are one
+        if key in seen:
+            if seen[key] == (v.id, v.params()):
                 bad("characters", f"variation '{v.id}' is listed twice")
-            bad("characters", f"two different variations get the id '{v.id}': give the characters distinct names")
-        seen[v.id] = v.params()
+            bad("characters", f"two different variations get the id '{seen[key][0]}'"
+                + (f" / '{v.id}' (ids are compared ignoring case)" if seen[key][0] != v.id else "")
+                + ": give the characters distinct names")
+        seen[key] = (v.id, v.params())
     return Plan(tuple(variations), mass, sex, length_scale, source)
 
 
@@ -210,6 +222,14 @@ def _positive(v, where, bad) -> float:
     return x
 
 
+def _count_values(v) -> int:
+    """How many values ``_values`` would make of v (without making them: a range may be huge)."""
+    if isinstance(v, dict):
+        n = v.get("steps")
+        return n if isinstance(n, int) and not isinstance(n, bool) and n > 0 else 1
+    return len(v) if isinstance(v, list) else 1
+
+
 def _values(v, where, bad) -> list[float]:
     """A number, a list of numbers, or a range {from, to, steps} (steps values, ends included)."""
     if isinstance(v, dict):
@@ -219,6 +239,9 @@ def _values(v, where, bad) -> list[float]:
         n = v["steps"]
         if isinstance(n, bool) or not isinstance(n, int) or n < 1 or (n == 1 and a != b):
             bad(where + ".steps", f"a whole number >= 2 (1 only when from == to), got {n!r}")
+        if n > MAX_VARIATIONS:
+            bad(where + ".steps", f"at most {MAX_VARIATIONS:,} (a plan may have at most {MAX_VARIATIONS:,} "
+                f"variations), got {n:,}")
         return [a + (b - a) * k / (n - 1) for k in range(n)] if n > 1 else [a]
     if isinstance(v, list):
         if not v:
@@ -244,9 +267,13 @@ def _expand_character(entry, where, bad, presets, base_dir):
         bad(f"{where}.base", "a preset name or a character file")
     spec = None if base is None else _spec_path(base, presets, base_dir)
     name = entry.get("name")
-    if name is not None and not re.fullmatch(r"[A-Za-z0-9._-]+", str(name)):
-        bad(f"{where}.name", f"letters, digits, '.', '_' and '-' only (it names files), got {name!r}")
+    if name is not None and not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]*", str(name)):
+        bad(f"{where}.name", "letters, digits, '.', '_' and '-', starting with a letter or digit (it names "
+            f"files), got {name!r}")
     keys = [k for k in CHARACTER_NUMBERS if k in entry]
+    n_combos = math.prod(_count_values(entry[k]) for k in keys)
+    if n_combos > MAX_VARIATIONS:
+        bad(where, f"expands to {n_combos:.3g} characters; a plan may have at most {MAX_VARIATIONS:,} variations")
     grids = [_values(entry[k], f"{where}.{k}", bad) for k in keys]
     ranged = [k for k, g in zip(keys, grids) if len(g) > 1]
     out = []
@@ -262,7 +289,15 @@ def _expand_character(entry, where, bad, presets, base_dir):
 
 
 def _label_of_spec(spec: str) -> str:
-    return re.sub(r"[^A-Za-z0-9._-]", "_", Path(spec).stem if spec.lower().endswith((".yaml", ".yml", ".bvh")) else spec)
+    return safe_name(Path(spec).stem if spec.lower().endswith((".yaml", ".yml", ".bvh")) else spec)
+
+
+def safe_name(text: str) -> str:
+    """text as one safe file-name part: letters, digits, '.', '_' and '-' only (others become '_'), not
+    starting with '.' (no '.', '..' or hidden names: leading dots become '_'), never empty."""
+    name = re.sub(r"[^A-Za-z0-9._-]", "_", text)
+    name = re.sub(r"^\.+", lambda m: "_" * len(m.group()), name)
+    return name or "_"
 
 
 def _spec_path(spec: str, presets, base_dir) -> str:
@@ -327,22 +362,39 @@ class Clip:
     path: str
 
 
-def find_clips(inputs) -> list[Clip]:
-    """Files, folders (every .bvh below them) and globs → clips, sorted, each once. Raises BatchError."""
+def find_clips(inputs, exclude=None) -> list[Clip]:
+    """Files, folders (every .bvh below them) and globs → clips, sorted, each once. Raises BatchError.
+
+    exclude: a folder (OUTDIR) whose files are never inputs: folders holding it and globs skip them; a
+    file or folder named explicitly inside it (or OUTDIR itself) is an error (a re-run would otherwise take the previous outputs for new clips).
+    Clip ids are safe relative paths (``safe_name`` per part: nothing can escape OUTDIR) and unique
+    ignoring case (``a.bvh`` and ``a.BVH`` would share one output folder: refused, naming both).
+    """
+    ex = None if exclude is None else Path(exclude).resolve()
+
+    def inside(p) -> bool:
+        return ex is not None and Path(p).resolve().is_relative_to(ex)
+
     paths = []
     for item in inputs:
         item = str(item)
         if any(c in item for c in "*?["):
-            hits = [p for p in glob.glob(item, recursive=True) if Path(p).is_file()]
+            hits = [p for p in glob.glob(item, recursive=True) if Path(p).is_file() and not inside(p)]
             if not hits:
-                raise BatchError(f"{item}: no file matches")
+                raise BatchError(f"{item}: no file matches" + (" outside the output folder" if ex else ""))
             paths += hits
         elif Path(item).is_dir():
-            hits = sorted(p for p in Path(item).rglob("*") if p.suffix.lower() == ".bvh" and p.is_file())
+            if inside(item):
+                raise BatchError(f"{item}: is the output folder {exclude} or inside it: outputs are not inputs "
+                                 "(write the outputs elsewhere, e.g. a subfolder)")
+            hits = sorted(p for p in Path(item).rglob("*")
+                          if p.suffix.lower() == ".bvh" and p.is_file() and not inside(p))
             if not hits:
-                raise BatchError(f"{item}: no .bvh file in this folder")
+                raise BatchError(f"{item}: no .bvh file in this folder" + (" outside the output folder" if ex else ""))
             paths += hits
         elif Path(item).is_file():
+            if inside(item):
+                raise BatchError(f"{item}: is inside the output folder {exclude}: outputs are not inputs")
             paths.append(item)
         else:
             raise BatchError(f"{item}: no such file or folder")
@@ -350,7 +402,21 @@ def find_clips(inputs) -> list[Clip]:
     if not unique:
         raise BatchError("no input clips")
     root = Path(os.path.commonpath([str(Path(p).parent) for p in unique]))
-    return [Clip(str(Path(p).relative_to(root).with_suffix("")), p) for p in unique]
+    clips = [Clip(clip_id(Path(p).relative_to(root)), p) for p in unique]
+    seen: dict[str, Clip] = {}
+    for c in clips:
+        other = seen.setdefault(c.id.lower(), c)
+        if other is not c:
+            raise BatchError(f"{other.path} and {c.path} would share the output folder '{other.id}' (clip ids "
+                             "are compared ignoring case, and unsafe characters become '_'): rename one")
+    return clips
+
+
+def clip_id(relative: Path) -> str:
+    """A clip's id from its path relative to the inputs' folder: without the .bvh suffix, every part a
+    ``safe_name`` (so ``...bvh`` is ``__``, never ``..``), '/'-separated."""
+    parts = list(relative.with_suffix("").parts) if relative.suffix.lower() == ".bvh" else list(relative.parts)
+    return "/".join(safe_name(part) for part in parts)
 
 
 @dataclass(frozen=True)
@@ -366,6 +432,10 @@ class Task:
 
 
 def make_tasks(clips, plan: Plan) -> list[Task]:
+    n = len(clips) * len(plan.variations)
+    if n > MAX_TASKS:
+        raise BatchError(f"{len(clips):,} clips x {len(plan.variations):,} variations = {n:,} tasks; a batch "
+                         f"may have at most {MAX_TASKS:,}: split it")
     return [Task(c, v) for c in clips for v in plan.variations]
 
 
@@ -400,10 +470,28 @@ def _jsonable(x):
     return json.loads(json.dumps(x))
 
 
+#: The temporaries of ``io.atomic.atomic_write``: ``.{stem}.{8 random characters}{suffix}`` beside the
+#: destination (tempfile.mkstemp's names; ``.tmp`` when the destination has no suffix).
+_TEMPORARY = re.compile(r"\.(?P<stem>.+)\.[a-z0-9_]{8}(?P<suffix>\.[^.]+)")
+
+
+def is_temporary(name: str) -> bool:
+    """True for a file name ``atomic_write`` uses while it writes (batch outputs never start with '.')."""
+    return name != LOCK_NAME and _TEMPORARY.fullmatch(name) is not None
+
+
+def temporaries(outdir) -> list[Path]:
+    """Temporaries of interrupted atomic writes anywhere under OUTDIR."""
+    return sorted(p for p in Path(outdir).rglob(".*") if p.is_file() and is_temporary(p.name))
+
+
 def clean_stale_temporaries(outdir) -> int:
-    """Remove temporary files of interrupted atomic writes (``.NAME.XXXX.tmp``); returns how many."""
+    """Remove the temporaries of interrupted atomic writes (``temporaries``); returns how many.
+
+    Only while no task of ours can be writing: before a run, and after it when every task has finished.
+    """
     n = 0
-    for p in Path(outdir).rglob(".*.tmp"):
+    for p in temporaries(outdir):
         try:
             p.unlink()
             n += 1
@@ -550,12 +638,10 @@ def write_parquet(outdir, rows) -> Path | None:
         import pyarrow.parquet as pq
     except ImportError:
         return None
+    from .io.atomic import atomic_write
+
     table = pacsv.read_csv(pa.py_buffer(index_text(rows).encode()))
-    path = Path(outdir) / "index.parquet"
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    pq.write_table(table, tmp)
-    os.replace(tmp, path)
-    return path
+    return atomic_write(Path(outdir) / "index.parquet", lambda tmp: pq.write_table(table, tmp))
 
 
 # ---- the driver -----------------------------------------------------------------------------------------
@@ -667,13 +753,23 @@ def run_batch(clips, plan: Plan, outdir, *, client=None, scheduler: str | None =
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
     outdir = Path(outdir).resolve()
     tasks = make_tasks(clips, plan)
+    # Nothing is created before the cluster answers: an unreachable scheduler leaves no OUTDIR behind.
+    # (A first look at the markers decides whether Dask is needed at all; they are read again under the lock.)
+    own = None
+    t0 = time.perf_counter()
+    if client is None and any(redo or read_done(outdir, t, plan) is None for t in tasks):
+        log(f"starting Dask ({scheduler or f'a local cluster of {n_workers or default_workers()} worker(s)'}) ...")
+        own = start_client(scheduler, n_workers)
+        client = own[0]
+    startup_s = time.perf_counter() - t0
+    lock = handlers = None
     try:
-        outdir.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise BatchError(f"{outdir}: cannot create the output folder: {e.strerror or e}") from None
-    lock = _lock(outdir)
-    handlers = _interrupt_handlers()
-    try:
+        try:
+            outdir.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise BatchError(f"{outdir}: cannot create the output folder: {e.strerror or e}") from None
+        lock = _lock(outdir)
+        handlers = _interrupt_handlers()
         n_tmp = clean_stale_temporaries(outdir)
         if n_tmp:
             log(f"removed {n_tmp} temporary file(s) of an interrupted run")
@@ -687,28 +783,43 @@ def run_batch(clips, plan: Plan, outdir, *, client=None, scheduler: str | None =
             else:
                 rows.append(base_row(t))
                 todo.append(i)
-        summary = Summary(rows, index=str(outdir / INDEX_NAME))
+        summary = Summary(rows, index=str(outdir / INDEX_NAME), startup_s=startup_s)
         write_index(outdir, rows)
         if todo:
             try:
-                _run_on_dask(tasks, todo, plan, outdir, summary, client, scheduler, n_workers, progress, log)
+                _run_on_dask(tasks, todo, plan, outdir, summary, client, progress)
             except KeyboardInterrupt:
+                _close(own)  # our local workers end here: nothing of ours writes any more
                 # tasks that finished while the cluster closed wrote their markers: the index says so
                 for i in todo:
                     if rows[i]["status"] == "pending":
                         done = read_done(outdir, tasks[i], plan)
                         if done is not None:
                             rows[i] = {**done, "status": "ok", "output": tasks[i].output}
-                if client is None and scheduler is None:  # our local workers are gone: nothing writes any more
+                if own is not None and own[1] is not None:
                     clean_stale_temporaries(outdir)
                 write_index(outdir, rows)
                 raise
+        # every task has finished (a killed worker's task too, retried or failed): a temporary left now is
+        # an orphan of a worker killed mid-write
+        clean_stale_temporaries(outdir)
         write_index(outdir, rows)
         write_parquet(outdir, rows)
         return summary
     finally:
+        _close(own)
         _restore_handlers(handlers)
         _unlock(lock)
+
+
+def _close(own) -> None:
+    """Close a (client, cluster) pair this run started (idempotent)."""
+    if own is None:
+        return
+    client, cluster = own
+    client.close()
+    if cluster is not None:
+        cluster.close()
 
 
 #: Loggers that report Dask's own teardown noise after an interrupt (e.g. tornado callbacks of
@@ -748,21 +859,14 @@ def _restore_handlers(handlers) -> None:
         logging.getLogger(n).setLevel(level)
 
 
-def _run_on_dask(tasks, todo, plan, outdir, summary, client, scheduler, n_workers, progress, log):
+def _run_on_dask(tasks, todo, plan, outdir, summary, client, progress):
     from dask.distributed import as_completed
 
     rows = summary.rows
     t0 = time.perf_counter()
-    own = client is None
-    cluster = None
-    if own:
-        where = scheduler or f"a local cluster of {n_workers or default_workers()} worker(s)"
-        log(f"starting Dask ({where}) ...")
-        client, cluster = start_client(scheduler, n_workers)
     bar = None
     futures = {}
     try:
-        summary.startup_s = time.perf_counter() - t0
         t_start = time.perf_counter()
         by_clip: dict[str, list[int]] = {}
         for i in todo:
@@ -810,10 +914,6 @@ def _run_on_dask(tasks, todo, plan, outdir, summary, client, scheduler, n_worker
         if bar is not None:
             bar.close()
         futures.clear()
-        if own:
-            client.close()
-            if cluster is not None:
-                cluster.close()
 
 
 def _progress_bar(total: int, enabled: bool):
@@ -833,7 +933,7 @@ def _lock(outdir: Path):
         import fcntl
     except ImportError:  # not POSIX: no lock
         return None
-    f = open(outdir / ".froude-batch.lock", "w")
+    f = open(outdir / LOCK_NAME, "w")
     try:
         fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:

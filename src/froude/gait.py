@@ -33,6 +33,11 @@ class Stance:
     ground: float
     contact_point: np.ndarray
     partial: bool
+    #: sub-frame touchdown / liftoff [frames]: where the contact test became true before ``start`` and false
+    #: after ``stop - 1`` (linear interpolation of the foot's height and speed between frames); so step
+    #: times do not carry a frame's quantisation (a 33 ms frame is 10 % of a step at 30 Hz).
+    t_on: float = float("nan")
+    t_off: float = float("nan")
 
     @property
     def side(self) -> str:
@@ -84,6 +89,62 @@ def _close_gaps(mask: np.ndarray, max_gap: int) -> np.ndarray:
     return out
 
 
+def _rise(x: np.ndarray, i: int, limit: float) -> float:
+    """Where x rises through ``limit`` between frames i and i + 1, as a fraction in [0, 1] of the way
+    (linear): 0 if x[i] is already at or above it, 1 if x[i + 1] is still below."""
+    a, b = float(x[i]), float(x[i + 1])
+    if a >= limit:
+        return 0.0
+    if b < limit:
+        return 1.0
+    return float((limit - a) / (b - a))
+
+
+def _subframe_events(h: np.ndarray, v: np.ndarray, h_lim: float, v_lim: float, s0: int, s1: int) -> tuple[float, float]:
+    """Sub-frame (touchdown, liftoff) [frames] of a contact on frames [s0, s1).
+
+    A foot is down while it is both low (h < h_lim) and slow (v < v_lim): it lands when the later of the
+    two tests becomes true between frames s0 − 1 and s0, and lifts when the first of them fails between
+    s1 − 1 and s1. h, v: (F,) lowest-marker height [m] and slowest-marker horizontal speed [m/s].
+    At the clip's edges the frame is kept.
+    """
+    F = len(h)
+    t_on = float(s0)
+    if s0 > 0:  # falling through the limits: a rise of −x
+        t_on = s0 - 1 + max(_rise(-h, s0 - 1, -h_lim), _rise(-v, s0 - 1, -v_lim))
+    t_off = float(s1 - 1)
+    if s1 < F:
+        t_off = s1 - 1 + min(_rise(h, s1 - 1, h_lim), _rise(v, s1 - 1, v_lim))
+    return float(t_on), float(t_off)
+
+
+def step_period(gait: "Gait", n_frames: int) -> float:
+    """Mean step time [s] of a gait, NaN with fewer than two touchdowns or liftoffs.
+
+    Measured from the sub-frame touchdown and liftoff times alike (two estimates, averaged by the number of
+    steps each spans; a contact cut by the clip's start gives no liftoff: its extent is uncertain). Each sequence is used over a whole number of strides when it spans more than one step
+    (an even number of steps), so a runner whose left and right steps differ is not biased by an odd step.
+    """
+    dt = gait.frame_time
+    spans, steps = [], []
+    for times in ([s.t_on for s in gait.stances if s.start > 0],
+                  [s.t_off for s in gait.stances if 0 < s.start and s.stop < n_frames]):
+        t = np.sort(np.asarray(times, float))
+        n = len(t) - 1
+        if n < 1:
+            continue
+        if n > 1 and n % 2:
+            n -= 1  # whole strides: leave out one step at either end and average the two
+            span = 0.5 * ((t[n] - t[0]) + (t[-1] - t[-1 - n]))
+        else:
+            span = t[n] - t[0]
+        spans.append(span * dt)
+        steps.append(n)
+    if not steps or sum(spans) <= 0:
+        return float("nan")
+    return float(sum(spans) / sum(steps))
+
+
 def detect_gait(motion: Motion, body: BodyModel, markers: np.ndarray | None = None) -> Gait:
     """Foot contacts, stances, flight phases and ground height of a motion.
 
@@ -121,8 +182,11 @@ def detect_gait(motion: Motion, body: BodyModel, markers: np.ndarray | None = No
                 contact[s0:s1, foot] = True
                 low = np.argmin(height[s0:s1, foot], axis=1)  # lowest marker per frame
                 pts = markers[np.arange(s0, s1), foot, low]
+                h_lim = local_ground + h_thr
+                t_on, t_off = _subframe_events(h_foot[:, foot], v_foot[:, foot], h_lim, v_thr, s0, s1)
                 stance_list.append(
-                    Stance(foot, int(s0), int(s1), local_ground, pts.mean(axis=0), bool(s0 == 0 or s1 == F))
+                    Stance(foot, int(s0), int(s1), local_ground, pts.mean(axis=0), bool(s0 == 0 or s1 == F),
+                           t_on, t_off)
                 )
     stance_list.sort(key=lambda s: s.start)
     any_contact = contact.any(axis=1)
@@ -175,13 +239,9 @@ def summarize(motion: Motion, body: BodyModel, com: np.ndarray | None = None, ga
     if dist > 0:
         heading[_HORIZONTAL] = disp / dist
     L = body.leg_length
-    touchdowns = [s for s in gait.stances if s.start > 0]
-    step_freq = np.nan
-    step_len = np.nan
-    if len(touchdowns) >= 2:
-        t0, t1 = touchdowns[0].start * dt, touchdowns[-1].start * dt
-        step_freq = (len(touchdowns) - 1) / (t1 - t0)
-        step_len = speed / step_freq
+    period = step_period(gait, motion.n_frames)
+    step_freq = 1.0 / period if period > 0 else np.nan
+    step_len = speed / step_freq if np.isfinite(step_freq) else np.nan
     flight_times = gait.flight_times()
     has_flight = bool(flight_times.size and flight_times.max() >= 0.025)
     excursion = float(com[:, UP_AXIS].max() - com[:, UP_AXIS].min())

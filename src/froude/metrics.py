@@ -6,7 +6,6 @@ output as ``*.report.json``.
 """
 from __future__ import annotations
 
-import json
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -15,6 +14,7 @@ from . import quat
 from .body import BodyModel
 from .constants import GRAVITY, UP_AXIS
 from .gait import Gait, detect_gait, summarize
+from .io.jsonable import dumps, jsonable
 from .motion import Motion
 
 _HORIZONTAL = [a for a in range(3) if a != UP_AXIS]
@@ -27,6 +27,26 @@ BARS = {
     "foot_skate_mm": 5.0,
     "penetration_mm": 5.0,
     "joint_jump_ratio": 1.5,
+}
+
+
+#: Why a report figure is ``null`` (written beside it as ``unmeasured``).
+UNMEASURED = {
+    "flight_gravity_m_s2": "no flight phase of at least 3 frames (a parabola needs 3 samples)",
+    "flight_horizontal_accel_m_s2": "no flight phase of at least 3 frames",
+    "step_frequency_hz": "fewer than two touchdowns or two liftoffs inside the motion",
+    "step_length_m": "fewer than two touchdowns or two liftoffs inside the motion",
+    "peak_vertical_force_bw": "motion too short (at most 8 frames) to differentiate the COM",
+    "leg_stiffness_n_m": "no complete stance with a measurable leg compression",
+    "leg_stiffness_K": "no complete stance with a measurable leg compression",
+    "com_tracking_rms_mm": "no machine COM to track (not a physical output)",
+    "com_tracking_max_mm": "no machine COM to track (not a physical output)",
+    "foot_marker_rms_mm": "no foot targets (not a physical output)",
+    "foot_marker_max_mm": "no foot targets (not a physical output)",
+    "pose_deviation_mean_deg": "no reference pose given",
+    "pose_deviation_max_deg": "no reference pose given",
+    "reference_max_joint_jump_deg": "no reference given",
+    "froude_U": "no leg length",
 }
 
 
@@ -67,11 +87,16 @@ class Report:
     extras: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
+        """Plain JSON-able dict: NaN/Infinity become ``null`` and ``unmeasured`` says why for each such field."""
         d = asdict(self)
-        return {"schema": "froude.report/1", **{k: _jsonable(v) for k, v in d.items()}}
+        out = {"schema": "froude.report/1", **{k: jsonable(v) for k, v in d.items()}}
+        out["unmeasured"] = {k: UNMEASURED.get(k, "not measurable on this motion")
+                             for k, v in out.items() if v is None}
+        return out
 
     def to_json(self) -> str:
-        return json.dumps(self.to_dict(), indent=2, allow_nan=True)
+        """Strict JSON (no NaN/Infinity tokens: any parser reads it)."""
+        return dumps(self.to_dict(), indent=2)
 
     def check_bars(self) -> list[str]:
         """Which of the project's physics bars this report fails (empty list: all pass)."""
@@ -97,41 +122,40 @@ class Report:
         return fails
 
 
-def _jsonable(v):
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    if isinstance(v, (np.floating, np.integer)):
-        return v.item()
-    if isinstance(v, dict):
-        return {k: _jsonable(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
-    return v
+#: Fewest frames of a flight phase the flight-gravity parabola is fitted to (3 samples determine it: at
+#: 30 Hz a 0.12 s flight has 3-4 frames; a physical output's COM is an exact parabola there).
+FLIGHT_MIN_FRAMES = 3
 
 
-def flight_gravity(com: np.ndarray, frame_time: float, flights, min_frames: int = 6) -> tuple[float, list[float], float]:
-    """Gravity seen in flight: a parabola fitted to the COM height of each flight phase.
+def flight_gravity(com: np.ndarray, frame_time: float, flights, min_frames: int = FLIGHT_MIN_FRAMES) -> tuple[float, list[float], float]:
+    """Gravity seen in flight: one parabola curvature shared by the COM height of every flight phase.
 
-    com: (F, 3) [m]; flights: [(start, stop), ...] frame intervals. Returns the duration-weighted mean
-    g [m/s^2] (9.81 for physical motion), the per-phase values, and the RMS horizontal COM acceleration
-    in flight [m/s^2] (≈ 0 for physical motion: nothing pushes a body in the air).
-    Phases shorter than ``min_frames`` frames are skipped (too short to fit a parabola robustly).
+    com: (F, 3) [m]; flights: [(start, stop), ...] frame intervals. Returns g [m/s^2] (9.81 for physical
+    motion) from one least-squares fit y_i(t) = c_i + b_i t − g t²/2 over all flights of at least
+    ``min_frames`` frames (each its own height and vertical speed, gravity common: short flights of a 30 Hz
+    clip then still constrain it together), the per-phase values, and the RMS horizontal COM acceleration
+    in flight [m/s^2] (≈ 0 for physical motion: nothing pushes a body in the air). NaN when no flight is
+    long enough.
     """
-    gs, ws, acc_h = [], [], []
-    for a, b in flights:
-        if b - a < min_frames:
-            continue
+    used = [(a, b) for a, b in flights if b - a >= min_frames]
+    if not used:
+        return float("nan"), [], float("nan")
+    n = len(used)
+    rows, ys, gs, acc_h = [], [], [], []
+    for i, (a, b) in enumerate(used):
         t = np.arange(b - a) * frame_time
-        y = com[a:b, UP_AXIS]
-        c2 = np.polyfit(t, y, 2)[0]
-        gs.append(-2.0 * c2)
-        ws.append(b - a)
+        t = t - t.mean()  # centred: better conditioned, same curvature
+        A = np.zeros((b - a, 2 * n + 1))
+        A[:, 2 * i] = 1.0
+        A[:, 2 * i + 1] = t
+        A[:, -1] = -0.5 * t * t
+        rows.append(A)
+        ys.append(com[a:b, UP_AXIS])
+        gs.append(-2.0 * np.polyfit(t, com[a:b, UP_AXIS], 2)[0])
         for ax in _HORIZONTAL:
             acc_h.append(2.0 * np.polyfit(t, com[a:b, ax], 2)[0])
-    if not gs:
-        return float("nan"), [], float("nan")
-    g = float(np.average(gs, weights=ws))
-    return g, [float(x) for x in gs], float(np.sqrt(np.mean(np.square(acc_h))))
+    sol, *_ = np.linalg.lstsq(np.concatenate(rows), np.concatenate(ys), rcond=None)
+    return float(sol[-1]), [float(x) for x in gs], float(np.sqrt(np.mean(np.square(acc_h))))
 
 
 def foot_skate_mm(markers: np.ndarray, gait: Gait, leg_length: float) -> float:

@@ -23,7 +23,7 @@ one simulator call per iteration, an extra one only on a rejected step.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -46,6 +46,12 @@ CYCLE_SCALES = {"U": 0.05, "H": 0.02, "theta0": 0.03, "K": 0.1, "a": 0.01, "b": 
 _VARS = ("U", "H", "theta0", "K", "a", "b", "c")
 #: Frames left out at each end of a flight when measuring the flight force residual (filter edge).
 RESIDUAL_GUARD_FRAMES = 2
+#: Clips below ANALYSIS_MIN_FPS are analysed at ANALYSIS_FPS (see fit_machine_detailed) [Hz].
+ANALYSIS_MIN_FPS = 100.0
+ANALYSIS_FPS = 120.0
+#: Fewest samples of a stance the control fit takes: K and an offset, then a, b, c (two small least
+#: squares), so 4 samples determine it; a 30 Hz clip has 4-5 frames in a 0.15 s stance.
+MIN_STANCE_SAMPLES = 4
 #: Samples of the lateral sway profile over one stride.
 SWAY_SAMPLES = 32
 
@@ -89,8 +95,8 @@ def fit_stance_control(tau, l, f_leg) -> StanceFit:
     tau = np.asarray(tau, float)
     l = np.asarray(l, float)
     f = np.asarray(f_leg, float)
-    if tau.size < 6:
-        raise FitError(f"need at least 6 stance samples to fit the control, got {tau.size}")
+    if tau.size < MIN_STANCE_SAMPLES:
+        raise FitError(f"need at least {MIN_STANCE_SAMPLES} stance samples to fit the control, got {tau.size}")
     comp = 1.0 - l
     A = np.stack([comp, np.ones_like(comp)], axis=1)
     (K, _), *_ = np.linalg.lstsq(A, f, rcond=None)
@@ -259,10 +265,19 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         body = BodyModel.from_skeleton(motion.skeleton, mass=mass)
     mass = body.total_mass
     mg = mass * GRAVITY
+    # The clip's own figures (what ``info`` prints) set the cycle's cadence and speed.
+    clip_summary = summarize(motion, body)
+    require_running(clip_summary, src)
+    if motion.fps < ANALYSIS_MIN_FPS:
+        # A 24-30 Hz clip has 4-5 frames per stance: too few for the force-refined events and the control
+        # fit. The forces are measured on the motion interpolated to ANALYSIS_FPS (positions linear, rotations
+        # slerped): the COM filter (CUTOFF_HZ, well below 12 Hz) sees the same band-limited signal, and the
+        # events fall between the clip's frames instead of on them. Times stay in seconds.
+        motion = motion.resample(ANALYSIS_FPS)
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers)
-    summary = summarize(motion, body, com, gait)
-    require_running(summary, src)
+    summary = replace(summarize(motion, body, com, gait), mean_speed=clip_summary.mean_speed,
+                      step_frequency=clip_summary.step_frequency)
     if sum(not st.partial for st in gait.stances) < 2:
         raise NotARunningMotion(
             f"{src}: only {sum(not st.partial for st in gait.stances)} complete stance phase(s) (of {len(gait.stances)} contacts); "
@@ -305,7 +320,16 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     if not flights:
         raise NotARunningMotion(f"{src}: no complete flight phase between two contacts")
     stance_time = float(np.mean([s.duration for s in full]))
-    flight_time = float(np.mean([b - a for a, b in flights]))
+    flight_time_measured = float(np.mean([b - a for a, b in flights]))
+    # The cycle's step time is the clip's own step period (the measure ``info`` prints, from sub-frame
+    # contacts over whole strides), so the output steps at the clip's cadence. Stance is the force-based
+    # one (what the machine's leg does); the flight is the rest of the step. Averaging stance and flight
+    # over different sets of stances would not add up to the step period (the issue that made outputs
+    # step 5 % off the clip).
+    step_period_s = 1.0 / summary.step_frequency if summary.step_frequency > 0 else stance_time + flight_time_measured
+    flight_time = step_period_s - stance_time
+    if not flight_time > 0.2 * stance_time:
+        flight_time = flight_time_measured  # contacts too few to trust the period: keep the measured flight
     win = _stride_window(ev)
     if win is None:
         raise NotARunningMotion(f"{src}: no complete stride (touchdown, liftoff, touchdown, liftoff, touchdown "
@@ -313,7 +337,10 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     e = np.array([t for t, _, _ in win])
     kinds = tuple(k for _, k, _ in win)
     x_fwd = p @ heading
-    mean_speed = float((np.interp(e[4], times, x_fwd) - np.interp(e[0], times, x_fwd)) / (e[4] - e[0]))
+    stride_speed = float((np.interp(e[4], times, x_fwd) - np.interp(e[0], times, x_fwd)) / (e[4] - e[0]))
+    # The machine runs at the clip's mean speed (``info``'s: first to last frame), not one stride's: on a
+    # take whose speed changes the two differ, and the speed factor must refer to what ``info`` printed.
+    mean_speed = float(summary.mean_speed)
 
     def ground_at(t):
         """Ground height under the runner at times t: the stance's during stance, interpolated in flight."""
@@ -395,6 +422,8 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     stride_feet = [("left", "right")[geo[i].foot] for _, _, i in win]
     reference = {
         "stance_time_s": stance_time, "flight_time_s": flight_time, "mean_speed_m_s": mean_speed,
+        "step_time_s": stance_time + flight_time, "stride_speed_m_s": stride_speed,
+        "flight_time_contacts_s": flight_time_measured,
         "apex_height_m": float(np.mean(apex_h)) if apex_h else None,
         "apex_speed_m_s": float(np.mean(apex_u)) if apex_u else None,
         "frame_time_s": dt,

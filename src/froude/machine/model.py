@@ -35,6 +35,7 @@ import numpy as np
 from ..constants import GRAVITY
 from ..errors import FitError
 from ..io.atomic import atomic_write_text
+from ..io.jsonable import dumps, jsonable as _jsonable
 from .dynamics import Control
 
 __all__ = ["SCHEMA", "SimpleMachine", "load_machine"]
@@ -208,7 +209,7 @@ class SimpleMachine:
 
     def save(self, path) -> None:
         """Write the machine as JSON (atomically: temp file + rename)."""
-        atomic_write_text(path, json.dumps(self.to_dict(), indent=1) + "\n")
+        atomic_write_text(path, dumps(self.to_dict(), indent=1) + "\n")
 
     @classmethod
     def load(cls, path) -> "SimpleMachine":
@@ -235,19 +236,3 @@ def _mul(v, f):
     return v * f
 
 
-def _jsonable(x):
-    """Recursively convert numpy scalars/arrays to plain Python (NaN → None)."""
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.bool_, bool)):
-        return bool(x)
-    if isinstance(x, (np.integer, int)):
-        return int(x)
-    if isinstance(x, (np.floating, float)):
-        v = float(x)
-        return v if math.isfinite(v) else None
-    return x

@@ -1,0 +1,89 @@
+"""Issue 13 (any running take) and issue 12 point 3 (frame rates): cadence and speed at identity, low
+frame rates, strict report JSON — on the real clips."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from froude import pipeline
+from froude.body import BodyModel
+from froude.gait import detect_gait, summarize
+from froude.io.bvh import load_bvh
+
+from conftest import RUNNING, clip, clip_params
+
+
+def _summary(motion):
+    body = BodyModel.from_skeleton(motion.skeleton)
+    return summarize(motion, body)
+
+
+def _strict(text: str):
+    """json.loads that refuses NaN/Infinity (what a strict parser does)."""
+    def bad(token):
+        raise ValueError(f"non-standard JSON token {token}")
+    return json.loads(text, parse_constant=bad)
+
+
+@pytest.mark.parametrize("name", clip_params(RUNNING))
+def test_identity_cadence_and_speed(name):
+    """Issue 13 acceptance 1: ``scale`` with no change steps at the clip's step frequency and speed (info)."""
+    motion = load_bvh(clip(name))
+    info = _summary(motion)
+    rep = pipeline.scale(pipeline.prepare(motion)).report
+    assert rep.step_frequency_hz == pytest.approx(info.step_frequency, rel=0.01)
+    assert rep.mean_speed_m_s == pytest.approx(info.mean_speed, rel=0.01)
+
+
+@pytest.mark.parametrize("fps", [24, 25, 30, 50, 60])
+@pytest.mark.parametrize("name", clip_params(["09_01", "02_03"]))
+def test_low_frame_rates_fit_and_report(name, fps):
+    """Issue 12 point 3: 4-5-frame stances fit as delivered; flight gravity measured at the output's own
+    rate; the machine agrees with the 120 Hz one; cadence and speed at identity within 1 %."""
+    full = load_bvh(clip(name))
+    motion = full.resample(fps)
+    prep = pipeline.prepare(motion)
+    ref = pipeline.prepare(full).machine
+    m = prep.machine
+    assert m.K == pytest.approx(ref.K, rel=0.06)
+    assert np.degrees(m.theta0) == pytest.approx(np.degrees(ref.theta0), abs=1.0)
+    info = prep.summary
+    assert info.step_frequency == pytest.approx(_summary(full).step_frequency, rel=0.015)
+    res = pipeline.scale(prep, strides=4)
+    rep = res.report
+    assert rep.frame_rate_hz == pytest.approx(fps)
+    assert rep.flight_gravity_m_s2 == pytest.approx(9.81, rel=0.03)
+    assert rep.step_frequency_hz == pytest.approx(info.step_frequency, rel=0.01)
+    assert rep.mean_speed_m_s == pytest.approx(info.mean_speed, rel=0.01)
+    assert not rep.check_bars()
+
+
+def test_report_json_is_strict_with_reasons(tmp_path):
+    """Issue 12 acceptance 5: a figure that cannot be measured is null with a reason, never NaN."""
+    motion = load_bvh(clip("09_01"))
+    res = pipeline.scale(pipeline.prepare(motion), strides=2)
+    _, rp = pipeline.write_result(res, tmp_path / "out.bvh")
+    d = _strict(rp.read_text())
+    assert d["flight_gravity_m_s2"] == pytest.approx(9.81, rel=0.03)
+    assert d["unmeasured"] == {}
+    # the naive baseline has no machine to track: null, with the reason
+    naive = pipeline.scale(pipeline.prepare(motion), method="naive", strides=2)
+    _, rp = pipeline.write_result(naive, tmp_path / "naive.bvh")
+    d = _strict(rp.read_text())
+    assert d["com_tracking_rms_mm"] is None and "machine" in d["unmeasured"]["com_tracking_rms_mm"]
+    # a motion with no flight at all: flight gravity null with its reason
+    from froude.metrics import physics_report
+
+    still = motion.with_(root_positions=np.repeat(motion.root_positions[:1], 40, axis=0),
+                         rotations=np.repeat(motion.rotations[:1], 40, axis=0))
+    d = _strict(physics_report(still).to_json())
+    assert d["flight_gravity_m_s2"] is None and "flight" in d["unmeasured"]["flight_gravity_m_s2"]
+
+
+def test_machine_json_is_strict(tmp_path):
+    motion = load_bvh(clip("09_01")).resample(30)
+    m = pipeline.prepare(motion).machine
+    m.save(tmp_path / "m.json")
+    _strict((tmp_path / "m.json").read_text())

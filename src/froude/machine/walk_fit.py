@@ -1,13 +1,17 @@
 """§4 for walking: fit the simple walking machine (:mod:`froude.machine.walking`) to a walking clip.
 
-    motion → body COM + foot markers → gait (marker contacts) → zero-lag filtered COM → eq. 1 forces
-    → per-stance leg geometry → one eq. 2 control fitted to the force of both legs → periodic walking
-    cycle search → WalkingMachine
+    motion → body COM + foot markers → gait (contacts) → zero-lag filtered COM → eq. 1 forces
+    → per-stance geometry (touchdown point, centre-of-pressure roll) → eq. 2 control of both legs by
+    linear least squares → periodic cycle (Newton) → shape fit of the force and COM height (least
+    squares) → exact periodic cycle again → WalkingMachine
 
 Events. In walking the total vertical force never falls near zero, so the running fit's force-refined
-events do not exist; touchdown and liftoff are the marker contacts of :mod:`froude.gait`, placed half
-a frame before the first contact frame and half a frame before the first frame off the ground (so the
-stance time is the one ``froude info`` prints).
+events do not exist; touchdown and liftoff are the sub-frame contact events of :mod:`froude.gait`
+(``Stance.t_on`` / ``t_off``).
+
+Geometry. A walking foot rolls: the centre of pressure travels from the heel to the toes. Each stance's
+contact is the least-squares line x_touchdown + roll·τ through the foot's lowest marker (τ = 0 … 1 over
+the stance); the machine's legs roll the same way (``roll``, the clips' mean, in l0 per unit τ).
 
 Control fit (eq. 2). In single support the measured sagittal force belongs to one leg; in double support
 it is the sum of two. The model force of the legs in contact is linear in (K, K a, K b, K c)::
@@ -15,15 +19,17 @@ it is the sum of two. The model force of the legs in contact is linear in (K, K 
     f(t) = Σ_legs [K (1 − l_i/l0_i) + K a + K b τ_i + K c τ_i²] u_i,   u_i = unit leg vector foot → COM
 
 so one linear least-squares solve over both force components of every frame whose legs are all in
-complete stances gives the control, without splitting the double-support force between the legs. (For
-the plot, the measured force of each leg is the projection on the leg in single support and the unique
-decomposition along the two legs in double support.)
+complete stances gives a control without splitting the double-support force between the legs. On the
+real clips it explains little of the force (r² ≈ 0: the leg-length change of walking is mostly
+geometry, not compression), so it is only a start; a plain spring leg (Geyer et al.'s) is the other.
 
-Cycle search: z = (u, v, d, s, θ0, K, a, b, c) (T_c held at the measured mean stance time) must make
-the step map periodic (4 equations) and reproduce the measured stance time, double-support time and
-mean speed (3): seven equations in nine unknowns, solved by minimum-norm Newton from the measured priors
-in coordinates scaled by ``CYCLE_SCALES`` (the periodic machine nearest the data), forward-difference
-Jacobians, halving on a rejected step.
+Cycle search: z = (u, v, d, s, θ0, K, a, b, c, l_td) (T_c held at the measured mean stance time) must
+make the step map periodic (4 equations) and reproduce the measured step time, double-support time and
+mean speed (3): seven equations in ten unknowns, solved by minimum-norm Newton from the priors in
+coordinates scaled by ``CYCLE_SCALES`` (the periodic machine nearest them). Then the *shape fit*: least
+squares of the machine's total vertical force over a stance (measured through the clip's filter) and its
+COM height over a step against the clip's, with periodicity and the three targets as heavily weighted
+residuals; the exact cycle is then found again from its result. Of the two starts the better shape wins.
 """
 from __future__ import annotations
 
@@ -39,6 +45,7 @@ from ..gait import detect_gait, summarize
 from ..motion import Motion
 from .dynamics import Control
 from .forces import CUTOFF_HZ, ground_force, sagittal_frame, smooth_com
+from .walk_model import WalkingMachine
 from .walking import N_PER_STANCE, REASONS, WalkState, simulate_walk, walk_step
 
 __all__ = ["WalkFitResult", "fit_walking_detailed", "CYCLE_SCALES", "force_landmarks", "PROFILE_SAMPLES"]
@@ -47,8 +54,11 @@ _VARS = ("u", "v", "d", "s", "theta0", "K", "a", "b", "c", "l_td")
 #: Scales of the cycle variables for the minimum-norm search (K relative to its prior).
 CYCLE_SCALES = {"u": 0.05, "v": 0.02, "d": 0.02, "s": 0.05, "theta0": 0.03, "K": 0.1, "a": 0.01, "b": 0.02,
                 "c": 0.02, "l_td": 0.01}
+#: The second start of the cycle search: a plain spring leg, Geyer et al.'s K ≈ 20 (k = 20 kN/m, m = 80 kg,
+#: l0 = 1 m gives 25), l_d = l0; (K, a, b, c).
+GEYER_CONTROL = (20.0, 0.0, 0.0, 0.0)
 #: Samples of the stance-normalised force profiles (τ = 0 … 1).
-PROFILE_SAMPLES = 101
+PROFILE_SAMPLES = 51
 
 
 @dataclass(frozen=True)
@@ -148,25 +158,29 @@ def force_landmarks(tau: np.ndarray, fy_bw: np.ndarray, tau_double: float) -> di
 
 @dataclass(frozen=True)
 class WalkFitResult:
-    """Everything the walking fit computed (SI unless stated; dimensionless machine fields)."""
+    """Everything the walking fit computed, for reports and plots (SI unless stated).
 
-    state: WalkState
-    theta0: float
-    control: Control
-    l0: float
-    mass: float
-    measured: dict
-    model: dict
-    quality: dict
-    fit: dict
+    machine: the WalkingMachine. profile_tau (N,) stance phase; profile_ref (N,) the clip's total vertical
+    force over a stance (mean of its complete stances) [BW]; profile_model (N,) the machine's, measured
+    through the clip's filter; profile_unfiltered (N,) the machine's exact force. t_ref (M,) times of the
+    frames of the complete steps [s], h_ref (M,) their COM height above the ground [m], h_model (M,) the
+    machine's at the phase-matched times [m]. stances: the WalkStance of every contact. t_leg (K,) time
+    since touchdown [s] and l_leg (K,) leg length [m] (COM → rolling centre of pressure) over the clip's
+    first complete stance. steps (S, 3): touchdown, the other foot's liftoff, next touchdown [s].
+    """
+
+    machine: WalkingMachine
     profile_tau: np.ndarray
     profile_ref: np.ndarray
     profile_model: np.ndarray
+    profile_unfiltered: np.ndarray
     t_ref: np.ndarray
     h_ref: np.ndarray
     h_model: np.ndarray
-    iterations: int
-    periodicity: float
+    stances: tuple
+    t_leg: np.ndarray
+    l_leg: np.ndarray
+    steps: np.ndarray
 
 
 def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40):
@@ -187,7 +201,7 @@ def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40):
             return None, w
         nx = w.next
         R = np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3],
-                      (w.t_stance - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
+                      (w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
                       (w.step_length / w.t_step - tgt[2]) / tgt[2]])
         return R, w
 
@@ -264,8 +278,27 @@ def stance_force_profile(state, theta0, ctl, w, tau, roll=0.0, l_td=1.0, n_per_s
 
 #: Weights of the shape fit: periodicity and measured times are (nearly) hard, the force profile soft.
 SHAPE_WEIGHTS = {"periodic": 100.0, "targets": 30.0, "prior": 0.05, "com": 10.0}
+#: Simulator resolution and evaluation budget of the shape fit (the exact cycle is found after it).
+SHAPE_N_PER_STANCE = 120
+SHAPE_MAX_EVALUATIONS = 120
 #: Samples of the step-phase COM height profile (double support, then single support).
 COM_SAMPLES = (8, 24)
+
+
+def stance_leg_length(m, tau, n_per_stance=N_PER_STANCE):
+    """Leg length l and desired length l_d [l0] of one leg of the periodic machine ``m`` over its stance.
+
+    m: a WalkingMachine; tau (N,) stance phase 0 … 1 (by T_c = the stance time). The leg is the leading
+    one of a step until t_step, then the trailing one of the next (the same step, by periodicity).
+    """
+    tau = np.asarray(tau, float)
+    t = tau * m.t_stance
+    first = t <= m.t_step
+    tq = np.where(first, t, t - m.t_step)
+    tr = simulate_walk(m.state, m.theta0, m.control, tq, roll=m.roll, l_td=m.l_td, n_per_stance=n_per_stance)
+    xc = np.where(first, tr.contact_x[1], tr.contact_x[0]) + m.roll * tau
+    l = np.hypot(tr.pos[:, 0] - xc, tr.pos[:, 1])
+    return l, 1.0 + m.a + tau * (m.b + m.c * tau)
 
 
 def step_phase_times(t_double, t_step):
@@ -274,7 +307,7 @@ def step_phase_times(t_double, t_step):
     return np.concatenate([np.linspace(0.0, t_double, n1, endpoint=False), np.linspace(t_double, t_step, n2)])
 
 
-def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, n_per_stance, frame_time, time_unit):
+def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_unit, n_per_stance=SHAPE_N_PER_STANCE):
     """Least squares of the machine's stance force profile against the clip's, near-periodic.
 
     Residuals: the vertical force over a stance at tau [BW]; the periodicity and the relative errors of
@@ -302,17 +335,12 @@ def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, n_per_stance, frame
                           n_per_stance=n_per_stance).pos[:, 1]
         nx = w.next
         per = np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3]]) * wp
-        tg = np.array([(w.t_stance - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
+        tg = np.array([(w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
                        (w.step_length / w.t_step - tgt[2]) / tgt[2]]) * wt
         return np.concatenate([prof - prof_ref, wc * (h - h_ref), per, tg, wr * (z - z1) / s])
 
-    sol = least_squares(resid, z1, x_scale=s, diff_step=1e-6, max_nfev=200, method="trf")
-    import os
-    if os.environ.get("FROUDE_DEBUG"):
-        r0 = resid(z1)
-        print("shape fit", sol.status, sol.nfev, "cost", 0.5 * float(r0 @ r0), "->", sol.cost, "prof rms",
-              float(np.sqrt(np.mean(r0[:tau.size] ** 2))), float(np.sqrt(np.mean(sol.fun[:tau.size] ** 2))))
-    return sol.x
+    sol = least_squares(resid, z1, x_scale=s, diff_step=1e-6, max_nfev=SHAPE_MAX_EVALUATIONS, method="trf")
+    return sol.x, float(sol.cost)
 
 
 def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: float = 70.0, *,
@@ -345,8 +373,9 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     x_fwd = p @ heading
     geo, stances = [], []
     for st in gait.stances:
-        td = max(st.start - 0.5, 0.0)
-        lo = min(st.stop - 0.5, F - 1.0)
+        td = st.t_on if math.isfinite(st.t_on) else st.start - 0.5
+        lo = st.t_off if math.isfinite(st.t_off) else st.stop - 0.5
+        td, lo = max(td, 0.0), min(lo, F - 1.0)
         if lo - td < 4:
             continue
         stances.append(st)
@@ -391,71 +420,109 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     f_sag = np.stack([f @ heading, f[:, UP_AXIS]], axis=1) / mg
     p_sag = np.stack([x_fwd, p[:, UP_AXIS]], axis=1)
     ls = _leg_samples(geo, p_sag, F, dt)
-    K0, a0, b0, c0, r2, rms = fit_two_leg_control(ls, f_sag)
-    z0 = np.array([u0, v0, d0, step_time / T, th0, K0, a0, b0, c0, 1.0])
-    T_c = stance_time / T
-    targets = (stance_time / T, double_time / T, mean_speed / V)
-    z1, w, iters, resid = _cycle_search(z0, T_c, roll, targets, n_per_stance)
+    starts = [GEYER_CONTROL]
+    try:
+        K0, a0, b0, c0, r2, rms = fit_two_leg_control(ls, f_sag)
+        starts.insert(0, (K0, a0, b0, c0))
+    except FitError as e:  # the plain spring start remains; the failure is reported in the machine's fit
+        K0 = a0 = b0 = c0 = r2 = rms = float("nan")
+        fit_note = str(e)
+    else:
+        fit_note = ""
+    T_c = stance_time / T  # τ runs 0 … 1 over the clip's mean stance
+    targets = (step_time / T, double_time / T, mean_speed / V)
     tau = np.linspace(0.0, 1.0, PROFILE_SAMPLES)
     prof_ref = np.mean([np.interp(sg.t_touchdown + tau * sg.duration, times, f_sag[:, 1]) for sg in full], axis=0)
-    # COM height above the ground at the touchdowns and mid single supports, for the shape fit.
+    # COM height above the ground (interpolated between the stances' grounds) over a step, phase-matched.
     tk = np.array([0.5 * (sg.t_touchdown + sg.t_liftoff) for sg in geo])
     gk = np.array([sg.ground for sg in geo])
-    h_td = float(np.mean(np.interp(t_td, times, p[:, UP_AXIS]) - np.interp(t_td, tk, gk))) / l0
+
+    def height(t):
+        return np.interp(t, times, p[:, UP_AXIS]) - np.interp(t, tk, gk)
+
     ph = step_phase_times(double_time, step_time)
-    h_ref_step = np.mean([np.interp(np.interp(ph, [0.0, double_time, step_time], [a, b, c]), times, p[:, UP_AXIS])
-                          - np.interp(np.interp(ph, [0.0, double_time, step_time], [a, b, c]), tk, gk)
+    h_ref_step = np.mean([height(np.interp(ph, [0.0, double_time, step_time], [a, b, c]))
                           for a, b, c in zip(t_td, t_lo, t_nx)], axis=0) / l0
-    z2 = _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref_step, n_per_stance, dt, T)
-    z, w, iters2, resid = _cycle_search(z2, T_c, roll, targets, n_per_stance)
-    iters += iters2
+
+    # Two starts: the least-squares control, and a plain spring leg (Geyer's K ≈ 20, l_d = l0) in case
+    # the force of the clip does not determine the control well; the better shape fit wins.
+    best = None
+    errors = []
+    for ctl0 in starts:
+        z0 = np.array([u0, v0, d0, step_time / T, th0, *ctl0, 1.0])
+        try:
+            z1, _, it1, _ = _cycle_search(z0, T_c, roll, targets, n_per_stance)
+            z2, cost = _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref_step, dt, T)
+            z, w, it2, _ = _cycle_search(z2, T_c, roll, targets, n_per_stance)
+        except FitError as e:
+            errors.append(str(e))
+            continue
+        if best is None or cost < best[1]:
+            best = (z, cost, w, it1 + it2, z0)
+    if best is None:
+        raise FitError(f"{src}: {errors[-1]}")
+    z, cost, w, iters, z0 = best
     state = WalkState(*map(float, z[:4]))
     th, ctl = float(z[4]), Control(K=float(z[5]), a=float(z[6]), b=float(z[7]), c=float(z[8]), T_c=T_c)
     l_td = float(z[9])
+    nx = w.next
+    periodicity = float(max(abs(nx.u - state.u), abs(nx.v - state.v), abs(nx.d - state.d), abs(nx.s - state.s)))
     prof_model = stance_force_profile(state, th, ctl, w, tau, roll, l_td, n_per_stance, frame_time=dt, time_unit=T)
     prof_raw = stance_force_profile(state, th, ctl, w, tau, roll, l_td, n_per_stance)
-    tau_ds_ref = double_time / stance_time
-    lm_ref = force_landmarks(tau, prof_ref, tau_ds_ref)
+    lm_ref = force_landmarks(tau, prof_ref, double_time / stance_time)
     lm_mod = force_landmarks(tau, prof_model, w.t_double / w.t_stance)
+    lm_raw = force_landmarks(tau, prof_raw, w.t_double / w.t_stance)
 
     # COM height over every complete step, phase-matched (double support → double support, single →
-    # single), above the ground interpolated between the stances' grounds.
+    # single).
     t_ref, h_ref, h_mod = [], [], []
-    for (i, j, k), a, b, c in zip(steps, t_td, t_lo, t_nx):
-        sel = (times >= a) & (times <= c)
-        tt = times[sel]
+    for a, b, c in zip(t_td, t_lo, t_nx):
+        tt = times[(times >= a) & (times <= c)]
         tm = np.interp(tt, [a, b, c], [0.0, w.t_double, w.t_step])
         trj = simulate_walk(state, th, ctl, tm, roll=roll, l_td=l_td, n_per_stance=n_per_stance)
         t_ref.append(tt)
-        h_ref.append(p[sel, UP_AXIS] - np.interp(tt, tk, gk))
+        h_ref.append(height(tt))
         h_mod.append(trj.pos[:, 1] * l0)
     t_ref, h_ref, h_mod = map(np.concatenate, (t_ref, h_ref, h_mod))
     com_rms = float(np.sqrt(np.mean((h_mod - h_ref) ** 2)))
 
-    step_T = w.t_step * T
-    measured = {"roll_m": roll * l0, "stance_time_s": stance_time, "double_support_s": double_time, "step_time_s": step_time,
-                "mean_speed_m_s": mean_speed, "l0_m": l0, "theta0_rad": th0, "n_steps": len(steps),
-                "force": lm_ref}
-    model = {"stance_time_s": w.t_stance * T, "double_support_s": w.t_double * T, "step_time_s": step_T,
-             "mean_speed_m_s": w.step_length / w.t_step * V, "step_length_m": w.step_length * l0,
-             "force": lm_mod}
+    def timing(key):
+        # stance phase → time since touchdown [s], as a share of the clip's step
+        return float((lm_mod[key] * w.t_stance * T - lm_ref[key] * stance_time) / step_time)
+
+    reference = {"stance_time_s": stance_time, "double_support_s": double_time, "step_time_s": step_time,
+                 "mean_speed_m_s": mean_speed, "theta0_rad": th0, "roll_m": roll * l0, "n_steps": len(steps),
+                 "steps_s": [[float(a), float(b), float(c)] for a, b, c in zip(t_td, t_lo, t_nx)],
+                 "force_bw": lm_ref, "frame_time_s": dt,
+                 "filter": {"kind": "butterworth forward-backward, quadratic edge extension", "cutoff_hz": cutoff_hz}}
     quality = {
         "com_rms_m": com_rms,
         "stance_time_error": w.t_stance * T / stance_time - 1.0,
         "double_support_error": w.t_double * T / double_time - 1.0,
-        "mean_speed_error": model["mean_speed_m_s"] / mean_speed - 1.0,
-        "peak1_error_bw": lm_mod["peak1"] - lm_ref["peak1"],
-        "trough_error_bw": lm_mod["trough"] - lm_ref["trough"],
+        "step_time_error": w.t_step * T / step_time - 1.0,
+        "mean_speed_error": w.step_length / w.t_step * V / mean_speed - 1.0,
+        "force_bw": lm_mod, "force_unfiltered_bw": lm_raw,
+        "peak1_error_bw": lm_mod["peak1"] - lm_ref["peak1"], "trough_error_bw": lm_mod["trough"] - lm_ref["trough"],
         "peak2_error_bw": lm_mod["peak2"] - lm_ref["peak2"],
-        "peak1_timing_error_step": (lm_mod["tau_peak1"] * w.t_stance * T - lm_ref["tau_peak1"] * stance_time) / step_time,
-        "trough_timing_error_step": (lm_mod["tau_trough"] * w.t_stance * T - lm_ref["tau_trough"] * stance_time) / step_time,
-        "peak2_timing_error_step": (lm_mod["tau_peak2"] * w.t_stance * T - lm_ref["tau_peak2"] * stance_time) / step_time,
+        "peak1_timing_error_step": timing("tau_peak1"), "trough_timing_error_step": timing("tau_trough"),
+        "peak2_timing_error_step": timing("tau_peak2"),
+        "force_profile_rms_bw": float(np.sqrt(np.mean((prof_model - prof_ref) ** 2))),
     }
-    return WalkFitResult(state=state, theta0=th, control=ctl, l0=l0, mass=mass, measured=measured, model=model,
-                         quality=quality, fit={"K": K0, "a": a0, "b": b0, "c": c0, "r2_vertical": r2, "rms_bw": rms,
-                                               "prior": dict(zip(_VARS, map(float, z0)))},
-                         profile_tau=tau, profile_ref=prof_ref, profile_model=prof_model, t_ref=t_ref, h_ref=h_ref,
-                         h_model=h_mod, iterations=iters, periodicity=resid)
+    fit = {"K": K0, "a": a0, "b": b0, "c": c0, "r2_vertical": r2, "rms_bw": rms, "note": fit_note,
+           "prior": dict(zip(_VARS, map(float, z0))), "shape_cost": float(cost)}
+    machine = WalkingMachine(
+        u=state.u, v=state.v, d=state.d, s=state.s, theta0=th, l_td=l_td, roll=roll, K=ctl.K, a=ctl.a, b=ctl.b,
+        c=ctl.c, T_c=T_c, t_stance=w.t_stance, t_double=w.t_double, t_step=w.t_step, step_length=w.step_length,
+        mean_speed=w.step_length / w.t_step, periodicity=periodicity, iterations=iters, mass=mass, l0=l0,
+        g=GRAVITY, source=src, heading=heading, lateral=lateral, up=np.eye(3)[UP_AXIS], ground=float(gait.ground),
+        reference=reference, quality=quality, fit=fit)
+    # The clip's leg length over its first complete stance (COM → rolling centre of pressure).
+    sg = full[0]
+    t_leg = times[(times >= sg.t_touchdown) & (times <= sg.t_liftoff)]
+    l_leg = np.hypot(np.interp(t_leg, times, x_fwd) - sg.contact_x(t_leg), height(t_leg))
+    return WalkFitResult(machine=machine, profile_tau=tau, profile_ref=prof_ref, profile_model=prof_model,
+                         profile_unfiltered=prof_raw, t_ref=t_ref, h_ref=h_ref, h_model=h_mod, stances=tuple(geo),
+                         t_leg=t_leg - sg.t_touchdown, l_leg=l_leg, steps=np.array([t_td, t_lo, t_nx]).T)
 
 
 @dataclass(frozen=True)

@@ -4,9 +4,9 @@ from __future__ import annotations
 import time
 
 from ..presets import list_presets
-from .common import (add_character_options, add_fps, add_force, add_load_options, add_mass, add_quiet, bound_work,
-                     character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
-                     print_rows, say, speed)
+from .common import (add_character_options, add_force, add_fps, add_load_options, add_mass, add_quiet,
+                     add_range_option, bound_work, character_input, character_kwargs, check_character,
+                     check_inputs, guard_outputs, number, print_rows, say, speed)
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
 MAX_STRIDES = 10_000
@@ -44,6 +44,7 @@ def register(sub) -> None:
     add_force(p)
     add_quiet(p)
     add_load_options(p)
+    add_range_option(p)
     p.set_defaults(func=run)
 
 
@@ -61,7 +62,7 @@ def run(args) -> int:
     from .. import pipeline
 
     say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale)
+    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale, time_range=args.range)
     _bound(prep, args)
     say(f"synthesising ({args.method}) ...", args.quiet)
     res = pipeline.scale(prep, args.character, speed=goal.factor if goal and goal.factor else 1.0,

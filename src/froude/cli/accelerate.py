@@ -3,9 +3,10 @@ from __future__ import annotations
 
 import time
 
-from .common import (add_character_options, add_force, add_fps, add_load_options, add_mass, add_quiet,
-                     add_range_option, bound_work, character_input, character_kwargs, check_character,
-                     check_inputs, guard_outputs, number, print_rows, say, speed)
+from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
+                     add_quiet, add_range_option, bound_work, character_input, character_kwargs,
+                     check_character, check_inputs, guard_outputs, load_clip, number, print_rows, say,
+                     speed)
 
 #: Steps of a speed change, and of the steady parts around it, froude plans at most.
 MAX_STEPS = 500
@@ -50,6 +51,7 @@ def register(sub) -> None:
     add_character_options(p)
     add_load_options(p)
     add_range_option(p)
+    add_keep(p)
     p.set_defaults(func=run)
 
 
@@ -69,7 +71,8 @@ def run(args) -> int:
 
     t0 = time.perf_counter()
     say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale, time_range=args.range)
+    clip = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.quiet, args.joint_map, args.up)
+    prep = pipeline.prepare(clip, mass=args.mass, time_range=args.range)
     rt = prep.retarget(args.character, **character_kwargs(args))
     m = prep.machine.scaled(rt.L, rt.M)
     step_s = m.step_time * m.time_unit
@@ -84,6 +87,11 @@ def run(args) -> int:
     )
     for note in res.notes:
         say(f"note: {note}", args.quiet)
+    fails = res.report.check_bars()
+    if fails and not args.keep:
+        say(f"froude accelerate: output not written: it misses physics bars ({'; '.join(fails)}); "
+            "--keep writes it anyway")
+        return 1
     with atomic_group():
         bvh, rep = pipeline.write_result(res, out)
         written = []
@@ -102,8 +110,7 @@ def run(args) -> int:
         ("touchdown angle per step", " ".join(f"{v:.1f}" for v in plan["theta0_deg"]) + " deg"),
     ] + tail
     print_rows(rows)
-    fails = res.report.check_bars()
-    print(f"physics bars: {'all met' if not fails else 'NOT met: ' + '; '.join(fails)}")
+    print(f"physics bars: {'all met' if not fails else 'NOT met (kept): ' + '; '.join(fails)}")
     for w in written:
         say(f"wrote {w}", args.quiet)
     say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep} in {time.perf_counter() - t0:.2f} s", args.quiet)

@@ -557,6 +557,7 @@ class Tab:
         self.gui_time.value = round(min(self._t, self.gui_time.max), 2)
         self._draw()
         self._update_playheads()
+        self.gui_state.content = self._state_md()
 
     def _on_time(self, event) -> None:
         if event.client is None:
@@ -564,6 +565,7 @@ class Tab:
         self._t = float(self.gui_time.value)
         self._draw()
         self._update_playheads()
+        self.gui_state.content = self._state_md()
 
     def _on_view(self, event) -> None:
         if getattr(event, "client", 1) is None:
@@ -786,6 +788,7 @@ class Tab:
                 return timing
             self.good = res
             self.naive = None
+            self._work_since = None
             self._publish(res)
             if self.gui_show_naive.value:
                 self._solve_naive()
@@ -832,8 +835,8 @@ class Tab:
         why in one line and the current clip stays."""
         from .. import pipeline
 
-        self._work_since, self._work_what = time.perf_counter(), f"opening {name}"
-        self._set_status(f"*opening {html.escape(name)}: loading, checking and fitting ...*")
+        self._work_since, self._work_what = time.perf_counter(), f"opening {name} (loading, checking, fitting)"
+        self._set_status(None)  # the progress line says what is going on
         try:
             with tempfile.TemporaryDirectory(prefix="froude-studio-") as d:
                 path = Path(d) / name
@@ -955,16 +958,20 @@ class Tab:
         status = "error" if self.message.startswith("error") else (
             "preview" if s.preview else ("ok" if complete else "report"))
         naive = self.naive.n_frames if self.naive is not None else 0
+        frame, _ = s.track.frame_at(self._t)
+        # drawn heights [m] of the reference and the result at this instant (true relative size checks)
+        h_ref, h_res = self.reference.vertical_extent(self._t), self.result.vertical_extent(self._t)
         return (f"`state: clip={self.clip_name.replace(' ', '_')} character={p.character} mode={p.mode} "
                 f"speed_factor={p.speed:g} to_factor={p.to_factor:g} steps={p.steps} strides={p.strides} "
-                f"n_frames={s.n_frames} speed_m_s={speed} naive_frames={naive} hash={s.hash} status={status}`")
+                f"n_frames={s.n_frames} frame={frame} h_ref_m={h_ref:.4f} h_res_m={h_res:.4f} "
+                f"speed_m_s={speed} naive_frames={naive} hash={s.hash} status={status}`")
 
     def _status_md(self) -> str:
         if self.message.startswith("error"):
             return (f"**⚠ {html.escape(self.message[7:])}**  \n(showing the last good result: "
                     f"{self.good.params.label()})")
         if self._work_since is not None:
-            return f"*⏳ {self._work_what}: working … {time.perf_counter() - self._work_since:.1f} s*"
+            return f"*working: {self._work_what} … {time.perf_counter() - self._work_since:.1f} s*"
         if self.message:
             return self.message if self.message.startswith("*") else f"*{self.message}*"
         res = self.good.result
@@ -993,15 +1000,18 @@ class Tab:
         def mean(x):
             return float(np.mean(x)) if len(x) else float("nan")
 
+        def f(v, spec):  # not measurable (no flight phase, ...) reads as a dash
+            return format(v, spec) if np.isfinite(v) else "—"
+
         def col(r):
             if r is None:
                 return ["—"] * 7
-            return [f"{r.mean_speed_m_s:.2f}", f"{r.froude_U:.2f}", f"{r.step_frequency_hz:.2f}",
-                    f"{mean(r.stance_times_s):.3f} / {mean(r.flight_times_s):.3f}", f"{r.flight_gravity_m_s2:.1f}",
-                    f"{r.foot_skate_mm:.0f}", f"{r.peak_vertical_force_bw:.1f}"]
+            return [f(r.mean_speed_m_s, ".2f"), f(r.froude_U, ".2f"), f(r.step_frequency_hz, ".2f"),
+                    f"{f(mean(r.stance_times_s), '.3f')} / {f(mean(r.flight_times_s), '.3f')}",
+                    f(r.flight_gravity_m_s2, ".1f"), f(r.foot_skate_mm, ".0f"), f(r.peak_vertical_force_bw, ".1f")]
 
-        ref = [f"{sm.mean_speed:.2f}", f"{sm.froude:.2f}", f"{sm.step_frequency:.2f}",
-               f"{mean(sm.stance_times):.3f} / {mean(sm.flight_times):.3f}", "—", "—", "—"]
+        ref = [f(sm.mean_speed, ".2f"), f(sm.froude, ".2f"), f(sm.step_frequency, ".2f"),
+               f"{f(mean(sm.stance_times), '.3f')} / {f(mean(sm.flight_times), '.3f')}", "—", "—", "—"]
         rows = ["speed [m/s]", "Froude number", "steps [1/s]", "stance / flight [s]", "flight gravity [m/s²]",
                 "foot skate [mm]", "peak force [× weight]"]
         out = "| | reference | physical | naive |\n|---|---|---|---|\n"

@@ -1109,15 +1109,16 @@ def report_path(out_path) -> Path:
     return p.with_name(p.stem + ".report.json")
 
 
-def write_result(result: Result, out_path) -> tuple[Path, Path]:
-    """Write OUT.bvh and OUT.report.json atomically; returns both paths."""
+def write_result(result: Result, out_path, **bvh_options) -> tuple[Path, Path]:
+    """Write OUT.bvh and OUT.report.json atomically; returns both paths. bvh_options: ``save_bvh``'s
+    (length_scale, up, rotations_only; default: the input's conventions)."""
     from .io.bvh import save_bvh
 
     out_path = Path(out_path)
     if out_path.suffix.lower() != ".bvh":
         raise FroudeError(f"{out_path}: the output must be a .bvh file")
     rp = report_path(out_path)
-    save_bvh(result.motion, out_path)
+    save_bvh(result.motion, out_path, **bvh_options)
     write_report(result.report, rp)
     return out_path, rp
 

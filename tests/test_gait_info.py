@@ -85,7 +85,8 @@ def test_info_help_and_usage_errors(run_cli):
     code, out, err = run_cli("info", "--help")
     assert code == 0 and "--json" in out
     code, out, err = run_cli("info")
-    assert code == 2 and "usage" in err
+    # one line naming what is missing and where the usage is
+    assert code == 2 and err.count("\n") == 1 and "required: clip" in err and "froude info --help" in err
 
 
 # ---- every clip: the right kind of motion ------------------------------------------------------------------

@@ -122,10 +122,10 @@ def test_output_file_and_report(tmp_path, prepared):
 
 @pytest.mark.parametrize("args, needle", [
     (["--character", "elf"], "unknown character 'elf'"),
-    (["--char-mass", "0"], "mass must be > 0"),
-    (["--height", "-1"], "height must be > 0"),
-    (["--speed", "0"], "speed factor must be > 0"),
-    (["--speed", "fast"], "cannot read speed"),
+    (["--char-mass", "0"], "--char-mass: must be from 1 to 5000 kg, got 0"),
+    (["--height", "-1"], "--height: must be from 0.3 to 10 m, got -1"),
+    (["--speed", "0"], "--speed: factor 0 is outside the supported range 0.1x to 5x"),
+    (["--speed", "fast"], "--speed: cannot read 'fast'"),
 ])
 def test_bad_input_one_line_exit_2(tmp_path, args, needle):
     """Acceptance 6: one-line errors and exit status 2, nothing written."""

@@ -10,21 +10,53 @@ Quick tour::
     body = froude.BodyModel.from_skeleton(motion.skeleton, mass=70.0)
     com = body.com(motion)                           # (F, 3) [m]
     gait = froude.detect_gait(motion, body)          # stances, flights, ground height
+
+The names below are imported on first use (PEP 562), so ``import froude`` -- and with it ``froude --help``,
+whose package lives under this one -- costs no NumPy or SciPy import until a name is touched.
 """
-from .api import Result, accelerate, fit, ground_reaction_force, load, save, scale
-from .body import BodyModel, find_roles, load_joint_map
-from .errors import BvhError, CharacterError, FitError, FroudeError, IkError, NotARunningMotion, PlanError
-from .gait import Gait, GaitSummary, Stance, detect_gait, summarize
-from .io.bvh import load_bvh, save_bvh
-from .motion import Motion
-from .samples import sample_path
-from .skeleton import Skeleton
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "Result", "accelerate", "fit", "ground_reaction_force", "load", "save", "scale",
-    "BodyModel", "BvhError", "CharacterError", "FitError", "FroudeError", "Gait", "GaitSummary", "IkError",
-    "Motion", "NotARunningMotion", "PlanError", "Skeleton", "Stance", "detect_gait", "find_roles",
-    "load_bvh", "load_joint_map", "sample_path", "save_bvh", "summarize",
-]
+#: Public name -> the module that defines it (one line per name: add new public names here).
+_LAZY = {
+    "Result": ".api", "accelerate": ".api", "fit": ".api", "ground_reaction_force": ".api", "load": ".api",
+    "save": ".api", "scale": ".api",
+    "BodyModel": ".body", "find_roles": ".body", "load_joint_map": ".body",
+    "BvhError": ".errors", "CharacterError": ".errors", "FitError": ".errors", "FroudeError": ".errors",
+    "IkError": ".errors", "NotARunningMotion": ".errors", "PlanError": ".errors",
+    "Gait": ".gait", "GaitSummary": ".gait", "Stance": ".gait", "detect_gait": ".gait", "summarize": ".gait",
+    "load_bvh": ".io.bvh", "save_bvh": ".io.bvh",
+    "Motion": ".motion",
+    "sample_path": ".samples",
+    "Skeleton": ".skeleton",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'froude' has no attribute '{name}'")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
+
+if TYPE_CHECKING:  # static analysers and IDEs see the real imports
+    from .api import Result, accelerate, fit, ground_reaction_force, load, save, scale
+    from .body import BodyModel, find_roles, load_joint_map
+    from .errors import BvhError, CharacterError, FitError, FroudeError, IkError, NotARunningMotion, PlanError
+    from .gait import Gait, GaitSummary, Stance, detect_gait, summarize
+    from .io.bvh import load_bvh, save_bvh
+    from .motion import Motion
+    from .samples import sample_path
+    from .skeleton import Skeleton

@@ -31,11 +31,11 @@ import numpy as np
 
 from .body import SIDES, BodyModel
 from .errors import CharacterError, FroudeError
+from .presets import HEIGHT_RANGE_M, MASS_RANGE_KG, PART_SCALE_RANGE, PRESET_DIR, list_presets
 from .skeleton import Skeleton
 
 PARTS = ("legs", "arms", "head", "trunk")
 _LIMB_SEGMENTS = ("upper_arm", "forearm", "hand", "thigh", "shank", "foot")
-PRESET_DIR = Path(__file__).parent / "data" / "characters"
 
 
 @dataclass(frozen=True)
@@ -52,22 +52,25 @@ class Character:
     skeleton: Skeleton | None = None  # an explicit target skeleton (from a BVH), overrides proportions
 
     def __post_init__(self):
-        if self.height is not None and not (np.isfinite(self.height) and self.height > 0):
-            raise CharacterError(f"character '{self.name}': height must be > 0 m, got {self.height}")
-        if self.mass is not None and not (np.isfinite(self.mass) and self.mass > 0):
-            raise CharacterError(f"character '{self.name}': mass must be > 0 kg, got {self.mass}")
+        def check(value, what: str, limits: tuple, unit: str) -> None:
+            lo, hi = limits
+            if not (np.isfinite(value) and value > 0):
+                raise CharacterError(f"character '{self.name}': {what} must be > 0{unit} (froude supports "
+                                     f"{lo:g}-{hi:g}{unit}), got {value}")
+            if not lo <= value <= hi:
+                raise CharacterError(f"character '{self.name}': {what} {value:g}{unit} is outside what froude "
+                                     f"supports, {lo:g}-{hi:g}{unit}")
+
+        if self.height is not None:
+            check(self.height, "height", HEIGHT_RANGE_M, " m")
+        if self.mass is not None:
+            check(self.mass, "mass", MASS_RANGE_KG, " kg")
         if self.sex not in ("male", "female"):
             raise CharacterError(f"character '{self.name}': sex must be male or female, got '{self.sex}'")
         for k, v in self.proportions.items():
             if k not in PARTS:
                 raise CharacterError(f"character '{self.name}': unknown proportion '{k}' (use {', '.join(PARTS)})")
-            if not (np.isfinite(v) and v > 0):
-                raise CharacterError(f"character '{self.name}': proportion '{k}' must be > 0, got {v}")
-
-
-def list_presets() -> list[str]:
-    """Names of the shipped presets."""
-    return sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
+            check(v, f"proportion '{k}'", PART_SCALE_RANGE, "")
 
 
 def load_character(spec: str | Path) -> Character:
@@ -95,26 +98,49 @@ def _from_yaml(path: Path) -> Character:
 
     try:
         data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as e:
-        raise CharacterError(f"{path}: cannot read character: {e}".splitlines()[0]) from None
+    except OSError as e:
+        raise CharacterError(f"{path}: cannot read character: {e.strerror or e}") from None
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark is not None else f"{path}"
+        what = getattr(e, "problem", None) or str(e).splitlines()[0]
+        raise CharacterError(f"{where}: not valid YAML: {what}") from None
     if not isinstance(data, dict):
         raise CharacterError(f"{path}: a character file is a YAML mapping (name, height, mass, proportions…)")
     known = {"name", "description", "height", "mass", "sex", "proportions", "mass_fractions"}
-    unknown = set(data) - known
+    unknown = set(map(str, data)) - known
     if unknown:
         raise CharacterError(f"{path}: unknown key(s) {', '.join(sorted(unknown))}; known: {', '.join(sorted(known))}")
+
+    def number(value, key: str, unit: str = "") -> float:
+        # YAML reads "tall" as a string and "1_0" as 10: only plain numbers are numbers here
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise CharacterError(f"{path}: {key} must be a number{unit}, got {value!r}")
+        return float(value)
+
+    def numbers(value, key: str) -> dict:
+        if value is None:
+            return {}
+        if not isinstance(value, dict):
+            raise CharacterError(f"{path}: {key} must be a mapping (part: factor), got {value!r}")
+        return {str(k): number(v, f"{key}.{k}") for k, v in value.items()}
+
     try:
-        return Character(
-            name=str(data.get("name", path.stem)),
-            height=None if data.get("height") is None else float(data["height"]),
-            mass=None if data.get("mass") is None else float(data["mass"]),
-            sex=str(data.get("sex", "male")),
-            proportions={k: float(v) for k, v in (data.get("proportions") or {}).items()},
-            mass_fractions={k: float(v) for k, v in (data.get("mass_fractions") or {}).items()},
-            description=str(data.get("description", "")),
-        )
-    except (TypeError, ValueError) as e:
+        return _yaml_character(data, path, number, numbers)
+    except CharacterError as e:
         raise CharacterError(f"{path}: {e}") from None
+
+
+def _yaml_character(data: dict, path: Path, number, numbers) -> Character:
+    return Character(
+        name=str(data.get("name", path.stem)),
+        height=None if data.get("height") is None else number(data["height"], "height", " in metres"),
+        mass=None if data.get("mass") is None else number(data["mass"], "mass", " in kg"),
+        sex=str(data.get("sex", "male")),
+        proportions=numbers(data.get("proportions"), "proportions"),
+        mass_fractions=numbers(data.get("mass_fractions"), "mass_fractions"),
+        description=str(data.get("description", "")),
+    )
 
 
 def joint_parts(skeleton: Skeleton, roles: Mapping[str, int]) -> list[str]:

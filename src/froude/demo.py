@@ -32,6 +32,19 @@ class DemoRow:
     report: object
 
 
+#: The Figure 3 rows the demo synthesises, in file order (key, BVH file name).
+ROW_FILES = (("fast", "2_fast.bvh"), ("decel", "3_decel.bvh"), ("troll", "4_troll.bvh"), ("child", "5_child.bvh"),
+             ("child_naive", "x_child_naive.bvh"))
+
+
+def demo_files(video: bool = True) -> list[str]:
+    """Names of every file ``run_demo`` writes into its folder (the CLI checks them all before work)."""
+    bvhs = ["1_original.bvh"] + [name for _, name in ROW_FILES]
+    names = ["machine.json", "fig2_fit.png", *bvhs, *(b[:-4] + ".report.json" for b in bvhs),
+             "fig3_filmstrip.png", "child_physical_vs_naive.png", "report.md"]
+    return names + (["demo.mp4"] if video else [])
+
+
 def run_demo(outdir: str | Path, clip: str | Path | None = None, *, strides: int = 3,
              video: bool = True, say: Callable[[str], None] = lambda s: None) -> dict:
     """Compute and write every demo output into ``outdir``; returns {name: path}."""
@@ -73,10 +86,11 @@ def run_demo(outdir: str | Path, clip: str | Path | None = None, *, strides: int
          lambda: pipeline.scale(prep, "child", speed=0.7, strides=strides, method="naive")),
     ]
     results = {}
-    for i, (key, label, desc, make) in enumerate(specs):
+    files_of = dict(ROW_FILES)
+    for key, label, desc, make in specs:
         res = make()
         results[key] = res
-        p = out / f"{i + 2}_{key}.bvh" if key != "child_naive" else out / "x_child_naive.bvh"
+        p = out / files_of[key]
         pipeline.write_result(res, p)
         rows.append(DemoRow(key, label, desc, p, res.report))
         say(f"      {label:<16} {res.motion.n_frames:>4} frames, {res.report.mean_speed_m_s:.2f} m/s")

@@ -3,8 +3,15 @@ from __future__ import annotations
 
 import time
 
-from .common import add_load_options, say
-from .scale import add_character_options, character_kwargs, print_rows
+from .common import (add_character_options, add_fps, add_force, add_load_options, add_mass, add_quiet, bound_work,
+                     character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
+                     print_rows, say, speed)
+
+#: Steps of a speed change, and of the steady parts around it, froude plans at most.
+MAX_STEPS = 500
+MAX_STEADY_STEPS = 100
+MAX_WITHIN_S = 300.0
+PLOT_SUFFIXES = (".png",)
 
 
 def register(sub) -> None:
@@ -13,68 +20,76 @@ def register(sub) -> None:
         description="Plan touchdown angles step by step so that the simple machine reaches a target speed "
         "(a step is one stance and the flight after it), simulate it, time-warp the reference cycle onto "
         "the planned steps and correct the whole body with IK. Works for any character: the plan is "
-        "dimensionless. Writes OUT.bvh and OUT.report.json (with the per-step speed profile).",
+        "dimensionless. Writes OUT.bvh and OUT.report.json (with the per-step speed profile), and the plot "
+        "if asked, all or none.",
         epilog="Examples: froude accelerate run.bvh --to-speed 0.5x --steps 8 -o slow.bvh ; "
-        "froude accelerate run.bvh --to-speed 4.5 --within 2.0 --character troll -o troll_fast.bvh",
+        "froude accelerate run.bvh --to-speed 4.5m/s --within 2.0 --character troll -o troll_fast.bvh",
     )
     p.add_argument("clip", help="reference running clip (BVH)")
-    p.add_argument("-o", "--output", required=True, help="output BVH (a .report.json is written beside it)")
-    p.add_argument("--to-speed", required=True, metavar="Fx|V",
-                   help="goal: a factor of the start speed with an x (0.5x) or a speed in m/s (3.0)")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.bvh",
+                   help="output BVH (OUT.report.json is written beside it); its folder must exist")
+    p.add_argument("--to-speed", required=True, type=speed("--to-speed"), metavar="Fx|Vm/s",
+                   help="goal: a factor of the start speed (0.5x, or a bare 0.5) or a speed (3.0m/s)")
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--steps", type=int, default=None, help="change over this many steps (default 8)")
-    g.add_argument("--within", type=float, default=None, metavar="S", help="change within this many seconds")
-    p.add_argument("--lead-steps", type=int, default=2, help="steady steps before the change (default 2)")
-    p.add_argument("--hold-steps", type=int, default=4, help="steady steps after the change (default 4)")
+    g.add_argument("--steps", type=number(1, MAX_STEPS, "steps", integer=True), default=None,
+                   help=f"change over this many steps, 1-{MAX_STEPS} (default 8)")
+    g.add_argument("--within", type=number(0, MAX_WITHIN_S, "s", lo_open=True), default=None, metavar="S",
+                   help=f"change within this many seconds (at most {MAX_WITHIN_S:g})")
+    p.add_argument("--lead-steps", type=number(0, MAX_STEADY_STEPS, "steps", integer=True), default=2,
+                   help=f"steady steps before the change, 0-{MAX_STEADY_STEPS} (default 2)")
+    p.add_argument("--hold-steps", type=number(0, MAX_STEADY_STEPS, "steps", integer=True), default=4,
+                   help=f"steady steps after the change, 0-{MAX_STEADY_STEPS} (default 4)")
     p.add_argument("--policy", choices=("ease", "even"), default="ease",
                    help="speed profile: ease (smooth start and end, default) or even (equal change per step)")
-    p.add_argument("--plot", default=None, metavar="PNG", help="also plot the speed profile and the transition table")
-    p.add_argument("--fps", type=float, default=None, help="output frame rate (default: the input's)")
-    p.add_argument("--mass", type=float, default=70.0, help="the reference performer's mass [kg], default 70")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress or notes on stderr")
+    p.add_argument("--plot", default=None, metavar="PNG",
+                   help="also plot the speed profile (PNG) and the transition table (PNG-table.png beside it)")
+    add_fps(p)
+    add_mass(p)
+    add_force(p)
+    add_quiet(p)
     add_character_options(p)
     add_load_options(p)
     p.set_defaults(func=run)
 
 
-def parse_goal(text: str) -> tuple[float | None, float | None]:
-    """'0.5x' -> (factor, None); '3.0' or '3.0m/s' -> (None, speed)."""
-    from ..errors import FroudeError
-
-    t = text.strip().lower()
-    try:
-        if t.endswith("x"):
-            return float(t[:-1]), None
-        if t.endswith("m/s"):
-            t = t[:-3]
-        return None, float(t)
-    except ValueError:
-        raise FroudeError(f"cannot read speed goal '{text}': use a factor (0.5x) or a speed in m/s (3.0)") from None
-
-
 def run(args) -> int:
-    from .. import pipeline
-    from ..errors import FroudeError
+    from ..io.atomic import atomic_group, require_suffix
+    from ..pipeline import report_path
 
-    factor, speed = parse_goal(args.to_speed)
-    if not str(args.output).lower().endswith(".bvh"):
-        raise FroudeError(f"{args.output}: the output must be a .bvh file")
-    for name, v in (("--steps", args.steps), ("--lead-steps", args.lead_steps), ("--hold-steps", args.hold_steps)):
-        if v is not None and v < (1 if name == "--steps" else 0):
-            raise FroudeError(f"{name} must be {'>= 1' if name == '--steps' else '>= 0'}, got {v}")
+    out = require_suffix(args.output, (".bvh",))
+    plot = require_suffix(args.plot, PLOT_SUFFIXES, "plot") if args.plot else None
+    check_inputs(args.clip)
+    guard_outputs([out, report_path(out), *_plot_files(plot)], [args.clip, character_input(args)])
+    check_character(args)
+    goal = args.to_speed
     steps = args.steps if (args.steps is not None or args.within is not None) else 8
+
+    from .. import pipeline
+
     t0 = time.perf_counter()
     say(f"fitting the simple machine to {args.clip} ...", args.quiet)
     prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale)
-    say("planning the steps and synthesising ...", args.quiet)
+    rt = prep.retarget(args.character, **character_kwargs(args))
+    m = prep.machine.scaled(rt.L, rt.M)
+    step_s = m.step_time * m.time_unit
+    n_steps = (steps if args.within is None else args.within / step_s) + args.lead_steps + args.hold_steps
+    bound_work(n_steps * step_s * (args.fps or prep.motion.fps), prep.motion.skeleton.n_joints, args.force,
+               "froude accelerate", args.quiet)
+    say(f"planning {n_steps:.0f} steps and synthesising ...", args.quiet)
     res = pipeline.accelerate(
-        prep, args.character, to_speed=speed, to_factor=factor, steps=None if args.within else steps,
+        prep, args.character, to_speed=goal.m_s, to_factor=goal.factor, steps=None if args.within else steps,
         within=args.within, lead_steps=args.lead_steps, hold_steps=args.hold_steps, fps=args.fps,
         policy=args.policy, **character_kwargs(args),
     )
     for note in res.notes:
         say(f"note: {note}", args.quiet)
-    bvh, rep = pipeline.write_result(res, args.output)
+    with atomic_group():
+        bvh, rep = pipeline.write_result(res, out)
+        written = []
+        if plot:
+            from ..viz.plan_plot import plot_plan
+
+            written = plot_plan(res, plot)
     plan = res.report.extras["plan"]
     rows = res.summary_rows()[:2] + [
         ("start speed", f"{plan['start_speed_m_s']:.3f} m/s"),
@@ -85,10 +100,16 @@ def run(args) -> int:
     print_rows(rows)
     fails = res.report.check_bars()
     print(f"physics bars: {'all met' if not fails else 'NOT met: ' + '; '.join(fails)}")
-    if args.plot:
-        from ..viz.plan_plot import plot_plan
-
-        for written in plot_plan(res, args.plot):
-            say(f"wrote {written}", args.quiet)
+    for w in written:
+        say(f"wrote {w}", args.quiet)
     say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep} in {time.perf_counter() - t0:.2f} s", args.quiet)
     return 0
+
+
+def _plot_files(plot):
+    """Every file ``plot_plan(res, plot)`` writes (it may add a second figure beside the first)."""
+    if plot is None:
+        return []
+    from ..viz.plan_plot import plan_plot_paths
+
+    return plan_plot_paths(plot)

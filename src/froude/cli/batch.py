@@ -3,7 +3,10 @@ from __future__ import annotations
 
 import argparse
 
-from .common import say
+from .common import add_quiet, number, say
+
+#: Local Dask worker processes froude starts at most.
+MAX_WORKERS = 256
 
 
 def register(sub) -> None:
@@ -27,20 +30,17 @@ def register(sub) -> None:
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="an existing Dask scheduler (tcp://host:8786); its workers must see INPUTS and OUTDIR")
-    p.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="local worker processes (default: one per core; 1 thread each)")
+    p.add_argument("--workers", type=number(1, MAX_WORKERS, "workers", integer=True), default=None, metavar="N",
+                   help=f"local worker processes, 1-{MAX_WORKERS} (default: one per core; 1 thread each)")
     p.add_argument("--dry-run", action="store_true", help="list the tasks (and which are done), run nothing")
     p.add_argument("--redo", action="store_true", help="recompute tasks that are already done")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or notes on stderr")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from .. import batch
-    from ..errors import FroudeError
 
-    if args.workers is not None and args.workers < 1:
-        raise FroudeError(f"--workers must be >= 1, got {args.workers}")
     plan = batch.load_plan(args.plan)
     clips = batch.find_clips(args.inputs, exclude=args.output)
     if args.dry_run:

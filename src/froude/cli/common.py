@@ -1,10 +1,33 @@
-"""Helpers shared by the subcommands: loading clips with a spoken summary of units and cleaning."""
+"""What the subcommands share: option types with their supported ranges, the load, character, speed and
+output options, the output guard and the work bound.
+
+Every option is checked when it is parsed (argparse calls the ``type``), so a bad value is refused before
+any file is read; what needs a file (the character, the outputs against the inputs, the size of the
+work) is checked right after, before the long work. Nothing here imports NumPy at module level:
+``froude --help`` builds every subcommand's parser.
+"""
 from __future__ import annotations
 
+import argparse
+import math
 import sys
+from pathlib import Path
 
-from ..io.bvh import load_bvh
-from ..motion import Motion
+from ..errors import FroudeError
+from ..presets import HEIGHT_RANGE_M, MASS_RANGE_KG, PART_SCALE_RANGE, list_presets
+
+#: Reference body mass the fit assumes [kg] and its supported range.
+BODY_MASS_RANGE_KG = (20.0, 300.0)
+#: Output frame rates froude supports [Hz]: the COM filter (8 Hz cutoff) needs more than 16 Hz.
+FPS_RANGE_HZ = (20.0, 1000.0)
+#: Metres per file unit accepted by --length-scale (micrometres to hectometres).
+LENGTH_SCALE_RANGE = (1e-6, 100.0)
+#: Without --force, a command refuses work estimated above either bound (frames of output, memory).
+MAX_FRAMES = 200_000
+MAX_MEMORY_BYTES = 2 << 30
+#: Memory estimate of the synthesis + IK per output frame and joint [bytes] (measured: about 300 B for
+#: a periodic 'scale' of CMU 09_01; accelerations are not tiled, so a margin).
+BYTES_PER_FRAME_JOINT = 1024
 
 
 def say(msg: str = "", quiet: bool = False) -> None:
@@ -13,8 +36,134 @@ def say(msg: str = "", quiet: bool = False) -> None:
         print(msg, file=sys.stderr, flush=True)
 
 
-def load_clip(path: str, length_scale: float | None = None, keep_all: bool = False, quiet: bool = False) -> Motion:
+# ---- option types ------------------------------------------------------------------------------------
+def _fmt(v: float) -> str:
+    return f"{v:g}"
+
+
+def number(lo: float, hi: float, unit: str = "", *, integer: bool = False, lo_open: bool = False):
+    """An argparse ``type``: a finite number in [lo, hi] (or (lo, hi] with lo_open), said with its unit.
+
+    The message names the supported range: ``must be 20 to 1000 Hz, got 0``. Integers refuse "2.5";
+    Python's "1_0" and "nan"/"inf" are refused for every number.
+    """
+    unit_s = f" {unit}" if unit else ""
+    rng = f"{'more than ' + _fmt(lo) + ' and at most' if lo_open else 'from ' + _fmt(lo) + ' to'} {_fmt(hi)}{unit_s}"
+
+    def parse(text: str):
+        t = text.strip()
+        try:
+            if "_" in t:
+                raise ValueError
+            value = int(t) if integer else float(t)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected {'a whole number' if integer else 'a number'} {rng}, got '{text}'") from None
+        ok = math.isfinite(value) and (lo < value if lo_open else lo <= value) and value <= hi
+        if not ok:
+            raise argparse.ArgumentTypeError(f"must be {rng}, got {text}")
+        return value
+
+    parse.__name__ = "integer" if integer else "number"  # argparse names the type in some messages
+    return parse
+
+
+def speed(what: str):
+    """An argparse ``type`` for the one speed syntax (``froude.speed_goal``): returns a SpeedGoal."""
+
+    def parse(text: str):
+        from ..speed_goal import parse_speed
+
+        try:
+            return parse_speed(text, what)
+        except FroudeError as e:
+            raise argparse.ArgumentTypeError(str(e).removeprefix(f"{what}: ")) from None
+
+    parse.__name__ = "speed"
+    return parse
+
+
+# ---- shared options ----------------------------------------------------------------------------------
+def add_quiet(p) -> None:
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress or notes on stderr (results still print)")
+
+
+def add_force(p) -> None:
+    p.add_argument("--force", action="store_true",
+                   help=f"run work estimated beyond {MAX_FRAMES:,} output frames or {MAX_MEMORY_BYTES >> 30} GiB "
+                   "(refused otherwise)")
+
+
+def add_mass(p, help_text: str = "the reference performer's mass [kg]") -> None:
+    lo, hi = BODY_MASS_RANGE_KG
+    p.add_argument("--mass", type=number(lo, hi, "kg"), default=70.0,
+                   help=f"{help_text}, {_fmt(lo)}-{_fmt(hi)}, default 70")
+
+
+def add_fps(p, help_text: str = "output frame rate [Hz] (default: the input's)", default=None) -> None:
+    lo, hi = FPS_RANGE_HZ
+    p.add_argument("--fps", type=number(lo, hi, "Hz"), default=default, help=f"{help_text}; {_fmt(lo)}-{_fmt(hi)}")
+
+
+def add_load_options(p) -> None:
+    lo, hi = LENGTH_SCALE_RANGE
+    p.add_argument("--length-scale", type=number(lo, hi, "m per unit", lo_open=False), default=None, metavar="M",
+                   help="metres per file unit (default: detected from the skeleton's height)")
+    p.add_argument("--keep-all-frames", action="store_true",
+                   help="do not drop a synthetic T-pose frame or invalid leading/trailing rows")
+
+
+def add_character_options(p) -> None:
+    g = p.add_argument_group("character (default: the reference's own body)")
+    g.add_argument("--character", default=None, metavar="PRESET|FILE",
+                   help=f"a preset ({', '.join(list_presets())}), a character YAML file or a target BVH skeleton")
+    (hlo, hhi), (mlo, mhi), (slo, shi) = HEIGHT_RANGE_M, MASS_RANGE_KG, PART_SCALE_RANGE
+    g.add_argument("--height", type=number(hlo, hhi, "m"), default=None, metavar="M",
+                   help=f"stature [m], {_fmt(hlo)}-{_fmt(hhi)}")
+    g.add_argument("--char-mass", dest="char_mass", type=number(mlo, mhi, "kg"), default=None, metavar="KG",
+                   help=f"character mass [kg], {_fmt(mlo)}-{_fmt(mhi)}")
+    for part in ("leg", "arm", "head", "trunk"):
+        g.add_argument(f"--{part}-scale", type=number(slo, shi), default=None, metavar="F",
+                       help=f"{part} bone length factor relative to the reference, {_fmt(slo)}-{_fmt(shi)}")
+
+
+def character_kwargs(args) -> dict:
+    return dict(height=args.height, mass=args.char_mass, leg_scale=args.leg_scale, arm_scale=args.arm_scale,
+                head_scale=args.head_scale, trunk_scale=args.trunk_scale)
+
+
+def check_character(args):
+    """Resolve the character options now (unknown preset, YAML errors, bad numbers, a target BVH that
+    cannot be read), before the fit; returns the Character. The pipeline resolves it again from the same
+    options (cheap), so the name and caching stay the pipeline's."""
+    from ..pipeline import resolve_character
+
+    return resolve_character(args.character, **character_kwargs(args))
+
+
+def character_input(args) -> str | None:
+    """The character option when it names a file (an input the outputs must not overwrite)."""
+    c = getattr(args, "character", None)
+    return c if c and c not in list_presets() and Path(c).suffix.lower() in (".yaml", ".yml", ".bvh") else None
+
+
+# ---- loading -----------------------------------------------------------------------------------------
+def check_inputs(*paths) -> None:
+    """Every input names an existing regular file (one line otherwise)."""
+    for p in paths:
+        if p is None:
+            continue
+        path = Path(p)
+        if path.is_dir():
+            raise FroudeError(f"{p}: is a folder, expected a file")
+        if not path.is_file():
+            raise FroudeError(f"{p}: no such file")
+
+
+def load_clip(path: str, length_scale: float | None = None, keep_all: bool = False, quiet: bool = False):
     """Load a BVH clip and say which units were chosen and what cleaning did."""
+    from ..io.bvh import load_bvh
+
     motion = load_bvh(path, length_scale=length_scale, clean=not keep_all)
     say(f"{path}: {motion.n_frames} frames at {motion.fps:.0f} Hz; units: {motion.meta['units']}", quiet)
     for note in motion.meta.get("cleaning", ()):
@@ -22,8 +171,34 @@ def load_clip(path: str, length_scale: float | None = None, keep_all: bool = Fal
     return motion
 
 
-def add_load_options(p) -> None:
-    p.add_argument("--length-scale", type=float, default=None, metavar="M",
-                   help="metres per file unit (default: detected from the skeleton's height)")
-    p.add_argument("--keep-all-frames", action="store_true",
-                   help="do not drop a synthetic T-pose frame or invalid leading/trailing rows")
+# ---- outputs and the size of the work ----------------------------------------------------------------
+def guard_outputs(outputs, inputs=(), folders=()) -> None:
+    """The output guard (``froude.io.atomic.check_outputs``): before any work, every output writable,
+    none an input or another output."""
+    from ..io.atomic import check_outputs
+
+    check_outputs(outputs, inputs, folders=folders)
+
+
+def bound_work(frames: float, joints: int, force: bool, what: str, quiet: bool = False,
+               extra_bytes: float = 0.0) -> None:
+    """Refuse work estimated beyond MAX_FRAMES output frames or MAX_MEMORY_BYTES unless ``force``.
+
+    frames: estimated output frames; joints: joints per frame; extra_bytes: other memory the work needs
+    (images of a video). Says the estimate when the work is large (a tenth of a bound or more).
+    """
+    memory = frames * joints * BYTES_PER_FRAME_JOINT + extra_bytes
+    if not math.isfinite(frames) or not math.isfinite(memory):
+        raise FroudeError(f"{what}: the work cannot be estimated (non-finite size)")
+    size = f"about {frames:,.0f} frames and {memory / 2**20:,.0f} MiB"
+    if (frames > MAX_FRAMES or memory > MAX_MEMORY_BYTES) and not force:
+        raise FroudeError(f"{what}: {size} is beyond the {MAX_FRAMES:,}-frame / {MAX_MEMORY_BYTES >> 30} GiB bound; "
+                          "ask for less, or add --force to run it anyway")
+    if frames > MAX_FRAMES / 10 or memory > MAX_MEMORY_BYTES / 10:
+        say(f"{what}: {size}; this takes a while", quiet)
+
+
+def print_rows(rows) -> None:
+    width = max(len(k) for k, _ in rows)
+    for k, v in rows:
+        print(f"{k:<{width}}  {v}")

@@ -4,9 +4,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from ..body import BodyModel
-from ..machine.fit import fit_machine_detailed
-from .common import add_load_options, load_clip, say
+from .common import add_load_options, add_mass, add_quiet, check_inputs, guard_outputs, load_clip, say
 
 
 def register(sub) -> None:
@@ -17,9 +15,11 @@ def register(sub) -> None:
         "matches the measured stance time, flight time and speed. Prints a table; writes the machine as JSON.",
     )
     p.add_argument("clip", help="BVH file of a running motion")
-    p.add_argument("-o", "--output", required=True, help="machine JSON to write (schema froude.machine/1)")
-    p.add_argument("--plot", default=None, metavar="PNG", help="also write Figure 2 of the paper for this clip")
-    p.add_argument("--mass", type=float, default=70.0, help="body mass [kg] (default 70)")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.json",
+                   help="machine JSON to write (schema froude.machine/1); its folder must exist")
+    p.add_argument("--plot", default=None, metavar="PNG", help="also write Figure 2 of the paper for this clip (.png)")
+    add_mass(p, "body mass [kg]")
+    add_quiet(p)
     add_load_options(p)
     p.set_defaults(func=run)
 
@@ -54,15 +54,27 @@ def fit_table(res) -> str:
 
 
 def run(args) -> int:
-    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames)
+    from ..io.atomic import atomic_group, require_suffix
+
+    out = require_suffix(args.output, (".json",))
+    plot = require_suffix(args.plot, (".png",), "plot") if args.plot else None
+    check_inputs(args.clip)
+    guard_outputs([out, plot], [args.clip])
+
+    from ..body import BodyModel
+    from ..machine.fit import fit_machine_detailed
+
+    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, quiet=args.quiet)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
     res = fit_machine_detailed(motion, body, source=Path(args.clip).name)
-    print(fit_table(res))
-    if args.plot:
-        from ..viz.fit_plot import plot_fit
+    with atomic_group():
+        if plot:
+            from ..viz.fit_plot import plot_fit
 
-        plot_fit(res, args.plot, title=Path(args.clip).name)
-        say(f"wrote {args.plot}")
-    res.machine.save(args.output)
-    say(f"wrote {args.output}")
+            plot_fit(res, plot, title=Path(args.clip).name)
+        res.machine.save(out)
+    print(fit_table(res))
+    if plot:
+        say(f"wrote {plot}", args.quiet)
+    say(f"wrote {out}", args.quiet)
     return 0

@@ -1,13 +1,9 @@
 """``froude info CLIP.bvh``: what is in a clip — skeleton, units, cleaning, speed, steps, phases."""
 from __future__ import annotations
 
-import json
+import math
 
-import numpy as np
-
-from ..body import BodyModel
-from ..gait import detect_gait, summarize
-from .common import add_load_options, load_clip
+from .common import add_load_options, add_mass, check_inputs, load_clip
 
 
 def register(sub) -> None:
@@ -19,7 +15,7 @@ def register(sub) -> None:
     )
     p.add_argument("clip", help="BVH file")
     p.add_argument("--json", action="store_true", help="print the summary as JSON instead of a table")
-    p.add_argument("--mass", type=float, default=70.0, help="body mass [kg] for the COM model (default 70)")
+    add_mass(p, "body mass [kg] for the COM model")
     add_load_options(p)
     p.set_defaults(func=run)
 
@@ -57,11 +53,21 @@ def info_dict(motion, body, summary, gait) -> dict:
         "flight_times_s": [round(float(t), 4) for t in summary.flight_times],
         "has_flight_phase": summary.has_flight,
         "double_support_fraction": round(summary.double_support_fraction, 4),
-        "step_frequency_hz": None if np.isnan(summary.step_frequency) else round(summary.step_frequency, 4),
-        "step_length_m": None if np.isnan(summary.step_length) else round(summary.step_length, 4),
+        "step_frequency_hz": _finite(summary.step_frequency),
+        "step_length_m": _finite(summary.step_length),
         "com_vertical_excursion_m": round(summary.com_vertical_excursion, 4),
         "ground_height_m": round(gait.ground, 4),
     }
+
+
+def _finite(v, digits: int = 4):
+    """A rounded float, or None (JSON null) for NaN and infinities: JSON has no such numbers."""
+    v = float(v)
+    return round(v, digits) if math.isfinite(v) else None
+
+
+def _n(v, spec: str = ".3f") -> str:
+    return "n/a" if v is None else format(v, spec)
 
 
 def _fmt_list(values, unit="s") -> str:
@@ -69,25 +75,31 @@ def _fmt_list(values, unit="s") -> str:
 
 
 def run(args) -> int:
+    check_inputs(args.clip)
+    from ..body import BodyModel
+    from ..gait import detect_gait, summarize
+
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, quiet=args.json)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers)
     summary = summarize(motion, body, com, gait)
-    d = info_dict(motion, body, summary, gait)
+    from ..io.jsonable import dumps, jsonable
+
+    d = jsonable(info_dict(motion, body, summary, gait))
     if args.json:
-        print(json.dumps(d, indent=2))
+        print(dumps(d, indent=2))
         return 0
     sk = d["skeleton"]
     rows = [
         ("file", d["file"]),
         ("skeleton", f"{sk['joints']} joints, {sk['dof']} channels, {sk['end_sites']} end sites"),
-        ("leg length / height", f"{sk['leg_length_m']:.3f} m / {sk['height_m']:.3f} m"),
+        ("leg length / height", f"{_n(sk['leg_length_m'])} m / {_n(sk['height_m'])} m"),
         ("units", sk["units"]),
         ("cleaning", "; ".join(d["cleaning"]) or "nothing dropped"),
-        ("frames", f"{d['frames']} at {d['frame_rate_hz']:.1f} Hz = {d['duration_s']:.3f} s"),
+        ("frames", f"{d['frames']} at {_n(d['frame_rate_hz'], '.1f')} Hz = {_n(d['duration_s'])} s"),
         ("motion", f"{summary.kind}: {summary.reason}"),
-        ("mean speed", f"{d['mean_speed_m_s']:.3f} m/s (Froude number U = {d['froude_U']:.3f})"),
+        ("mean speed", f"{_n(d['mean_speed_m_s'])} m/s (Froude number U = {_n(d['froude_U'])})"),
         ("foot contacts", " ".join(
             f"{c['foot'][0].upper()}{'*' if c['partial'] else ''}" for c in d["contacts"]
         ) + f"  ({len(d['contacts'])}; * = cut by the clip's edge)"),
@@ -95,8 +107,8 @@ def run(args) -> int:
         ("flight times", _fmt_list(summary.flight_times) if summary.has_flight else "no flight phase"),
         ("step frequency", "n/a" if d["step_frequency_hz"] is None else f"{d['step_frequency_hz']:.3f} Hz"),
         ("step length", "n/a" if d["step_length_m"] is None else f"{d['step_length_m']:.3f} m"),
-        ("COM vertical excursion", f"{100 * d['com_vertical_excursion_m']:.1f} cm"),
-        ("double support", f"{100 * d['double_support_fraction']:.0f}% of frames"),
+        ("COM vertical excursion", f"{_n(d['com_vertical_excursion_m'] and 100 * d['com_vertical_excursion_m'], '.1f')} cm"),
+        ("double support", f"{_n(d['double_support_fraction'] and 100 * d['double_support_fraction'], '.0f')}% of frames"),
     ]
     width = max(len(k) for k, _ in rows)
     for k, v in rows:

@@ -5,9 +5,18 @@ import sys
 from pathlib import Path
 
 from ..errors import FroudeError
-from .common import add_load_options, load_clip, say
+from .common import (add_force, add_load_options, add_quiet, bound_work, check_inputs, guard_outputs,
+                     load_clip, number, say)
 
 _EXTENSIONS = (".png", ".gif", ".mp4")
+#: Image sizes [px] and filmstrip settings froude draws.
+WIDTH_RANGE_PX = (16, 8192)
+HEIGHT_RANGE_PX = (16, 8192)
+INTERVAL_RANGE_S = (0.001, 10.0)
+SPACING_RANGE_M = (0.0, 100.0)
+VIDEO_FPS_RANGE_HZ = (1.0, 240.0)
+#: Pixels drawn at most without --force (frames x width x height; a 20 s 960x720 video at 30 Hz is 4e8).
+MAX_PIXELS = 4e9
 
 
 def register(sub) -> None:
@@ -21,22 +30,27 @@ def register(sub) -> None:
     p.add_argument("clips", nargs="+", metavar="CLIP", help="BVH files")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output file: .png, .gif or .mp4")
     p.add_argument("--filmstrip", action="store_true", help="snapshots side by side, a row per motion (PNG)")
-    p.add_argument("--interval", type=float, default=0.066, metavar="S",
-                   help="filmstrip: seconds between snapshots (default 0.066, as in the paper's Fig. 3)")
-    p.add_argument("--spacing", type=float, default=None, metavar="M",
-                   help="filmstrip: extra metres between snapshots (default: enough to keep them apart; "
+    p.add_argument("--interval", type=number(*INTERVAL_RANGE_S, "s"), default=0.066, metavar="S",
+                   help="filmstrip: seconds between snapshots, 0.001-10 (default 0.066, as in the paper's Fig. 3)")
+    p.add_argument("--spacing", type=number(*SPACING_RANGE_M, "m"), default=None, metavar="M",
+                   help="filmstrip: extra metres between snapshots, 0-100 (default: enough to keep them apart; "
                    "0 = true positions, a chronophotograph)")
     p.add_argument("--camera", choices=("side", "three-quarter", "front"), default="side",
                    help="orthographic camera (default side)")
     p.add_argument("--labels", default=None, metavar="A,B",
                    help="comma-separated labels, one per clip (default: file names)")
-    p.add_argument("--fps", type=float, default=30.0, help="video frame rate [Hz] (default 30)")
-    p.add_argument("--width", type=int, default=None, metavar="PX",
-                   help="image width [px] (default 2400 for filmstrips, 960 for videos and stills)")
-    p.add_argument("--height", type=int, default=None, metavar="PX",
-                   help="video/still height [px] (default 0.75 x the panel width)")
-    p.add_argument("--at", type=float, default=0.0, metavar="S", help="still PNG: time [s] to show (default 0)")
-    p.add_argument("--quiet", action="store_true", help="no progress or notes on stderr")
+    p.add_argument("--fps", type=number(*VIDEO_FPS_RANGE_HZ, "Hz"), default=30.0,
+                   help="video frame rate [Hz], 1-240 (default 30)")
+    p.add_argument("--width", type=number(*WIDTH_RANGE_PX, "px", integer=True), default=None, metavar="PX",
+                   help=f"image width [px], {WIDTH_RANGE_PX[0]}-{WIDTH_RANGE_PX[1]} "
+                   "(default 2400 for filmstrips, 960 for videos and stills)")
+    p.add_argument("--height", type=number(*HEIGHT_RANGE_PX, "px", integer=True), default=None, metavar="PX",
+                   help=f"video/still height [px], {HEIGHT_RANGE_PX[0]}-{HEIGHT_RANGE_PX[1]} "
+                   "(default 0.75 x the panel width)")
+    p.add_argument("--at", type=number(0.0, 1e6, "s"), default=0.0, metavar="S",
+                   help="still PNG: time [s] to show, within the longest clip (default 0)")
+    add_force(p)
+    add_quiet(p)
     add_load_options(p)
     p.set_defaults(func=run)
 
@@ -60,23 +74,22 @@ def run(args) -> int:
         raise FroudeError(f"{out}: unknown output extension '{out.suffix}'; use .png, .gif or .mp4")
     if args.filmstrip and ext != ".png":
         raise FroudeError(f"{out}: a filmstrip is a still image; write it to a .png")
-    if args.width is not None and args.width < 16:
-        raise FroudeError(f"--width must be at least 16 px, got {args.width}")
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        raise FroudeError(f"{out}: folder '{parent}' does not exist")
     labels = None
     if args.labels is not None:
         labels = [s.strip() for s in args.labels.split(",")]
         if len(labels) != len(args.clips):
             raise FroudeError(f"--labels gives {len(labels)} labels for {len(args.clips)} clips")
-    for clip in args.clips:
-        if not Path(clip).is_file():
-            raise FroudeError(f"{clip}: no such file")
+    check_inputs(*args.clips)
+    guard_outputs([out], args.clips)
 
     from ..viz import render as R
 
     motions = [load_clip(c, args.length_scale, args.keep_all_frames, quiet=args.quiet) for c in args.clips]
+    longest = max(m.duration for m in motions)
+    if not args.filmstrip and ext == ".png" and args.at > longest:
+        raise FroudeError(f"--at {args.at:g} s is after the end of the longest clip ({longest:.3f} s); "
+                          f"give 0 to {longest:.3f}")
+    _bound(args, motions, ext, longest)
     if labels is None:
         labels = [Path(c).stem for c in args.clips]
     if args.filmstrip:
@@ -94,3 +107,24 @@ def run(args) -> int:
                                  height=args.height, progress=_progress(args.quiet))
         say(f"wrote {out}: {n} frames {w}x{h} px at {args.fps:g} fps", args.quiet)
     return 0
+
+
+def _bound(args, motions, ext: str, longest: float) -> None:
+    """Refuse a render whose pixels (or, for a GIF, frames held in memory) are out of proportion."""
+    if args.filmstrip:
+        snapshots = sum(int(m.duration / args.interval) + 1 for m in motions)
+        if snapshots > 2000 and not args.force:
+            raise FroudeError(f"--interval {args.interval:g} s gives {snapshots} snapshots; at most 2000 without "
+                              "--force (use a longer interval)")
+        return
+    if ext == ".png":
+        return
+    width = args.width or 960
+    height = args.height or int(0.75 * width / max(len(motions), 1))
+    frames = int(longest * args.fps) + 1
+    pixels = float(frames) * width * height
+    # a GIF keeps every frame in memory (RGB, 3 bytes a pixel) until it is encoded
+    if pixels > MAX_PIXELS and not args.force:
+        raise FroudeError(f"{frames} frames of {width}x{height} px is beyond the {MAX_PIXELS:.0e}-pixel bound; "
+                          "lower --fps/--width/--height or add --force")
+    bound_work(frames, 0, args.force, "froude render", args.quiet, extra_bytes=3 * pixels if ext == ".gif" else 0)

@@ -3,8 +3,14 @@ from __future__ import annotations
 
 import time
 
-from ..characters import list_presets
-from .common import add_load_options, say
+from ..presets import list_presets
+from .common import (add_character_options, add_fps, add_force, add_load_options, add_mass, add_quiet, bound_work,
+                     character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
+                     print_rows, say, speed)
+
+#: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
+MAX_STRIDES = 10_000
+MAX_DURATION_S = 3600.0
 
 
 def register(sub) -> None:
@@ -13,87 +19,74 @@ def register(sub) -> None:
         description="Fit the simple machine to the clip, scale it to the character by dynamic similarity "
         "(times x sqrt(L), speeds x sqrt(L)), change its speed by horizontal stretching, synthesise any "
         "number of strides and correct the whole body with IK. Writes OUT.bvh (same joint names and "
-        "channel orders as the input, the target's bone lengths) and OUT.report.json (the physics report).",
-        epilog=f"Presets: {', '.join(list_presets())}. Example: froude scale run.bvh --character child --speed 0.7 -o child.bvh",
+        "channel orders as the input, the target's bone lengths) and OUT.report.json (the physics report), "
+        "both or neither. Every option is checked before the work starts; an output that would replace an "
+        "input is refused.",
+        epilog=f"Presets: {', '.join(list_presets())}. Example: froude scale run.bvh --character child --speed 0.7x "
+        "-o child.bvh",
     )
     p.add_argument("clip", help="reference running clip (BVH)")
-    p.add_argument("-o", "--output", required=True, help="output BVH (a .report.json is written beside it)")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.bvh",
+                   help="output BVH (OUT.report.json is written beside it); its folder must exist")
     add_character_options(p)
     g = p.add_argument_group("speed and length")
-    g.add_argument("--speed", default="1.0", metavar="S|Vm/s",
-                   help="speed factor on the character's dynamically scaled speed (e.g. 0.7), or an absolute "
-                   "speed with a unit (e.g. 3.2m/s); default 1.0")
-    g.add_argument("--strides", type=int, default=4, help="output strides (two steps each), default 4")
-    g.add_argument("--duration", type=float, default=None, metavar="S", help="output length in seconds (overrides --strides)")
-    g.add_argument("--fps", type=float, default=None, help="output frame rate (default: the input's)")
+    g.add_argument("--speed", type=speed("--speed"), default=None, metavar="Fx|Vm/s",
+                   help="a factor on the character's dynamically scaled speed (0.7x, or a bare 0.7) or an "
+                   "absolute speed (3.2m/s); default 1x")
+    g.add_argument("--strides", type=number(1, MAX_STRIDES, "strides", integer=True), default=4,
+                   help=f"output strides (two steps each), 1-{MAX_STRIDES}, default 4")
+    g.add_argument("--duration", type=number(0, MAX_DURATION_S, "s", lo_open=True), default=None, metavar="S",
+                   help="output length in seconds (overrides --strides; at least two steps are made)")
+    add_fps(g)
     p.add_argument("--method", choices=("physical", "naive"), default="physical",
                    help="physical (froude) or naive (what engines do: angles copied, root x L, timing kept)")
-    p.add_argument("--mass", type=float, default=70.0, help="the reference performer's mass [kg], default 70")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress or notes on stderr")
+    add_mass(p)
+    add_force(p)
+    add_quiet(p)
     add_load_options(p)
     p.set_defaults(func=run)
 
 
-def add_character_options(p) -> None:
-    g = p.add_argument_group("character (default: the reference's own body)")
-    g.add_argument("--character", default=None, metavar="PRESET|FILE",
-                   help=f"a preset ({', '.join(list_presets())}), a character YAML file or a target BVH skeleton")
-    g.add_argument("--height", type=float, default=None, help="stature [m]")
-    g.add_argument("--char-mass", dest="char_mass", type=float, default=None, metavar="KG", help="character mass [kg]")
-    g.add_argument("--leg-scale", type=float, default=None, help="leg bone length factor relative to the reference")
-    g.add_argument("--arm-scale", type=float, default=None, help="arm bone length factor")
-    g.add_argument("--head-scale", type=float, default=None, help="head and neck factor")
-    g.add_argument("--trunk-scale", type=float, default=None, help="trunk factor")
-
-
-def character_kwargs(args) -> dict:
-    return dict(height=args.height, mass=args.char_mass, leg_scale=args.leg_scale, arm_scale=args.arm_scale,
-                head_scale=args.head_scale, trunk_scale=args.trunk_scale)
-
-
-def parse_speed(text: str) -> tuple[float | None, float | None]:
-    """'0.7' or '0.7x' -> (factor, None); '3.2m/s' -> (None, 3.2)."""
-    from ..errors import FroudeError
-
-    t = text.strip().lower()
-    try:
-        if t.endswith("m/s"):
-            return None, float(t[:-3])
-        if t.endswith("x"):
-            return float(t[:-1]), None
-        return float(t), None
-    except ValueError:
-        raise FroudeError(f"cannot read speed '{text}': use a factor (0.7 or 0.7x) or a speed (3.2m/s)") from None
-
-
-def print_rows(rows) -> None:
-    width = max(len(k) for k, _ in rows)
-    for k, v in rows:
-        print(f"{k:<{width}}  {v}")
-
-
 def run(args) -> int:
-    from .. import pipeline
-    from ..errors import FroudeError
+    from ..io.atomic import atomic_group, require_suffix
+    from ..pipeline import report_path
 
-    factor, absolute = parse_speed(args.speed)
-    if factor is not None and not factor > 0:
-        raise FroudeError(f"speed factor must be > 0, got {factor}")
-    if absolute is not None and not absolute > 0:
-        raise FroudeError(f"speed must be > 0 m/s, got {absolute}")
-    if not str(args.output).lower().endswith(".bvh"):
-        raise FroudeError(f"{args.output}: the output must be a .bvh file")
+    out = require_suffix(args.output, (".bvh",))
+    check_inputs(args.clip)
+    guard_outputs([out, report_path(out)], [args.clip, character_input(args)])
+    check_character(args)
+    goal = args.speed
     t0 = time.perf_counter()
+
+    from .. import pipeline
+
     say(f"fitting the simple machine to {args.clip} ...", args.quiet)
     prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale)
+    _bound(prep, args)
     say(f"synthesising ({args.method}) ...", args.quiet)
-    res = pipeline.scale(prep, args.character, speed=factor or 1.0, target_speed=absolute, strides=args.strides,
-                         duration=args.duration, fps=args.fps, method=args.method, **character_kwargs(args))
+    res = pipeline.scale(prep, args.character, speed=goal.factor if goal and goal.factor else 1.0,
+                         target_speed=goal.m_s if goal else None, strides=args.strides, duration=args.duration,
+                         fps=args.fps, method=args.method, **character_kwargs(args))
     for note in res.notes:
         say(f"note: {note}", args.quiet)
-    bvh, rep = pipeline.write_result(res, args.output)
+    with atomic_group():
+        bvh, rep = pipeline.write_result(res, out)
     print_rows(res.summary_rows())
     fails = res.report.check_bars()
     print(f"physics bars: {'all met' if not fails else 'NOT met: ' + '; '.join(fails)}")
     say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep} in {time.perf_counter() - t0:.2f} s", args.quiet)
     return 0
+
+
+def _bound(prep, args) -> None:
+    """Estimate the output's frames from the scaled machine's step time; refuse a runaway; note a
+    --duration shorter than the two steps froude makes at least."""
+    rt = prep.retarget(args.character, **character_kwargs(args))
+    m = prep.machine.scaled(rt.L, rt.M)
+    step_s = m.step_time * m.time_unit
+    fps = args.fps or prep.motion.fps
+    seconds = args.duration if args.duration is not None else 2 * args.strides * step_s
+    if args.duration is not None and args.duration < 2 * step_s:
+        say(f"note: --duration {args.duration:g} s is shorter than two steps; the output is two steps "
+            f"(about {2 * step_s:.2f} s), the shortest froude makes", args.quiet)
+    bound_work(seconds * fps, prep.motion.skeleton.n_joints, args.force, "froude scale", args.quiet)

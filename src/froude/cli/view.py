@@ -3,7 +3,11 @@ with controls and watch the result run beside the reference, with the simple mac
 from __future__ import annotations
 
 from ..errors import FroudeError
-from .common import add_load_options, say
+from .common import add_load_options, add_mass, check_inputs, number, say, speed
+
+#: Starting values the studio's controls can show: speed factor and strides (the sliders' ranges).
+VIEW_SPEED_RANGE = (0.3, 3.0)
+VIEW_STRIDES = (1, 12)
 
 
 def register(sub) -> None:
@@ -24,12 +28,16 @@ def register(sub) -> None:
                    help="running BVH clip (default: the embedded sample, CMU 09_01)")
     p.add_argument("--host", default="127.0.0.1",
                    help="address to bind (default 127.0.0.1; 0.0.0.0 to share on the network)")
-    p.add_argument("--port", type=int, default=8080, help="port (default 8080; the next free one if taken)")
+    p.add_argument("--port", type=number(0, 65535, integer=True), default=8080,
+                   help="port, 0-65535 (default 8080; the next free one if taken)")
     p.add_argument("--open", action="store_true", help="also open the page in the default web browser")
-    p.add_argument("--mass", type=float, default=70.0, help="reference body mass [kg] (default 70)")
+    add_mass(p, "reference body mass [kg]")
     p.add_argument("--character", default="same", help="starting character: a preset name or 'same'")
-    p.add_argument("--speed", type=float, default=1.0, help="starting speed factor (default 1)")
-    p.add_argument("--strides", type=int, default=4, help="starting output length in strides (default 4)")
+    p.add_argument("--speed", type=speed("--speed"), default=None, metavar="Fx|Vm/s",
+                   help=f"starting speed: a factor (1.2x, or a bare 1.2) or a speed (3.5m/s); the studio's "
+                   f"slider spans {VIEW_SPEED_RANGE[0]:g}x-{VIEW_SPEED_RANGE[1]:g}x (default 1x)")
+    p.add_argument("--strides", type=number(*VIEW_STRIDES, "strides", integer=True), default=4,
+                   help=f"starting output length in strides, {VIEW_STRIDES[0]}-{VIEW_STRIDES[1]} (default 4)")
     add_load_options(p)
     p.set_defaults(func=run)
 
@@ -44,8 +52,7 @@ def run(args) -> int:
     from ..samples import sample_path
     from ..studio import Params, serve
 
-    if not 0 <= args.port <= 65535:
-        raise FroudeError(f"--port must be 0..65535, got {args.port}")
+    check_inputs(args.clip)
     if args.character not in ("same", *list_presets()):
         raise FroudeError(f"unknown character '{args.character}': use same or a preset ({', '.join(list_presets())})")
     clip = args.clip or str(sample_path())
@@ -55,8 +62,25 @@ def run(args) -> int:
         clip = load_clip(clip, args.length_scale, keep_all=True)
     say(f"froude view: preparing {args.clip or 'the embedded sample (09_01)'} (fit once, reused for every change) ...")
     prep = pipeline.prepare(clip, mass=args.mass, length_scale=args.length_scale)
-    params = Params(character=args.character, speed=args.speed, strides=args.strides)
+    params = Params(character=args.character, speed=_start_factor(prep, args), strides=args.strides)
     code = serve(prep, host=args.host, port=args.port, params=params, open_browser=args.open,
                  announce=lambda m: print(m, flush=True))
     say("froude view: stopped")
     return code
+
+
+def _start_factor(prep, args) -> float:
+    """The --speed goal as the studio's speed factor (a speed in m/s divided by the character's scaled
+    speed), refused outside the slider's range."""
+    goal = args.speed
+    if goal is None:
+        return 1.0
+    factor = goal.factor
+    if factor is None:
+        rt = prep.retarget(None if args.character == "same" else args.character)
+        m = prep.machine.scaled(rt.L, rt.M)
+        factor = goal.m_s / (m.mean_speed * m.speed_unit)
+    lo, hi = VIEW_SPEED_RANGE
+    if not lo <= factor <= hi:
+        raise FroudeError(f"--speed {goal} is a factor of {factor:.2f}; the studio's slider spans {lo:g}x to {hi:g}x")
+    return factor

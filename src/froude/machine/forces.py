@@ -3,7 +3,7 @@
 Differentiation (documented choice, see docs/force_shares.md):
 
 * The whole-body COM (de Leva model) is low-passed with a **2nd-order Butterworth filter run forward
-  and backward** (``sosfiltfilt``: zero lag, effective 4th order, −6 dB at ``CUTOFF_HZ`` = 8 Hz), then
+  and backward** (``filtfilt`` here, the same as SciPy's ``sosfiltfilt``: zero lag, effective 4th order, −6 dB at ``CUTOFF_HZ`` = 8 Hz), then
   differentiated twice by central differences. 8 Hz is the trade-off measured on the nine running
   clips: lower cutoffs smear the touchdown force rise into the flight phases, higher ones pass the
   capture jitter (the flight residual grows monotonically above 8 Hz; see the docs for the table).
@@ -28,8 +28,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import math
+
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
 from ..constants import G_WORLD, GRAVITY, UP, UP_AXIS
 from ..errors import FitError
@@ -70,6 +71,54 @@ def _quadratic_extension(y: np.ndarray, dt: float, n_fit: int, n_pad: int) -> np
     return np.concatenate([head, y, tail], axis=0)
 
 
+def butter_lowpass(order: int, cutoff_hz: float, fs: float) -> list[tuple[tuple, tuple]]:
+    """Digital Butterworth low-pass as second-order sections [(b0, b1, b2), (1, a1, a2)], each with unit
+    gain at 0 Hz; the same filter as ``scipy.signal.butter(order, cutoff_hz, fs=fs, output="sos")``
+    (analogue prototype, pre-warped bilinear transform). Written here because importing scipy.signal
+    costs the command line about a second (it pulls in scipy.stats)."""
+    warped = 2.0 * fs * math.tan(math.pi * cutoff_hz / fs)
+    sections = []
+    for k in range(order // 2):  # one conjugate pole pair per section, zeros at z = -1 (Nyquist)
+        p = warped * complex(math.cos(math.pi * (2 * k + order + 1) / (2 * order)),
+                             math.sin(math.pi * (2 * k + order + 1) / (2 * order)))
+        z = (2 * fs + p) / (2 * fs - p)
+        a1, a2 = -2.0 * z.real, abs(z) ** 2
+        g = (1.0 + a1 + a2) / 4.0
+        sections.append(((g, 2 * g, g), (1.0, a1, a2)))
+    if order % 2:  # the real pole
+        z = (2 * fs - warped) / (2 * fs + warped)
+        g = (1.0 - z) / 2.0
+        sections.append(((g, g, 0.0), (1.0, -z, 0.0)))
+    return sections
+
+
+def _sos_pass(sections, x: np.ndarray) -> np.ndarray:
+    """One causal pass over axis 0 of x (N, C), every section started in its steady state for x[0]
+    (as scipy's ``sosfilt`` with ``sosfilt_zi(sos) * x[0]``: unit DC gain, so each state is set by x[0])."""
+    y = np.array(x, float)
+    for (b0, b1, b2), (_, a1, a2) in sections:
+        for c in range(y.shape[1]):
+            col = y[:, c].tolist()
+            x0 = col[0]
+            # transposed direct form II; steady state for a constant input x0 (output x0)
+            z1 = (b2 - a2) * x0
+            z0 = (b1 - a1) * x0 + z1
+            for i, xi in enumerate(col):
+                yi = b0 * xi + z0
+                z0 = b1 * xi - a1 * yi + z1
+                z1 = b2 * xi - a2 * yi
+                col[i] = yi
+            y[:, c] = col
+    return y
+
+
+def filtfilt(sections, x: np.ndarray) -> np.ndarray:
+    """Zero-phase forward-backward filtering of x (N, C) along axis 0, without padding (the callers
+    extend the signal themselves): ``scipy.signal.sosfiltfilt(sos, x, axis=0, padtype=None)``."""
+    forward = _sos_pass(sections, x)
+    return _sos_pass(sections, forward[::-1])[::-1]
+
+
 def smooth_com(p_world_com: np.ndarray, frame_time: float, cutoff_hz: float = CUTOFF_HZ):
     """Zero-lag low-pass COM and its first two derivatives.
 
@@ -86,8 +135,7 @@ def smooth_com(p_world_com: np.ndarray, frame_time: float, cutoff_hz: float = CU
     n_pad = int(round(EDGE_PAD_S / frame_time))
     n_fit = int(round(EDGE_FIT_S / frame_time))
     ext = _quadratic_extension(p, frame_time, n_fit, n_pad)
-    sos = butter(FILTER_ORDER, cutoff_hz, fs=fs, output="sos")
-    ps = sosfiltfilt(sos, ext, axis=0, padtype=None)
+    ps = filtfilt(butter_lowpass(FILTER_ORDER, cutoff_hz, fs), ext)
     v = np.gradient(ps, frame_time, axis=0)
     a = np.gradient(v, frame_time, axis=0)
     sl = slice(n_pad, n_pad + F)

@@ -4,6 +4,12 @@ from __future__ import annotations
 from pathlib import Path
 
 
+def plan_plot_paths(path) -> list[Path]:
+    """The files ``plot_plan(result, path)`` writes: PATH and PATH-table.png."""
+    path = Path(path)
+    return [path, path.with_name(path.stem + "-table.png")]
+
+
 def plot_plan(result, path) -> list[Path]:
     """Write PATH (the per-step speed profile) and PATH-table.png (U′ over (U, θ0) at the cycle's H).
 
@@ -20,7 +26,7 @@ def plot_plan(result, path) -> list[Path]:
     U0, H0, th0 = float(plan.U[0]), float(plan.H[0]), float(plan.theta0[0])
     grid = grid_around(U0, H0, th0, n=48)
     table, _ = load_or_build_table(plan.controls[0], grid)
-    table_path = path.with_name(path.stem + "-table.png")
+    table_path = plan_plot_paths(path)[1]
     plot_table(table, H0, table_path, cycle=_Point(U0, H0, th0),
                title="transition table: next apex speed U' over (U, touchdown angle)")
     return [path, table_path]

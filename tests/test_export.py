@@ -223,3 +223,51 @@ def test_example_three_heights(tmp_path):
         d = read_frame_data(out / f"h{h}.csv")
         assert abs((d["com_y_m"].max()) / float(h) - 0.65) < 0.1  # the COM sits near 0.55-0.65 of stature
         assert (out / f"h{h}.glb").is_file()
+
+
+# ---- the CLI ----------------------------------------------------------------------------------------------
+def test_cli_glb_and_data_outputs(tmp_path, run_cli):
+    """-o OUT.glb and --data on scale and accelerate: the validator passes them, the data matches the report."""
+    out = tmp_path / "child.glb"
+    code, stdout, err = run_cli("scale", clip("09_01"), "--character", "child", "--strides", 2, "-o", out,
+                                "--data", tmp_path / "child.csv", "-q")
+    assert code == 0, err
+    rep = json.loads((tmp_path / "child.report.json").read_text())
+    d = read_frame_data(tmp_path / "child.csv")
+    assert len(d["time_s"]) == rep["n_frames"]
+    com = np.stack([d[f"com_{a}_m"] for a in "xyz"], axis=1)
+    mcom = np.stack([d[f"machine_com_{a}_m"] for a in "xyz"], axis=1)
+    assert 1000 * np.linalg.norm(com - mcom, axis=1).max() == pytest.approx(rep["com_tracking_max_mm"], abs=0.01)
+    assert peak_vertical_force_bw(d, rep["mass_kg"]) == pytest.approx(rep["peak_vertical_force_bw"], rel=1e-6)
+    code, _, err = run_cli("accelerate", clip("09_01"), "--to-speed", "1.2x", "--steps", 4, "-o", tmp_path / "fast.gltf",
+                           "--data", tmp_path / "fast.parquet", "-q")
+    assert code == 0, err
+    assert {p.name for p in tmp_path.iterdir()} == {"child.glb", "child.report.json", "child.csv", "fast.gltf",
+                                                     "fast.report.json", "fast.parquet"}
+    assert all(v["errors"] == 0 for v in validate(out, tmp_path / "fast.gltf"))
+    # a bad --data suffix is refused before any work, nothing written
+    code, _, err = run_cli("scale", clip("09_01"), "-o", tmp_path / "x.glb", "--data", tmp_path / "x.xlsx")
+    assert code == 2 and "--data output must be a .csv or .parquet or .npz" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x.glb").exists()
+
+
+def test_cli_convert_both_ways_and_info_data(tmp_path, run_cli):
+    src = clip("dataset-1_run_tired_001")
+    glb = tmp_path / "tired.glb"
+    code, _, err = run_cli("convert", src, glb, "-q")
+    assert code == 0, err
+    code, _, err = run_cli("convert", glb, tmp_path / "tired.bvh", "--data", tmp_path / "tired.npz", "-q")
+    assert code == 0, err
+    a, b = froude.load(src), froude.load(tmp_path / "tired.bvh")
+    assert b.skeleton.names == a.skeleton.names and b.skeleton.channels == a.skeleton.channels
+    assert np.abs(fk(a)[0] - fk(b)[0]).max() < 1e-4
+    assert len(read_frame_data(tmp_path / "tired.npz")["time_s"]) == a.n_frames
+    code, _, err = run_cli("convert", glb, glb)
+    assert code == 2 and "would overwrite the input" in err
+    code, _, err = run_cli("convert", src, tmp_path / "x.fbx")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and not (tmp_path / "x.fbx").exists()
+    code, _, err = run_cli("info", clip("09_03"), "--data", tmp_path / "in.csv")
+    assert code == 0, err
+    d = read_frame_data(tmp_path / "in.csv")
+    fitted = froude.fit(clip("09_03"))
+    np.testing.assert_allclose(d["com_force_y_N"], fitted.ground_force[:, 1], rtol=1e-6, atol=1e-3)

@@ -87,3 +87,36 @@ def test_machine_json_is_strict(tmp_path):
     m = pipeline.prepare(motion).machine
     m.save(tmp_path / "m.json")
     _strict((tmp_path / "m.json").read_text())
+
+
+def _speeding_up(motion, gain=0.35):
+    """A take that speeds up: the clip played faster and faster (source time t + gain t² / (2 T))."""
+    T = motion.duration * 0.8
+    t = np.arange(int(T * motion.fps)) / motion.fps
+    return motion.time_warp(t + 0.5 * gain * t * t / T)
+
+
+@pytest.mark.parametrize("name", clip_params(["02_03"]))
+def test_changing_speed_says_what_is_modelled(name, run_cli, tmp_path):
+    """Issue 13: a take whose speed changes: the machine runs its mean (info's), says so, and speed factors
+    refer to what it printed; --range T0:T1 models a part instead."""
+    motion = _speeding_up(load_bvh(clip(name)))
+    prep = pipeline.prepare(motion)
+    info = _summary(motion)
+    assert any("speed changes within the take" in n for n in prep.notes)
+    for s in (1.0, 1.2):
+        rep = pipeline.scale(prep, speed=s).report
+        assert rep.mean_speed_m_s == pytest.approx(s * info.mean_speed, rel=0.01)
+    assert pipeline.scale(prep).report.step_frequency_hz == pytest.approx(info.step_frequency, rel=0.01)
+    # a part of the take: its own speed
+    part = pipeline.prepare(motion, time_range=(0.0, 0.97))
+    cut = pipeline.select_range(motion, (0.0, 0.97))
+    assert part.summary.mean_speed == pytest.approx(_summary(cut).mean_speed, rel=1e-9)
+    assert part.summary.mean_speed < 0.97 * info.mean_speed
+    rep = pipeline.scale(part).report
+    assert rep.mean_speed_m_s == pytest.approx(part.summary.mean_speed, rel=0.01)
+    # the CLI prints what it models
+    code, out, err = run_cli("scale", clip(name), "--range", "0.05:", "-o", tmp_path / "o.bvh")
+    assert code == 0 and "modelled  " in out and "0.05-1.43 s of the take" in out
+    code, out, err = run_cli("scale", clip(name), "--range", "x", "-o", tmp_path / "p.bvh")
+    assert code == 2 and "T0:T1" in err and len(err.strip().splitlines()) == 1

@@ -3,10 +3,9 @@ from __future__ import annotations
 
 import time
 
-from .common import (MOTION_OUTPUTS, add_character_options, add_data_option, add_fps, add_force, add_load_options,
-                     add_mass, add_quiet, bound_work, data_output,
-                     character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
-                     print_rows, say, speed)
+from .common import (MOTION_OUTPUTS, add_character_options, add_data_option, add_force, add_fps, add_load_options,
+                     add_mass, add_quiet, add_range_option, bound_work, character_input, character_kwargs,
+                     check_character, check_inputs, data_output, guard_outputs, number, print_rows, say, speed)
 
 #: Steps of a speed change, and of the steady parts around it, froude plans at most.
 MAX_STEPS = 500
@@ -21,15 +20,16 @@ def register(sub) -> None:
         description="Plan touchdown angles step by step so that the simple machine reaches a target speed "
         "(a step is one stance and the flight after it), simulate it, time-warp the reference cycle onto "
         "the planned steps and correct the whole body with IK. Works for any character: the plan is "
-        "dimensionless. Writes OUT.bvh (or .glb/.gltf) and OUT.report.json (with the per-step speed profile), and the plot "
+        "dimensionless. Writes OUT.bvh (or .glb/.gltf) and OUT.report.json (with the per-step speed profile), "
+        "and the plot "
         "if asked, all or none.",
         epilog="Examples: froude accelerate run.bvh --to-speed 0.5x --steps 8 -o slow.bvh ; "
         "froude accelerate run.bvh --to-speed 4.5m/s --within 2.0 --character troll -o troll_fast.bvh",
     )
     p.add_argument("clip", help="reference running clip (BVH)")
     p.add_argument("-o", "--output", required=True, metavar="OUT.bvh|.glb|.gltf",
-                   help="output motion: BVH, or glTF/GLB (skin, joints, animation, a mannequin mesh); OUT.report.json "
-                   "is written beside it; its folder must exist")
+                   help="output motion: BVH, or glTF/GLB (skin, joints, animation, a mannequin mesh); "
+                   "OUT.report.json is written beside it; its folder must exist")
     p.add_argument("--to-speed", required=True, type=speed("--to-speed"), metavar="Fx|Vm/s",
                    help="goal: a factor of the start speed (0.5x, or a bare 0.5) or a speed (3.0m/s)")
     g = p.add_mutually_exclusive_group()
@@ -52,6 +52,7 @@ def register(sub) -> None:
     add_quiet(p)
     add_character_options(p)
     add_load_options(p)
+    add_range_option(p)
     p.set_defaults(func=run)
 
 
@@ -63,7 +64,8 @@ def run(args) -> int:
     data = data_output(args)
     plot = require_suffix(args.plot, PLOT_SUFFIXES, "plot") if args.plot else None
     check_inputs(args.clip)
-    guard_outputs([out, report_path(out), *_plot_files(plot)] + ([data] if data else []), [args.clip, character_input(args)])
+    guard_outputs([out, report_path(out), *_plot_files(plot)] + ([data] if data else []),
+                  [args.clip, character_input(args)])
     check_character(args)
     goal = args.to_speed
     steps = args.steps if (args.steps is not None or args.within is not None) else 8
@@ -72,7 +74,7 @@ def run(args) -> int:
 
     t0 = time.perf_counter()
     say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale)
+    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale, time_range=args.range)
     rt = prep.retarget(args.character, **character_kwargs(args))
     m = prep.machine.scaled(rt.L, rt.M)
     step_s = m.step_time * m.time_unit
@@ -95,18 +97,22 @@ def run(args) -> int:
 
             written = plot_plan(res, plot)
     plan = res.report.extras["plan"]
-    rows = res.summary_rows()[:2] + [
+    head = [r for r in res.summary_rows() if r[0] in ("character", "method", "modelled")]
+    tail = [r for r in res.summary_rows() if r[0] not in ("character", "method", "modelled", "speed",
+                                                         "Froude number U", "step frequency")]
+    rows = head + [
         ("start speed", f"{plan['start_speed_m_s']:.3f} m/s"),
         ("goal", f"{plan['target_speed_m_s']:.3f} m/s"),
         ("apex speed per step", " ".join(f"{v:.2f}" for v in plan["apex_speed_m_s"]) + " m/s"),
         ("touchdown angle per step", " ".join(f"{v:.1f}" for v in plan["theta0_deg"]) + " deg"),
-    ] + res.summary_rows()[5:]
+    ] + tail
     print_rows(rows)
     fails = res.report.check_bars()
     print(f"physics bars: {'all met' if not fails else 'NOT met: ' + '; '.join(fails)}")
     for w in written:
         say(f"wrote {w}", args.quiet)
-    say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep}{''.join(f' and {d}' for d in data_written)} in {time.perf_counter() - t0:.2f} s", args.quiet)
+    also = "".join(f" and {d}" for d in data_written)
+    say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep}{also} in {time.perf_counter() - t0:.2f} s", args.quiet)
     return 0
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from .common import add_load_options, add_mass, add_quiet, check_inputs, guard_outputs, load_clip, say
+from .common import add_load_options, add_range_option, add_mass, add_quiet, check_inputs, guard_outputs, load_clip, say
 
 
 def register(sub) -> None:
@@ -21,6 +21,7 @@ def register(sub) -> None:
     add_mass(p, "body mass [kg]")
     add_quiet(p)
     add_load_options(p)
+    add_range_option(p)
     p.set_defaults(func=run)
 
 
@@ -65,6 +66,10 @@ def run(args) -> int:
     from ..machine.fit import fit_machine_detailed
 
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, quiet=args.quiet)
+    if args.range:
+        from ..pipeline import select_range
+
+        motion = select_range(motion, args.range, Path(args.clip).name)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
     res = fit_machine_detailed(motion, body, source=Path(args.clip).name)
     with atomic_group():

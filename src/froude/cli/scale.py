@@ -4,10 +4,9 @@ from __future__ import annotations
 import time
 
 from ..presets import list_presets
-from .common import (MOTION_OUTPUTS, add_character_options, add_data_option, add_fps, add_force, add_load_options,
-                     add_mass, add_quiet, bound_work, data_output,
-                     character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
-                     print_rows, say, speed)
+from .common import (MOTION_OUTPUTS, add_character_options, add_data_option, add_force, add_fps, add_load_options,
+                     add_mass, add_quiet, add_range_option, bound_work, character_input, character_kwargs,
+                     check_character, check_inputs, data_output, guard_outputs, number, print_rows, say, speed)
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
 MAX_STRIDES = 10_000
@@ -19,7 +18,8 @@ def register(sub) -> None:
         "scale", help="retarget a run to a new character and/or speed, physically (paper 5.1, 5.2, 6)",
         description="Fit the simple machine to the clip, scale it to the character by dynamic similarity "
         "(times x sqrt(L), speeds x sqrt(L)), change its speed by horizontal stretching, synthesise any "
-        "number of strides and correct the whole body with IK. Writes OUT.bvh or OUT.glb/.gltf (same joint names and "
+        "number of strides and correct the whole body with IK. Writes OUT.bvh or OUT.glb/.gltf (same joint names "
+        "and "
         "channel orders as the input, the target's bone lengths) and OUT.report.json (the physics report), "
         "both or neither. Every option is checked before the work starts; an output that would replace an "
         "input is refused.",
@@ -28,8 +28,8 @@ def register(sub) -> None:
     )
     p.add_argument("clip", help="reference running clip (BVH)")
     p.add_argument("-o", "--output", required=True, metavar="OUT.bvh|.glb|.gltf",
-                   help="output motion: BVH, or glTF/GLB (skin, joints, animation, a mannequin mesh); OUT.report.json "
-                   "is written beside it; its folder must exist")
+                   help="output motion: BVH, or glTF/GLB (skin, joints, animation, a mannequin mesh); "
+                   "OUT.report.json is written beside it; its folder must exist")
     add_character_options(p)
     g = p.add_argument_group("speed and length")
     g.add_argument("--speed", type=speed("--speed"), default=None, metavar="Fx|Vm/s",
@@ -47,6 +47,7 @@ def register(sub) -> None:
     add_data_option(p)
     add_quiet(p)
     add_load_options(p)
+    add_range_option(p)
     p.set_defaults(func=run)
 
 
@@ -65,7 +66,7 @@ def run(args) -> int:
     from .. import pipeline
 
     say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale)
+    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale, time_range=args.range)
     _bound(prep, args)
     say(f"synthesising ({args.method}) ...", args.quiet)
     res = pipeline.scale(prep, args.character, speed=goal.factor if goal and goal.factor else 1.0,
@@ -78,7 +79,8 @@ def run(args) -> int:
     print_rows(res.summary_rows())
     fails = res.report.check_bars()
     print(f"physics bars: {'all met' if not fails else 'NOT met: ' + '; '.join(fails)}")
-    say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep}{''.join(f' and {d}' for d in data_written)} in {time.perf_counter() - t0:.2f} s", args.quiet)
+    also = "".join(f" and {d}" for d in data_written)
+    say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep}{also} in {time.perf_counter() - t0:.2f} s", args.quiet)
     return 0
 
 

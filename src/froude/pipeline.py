@@ -786,6 +786,95 @@ def scale(prep: Prepared, character=None, *, report: bool = True, **options) -> 
     return plan_scale(prep, character, **options).finish(report=report)
 
 
+@dataclass(frozen=True)
+class SpeedRange:
+    """The speeds a prepared clip reaches for one character with every physics bar met.
+
+    lo, hi: speed factors on the character's dynamically scaled speed [-]; lo_m_s, hi_m_s: the same in
+    m/s; base_m_s: the character's speed at factor 1 [m/s] (the clip's mean speed for its own body).
+    probes: ((factor, met: bool, reason), ...) every output tried, in order.
+    """
+
+    lo: float
+    hi: float
+    lo_m_s: float
+    hi_m_s: float
+    base_m_s: float
+    probes: tuple = ()
+    empty: bool = False  # True when not even x1 meets every bar
+
+    def describe(self) -> str:
+        if self.empty:
+            return f"none (x1 = {self.base_m_s:.2f} m/s already misses a bar)"
+        return (f"x{self.lo:.2f}-{self.hi:.2f} ({self.lo_m_s:.2f}-{self.hi_m_s:.2f} m/s; "
+                f"x1 = {self.base_m_s:.2f} m/s)")
+
+
+#: The factors reachable_speed_range searches between, and how finely [-].
+SPEED_SEARCH_RANGE = (0.3, 3.0)
+SPEED_SEARCH_TOL = 0.03
+
+
+def _speed_ok(prep: Prepared, character, s: float, numbers: dict) -> tuple[bool, str]:
+    """Whether a 2-stride output at speed factor s meets every physics bar, and why not."""
+    from .errors import FitError
+
+    try:
+        rep = plan_scale(prep, character, speed=s, strides=2, **numbers).finish().report
+    except FitError as e:
+        return False, str(e)
+    fails = rep.check_bars()
+    return not fails, "; ".join(fails)
+
+
+def reachable_speed_range(prep: Prepared, character=None, **character_numbers) -> SpeedRange:
+    """The range of ``scale`` speed factors whose outputs meet every physics bar, for one character.
+
+    Bisection on real outputs (2 strides each, the same synthesis and IK as ``scale``) between 1 and the
+    ends of SPEED_SEARCH_RANGE, to SPEED_SEARCH_TOL; the ends returned were themselves produced and
+    checked. About a dozen short outputs (a few seconds); remembered per character on ``prep``. Assumes the
+    reachable speeds form one interval around x1 (true on the shared clips: faster outputs fail by a knee
+    that pops or a cycle that does not exist, slower ones by nothing down to x0.3).
+    For the studio's speed slider and for ``scale``'s refusals.
+    """
+    key = ("speed_range", character if isinstance(character, (str, type(None))) else id(character),
+           tuple(sorted((k, v) for k, v in character_numbers.items() if v is not None)))
+    hit = prep.retargets.get(key)
+    if hit is not None:
+        return hit
+    rt = prep.retarget(character, **character_numbers)
+    m = prep.machine.scaled(rt.L, rt.M)
+    base = m.mean_speed * m.speed_unit
+    probes = []
+
+    def ok(s):
+        good, why = _speed_ok(prep, character, s, character_numbers)
+        probes.append((float(s), good, why))
+        return good
+
+    if not ok(1.0):
+        lo = hi = 1.0  # not even the clip's own speed meets the bars: nothing is reachable (empty range)
+    else:
+        ends = []
+        for far in SPEED_SEARCH_RANGE:
+            good, bad = 1.0, far
+            if ok(far):
+                ends.append(far)
+                continue
+            while abs(bad - good) > SPEED_SEARCH_TOL:
+                mid = 0.5 * (good + bad)
+                if ok(mid):
+                    good = mid
+                else:
+                    bad = mid
+            ends.append(good)
+        lo, hi = ends
+    out = SpeedRange(lo=lo, hi=hi, lo_m_s=lo * base, hi_m_s=hi * base, base_m_s=base, probes=tuple(probes),
+                     empty=not probes[0][1])
+    prep.retargets[key] = out
+    return out
+
+
 def plan_scale(
     prep: Prepared,
     character=None,

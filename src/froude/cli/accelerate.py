@@ -3,9 +3,10 @@ from __future__ import annotations
 
 import time
 
-from .common import (MOTION_OUTPUTS, add_character_options, add_data_option, add_force, add_fps, add_load_options,
-                     add_mass, add_quiet, add_range_option, bound_work, character_input, character_kwargs,
-                     check_character, check_inputs, data_output, guard_outputs, number, print_rows, say, speed)
+from .common import (MOTION_OUTPUTS, add_character_options, add_data_option, add_force, add_fps, add_keep,
+                     add_load_options, add_mass, add_quiet, add_range_option, bound_work, character_input,
+                     character_kwargs, check_character, check_inputs, data_output, guard_outputs, number,
+                     print_rows, say, speed)
 
 #: Steps of a speed change, and of the steady parts around it, froude plans at most.
 MAX_STEPS = 500
@@ -53,6 +54,7 @@ def register(sub) -> None:
     add_character_options(p)
     add_load_options(p)
     add_range_option(p)
+    add_keep(p)
     p.set_defaults(func=run)
 
 
@@ -89,6 +91,11 @@ def run(args) -> int:
     )
     for note in res.notes:
         say(f"note: {note}", args.quiet)
+    fails = res.report.check_bars()
+    if fails and not args.keep:
+        say(f"froude accelerate: output not written: it misses physics bars ({'; '.join(fails)}); "
+            "--keep writes it anyway")
+        return 1
     with atomic_group():
         bvh, rep, *data_written = pipeline.write_result(res, out, data)
         written = []
@@ -107,8 +114,7 @@ def run(args) -> int:
         ("touchdown angle per step", " ".join(f"{v:.1f}" for v in plan["theta0_deg"]) + " deg"),
     ] + tail
     print_rows(rows)
-    fails = res.report.check_bars()
-    print(f"physics bars: {'all met' if not fails else 'NOT met: ' + '; '.join(fails)}")
+    print(f"physics bars: {'all met' if not fails else 'NOT met (kept): ' + '; '.join(fails)}")
     for w in written:
         say(f"wrote {w}", args.quiet)
     also = "".join(f" and {d}" for d in data_written)

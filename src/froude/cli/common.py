@@ -94,6 +94,12 @@ def time_range(text: str):
 
 
 # ---- shared options ----------------------------------------------------------------------------------
+def add_keep(p) -> None:
+    p.add_argument("--keep", action="store_true",
+                   help="write the output even if it misses a physics bar (otherwise it is not written, the "
+                   "bars missed and the reachable speeds are said, and the exit status is 1)")
+
+
 def add_range_option(p) -> None:
     p.add_argument("--range", type=time_range, default=None, metavar="T0:T1",
                    help="model only this part of the take, in seconds (e.g. 1.2:3.0, or 1.2: to the end): its "

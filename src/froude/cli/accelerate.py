@@ -3,10 +3,11 @@ from __future__ import annotations
 
 import time
 
-from .common import (MOTION_OUTPUTS, add_character_options, add_data_option, add_force, add_fps, add_keep,
-                     add_load_options, add_mass, add_quiet, add_range_option, bound_work, character_input,
-                     character_kwargs, check_character, check_inputs, data_output, guard_outputs, number,
-                     print_rows, say, speed)
+from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
+                     add_quiet, add_range_option, bound_work, character_input, character_kwargs,
+                     check_character, check_inputs, guard_outputs, load_clip, number, print_rows, say,
+                     speed)
+from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Steps of a speed change, and of the steady parts around it, froude plans at most.
 MAX_STEPS = 500
@@ -76,7 +77,8 @@ def run(args) -> int:
 
     t0 = time.perf_counter()
     say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale, time_range=args.range)
+    clip = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.quiet, args.joint_map, args.up)
+    prep = pipeline.prepare(clip, mass=args.mass, time_range=args.range)
     rt = prep.retarget(args.character, **character_kwargs(args))
     m = prep.machine.scaled(rt.L, rt.M)
     step_s = m.step_time * m.time_unit

@@ -84,7 +84,7 @@ def run(args) -> int:
     from ..body import BodyModel
     from ..gait import detect_gait, summarize
 
-    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, quiet=args.json)
+    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.json, args.joint_map, args.up)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers)

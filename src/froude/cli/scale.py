@@ -5,10 +5,11 @@ import time
 from pathlib import Path
 
 from ..presets import list_presets
-from .common import (MOTION_OUTPUTS, add_character_options, add_data_option, add_force, add_fps, add_keep,
-                     add_load_options, add_mass, add_quiet, add_range_option, bound_work, character_input,
-                     character_kwargs, check_character, check_inputs, data_output, guard_outputs, number,
-                     print_rows, say, speed)
+from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
+                     add_quiet, add_range_option, bound_work, character_input, character_kwargs,
+                     check_character, check_inputs, guard_outputs, load_clip, number, print_rows, say,
+                     speed)
+from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
 MAX_STRIDES = 10_000
@@ -69,7 +70,8 @@ def run(args) -> int:
     from .. import pipeline
 
     say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale, time_range=args.range)
+    clip = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.quiet, args.joint_map, args.up)
+    prep = pipeline.prepare(clip, mass=args.mass, time_range=args.range)
     _bound(prep, args)
     say(f"synthesising ({args.method}) ...", args.quiet)
     from ..errors import FitError, FroudeError

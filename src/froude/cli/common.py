@@ -255,3 +255,22 @@ def print_rows(rows) -> None:
     width = max(len(k) for k, _ in rows)
     for k, v in rows:
         print(f"{k:<{width}}  {v}")
+
+
+# ---- exports -----------------------------------------------------------------------------------------
+#: Output suffixes of a motion (``froude.api.save`` writes them) and of per-frame data.
+MOTION_OUTPUTS = (".bvh", ".glb", ".gltf")
+DATA_OUTPUTS = (".csv", ".parquet", ".npz")
+
+
+def add_data_option(p) -> None:
+    p.add_argument("--data", default=None, metavar="OUT.csv|.parquet|.npz",
+                   help="also write per frame: time, COM position and velocity, ground force (the machine's for "
+                   "outputs; eq. 1 from the COM always), each foot's contact and markers, stance/flight phase")
+
+
+def data_output(args):
+    """The --data path with its suffix checked (None when not asked for)."""
+    from ..io.atomic import require_suffix
+
+    return None if args.data is None else require_suffix(args.data, DATA_OUTPUTS, "--data output")

@@ -141,6 +141,24 @@ def add_load_options(p) -> None:
                    help="do not drop a synthetic T-pose frame or invalid leading/trailing rows")
 
 
+def add_output_options(p) -> None:
+    """How the output BVH is written; by default in the input's conventions (unit, up axis, names, channel
+    orders, frame rate)."""
+    g = p.add_argument_group("output file (default: the input's conventions)")
+    g.add_argument("--units", default=None, choices=("m", "cm", "mm", "in", "cmu"),
+                   help="length unit of the output BVH (default: the input's)")
+    g.add_argument("--rotations-only", action="store_true",
+                   help="no position channels below the root (some readers mishandle them)")
+
+
+def output_kwargs(args) -> dict:
+    """``save_bvh`` options from add_output_options."""
+    from ..conventions import unit_scale
+
+    return {"length_scale": unit_scale(args.units)[0] if args.units else None,
+            "rotations_only": args.rotations_only}
+
+
 def add_character_options(p) -> None:
     g = p.add_argument_group("character (default: the reference's own body)")
     g.add_argument("--character", default=None, metavar="PRESET|FILE",
@@ -237,3 +255,22 @@ def print_rows(rows) -> None:
     width = max(len(k) for k, _ in rows)
     for k, v in rows:
         print(f"{k:<{width}}  {v}")
+
+
+# ---- exports -----------------------------------------------------------------------------------------
+#: Output suffixes of a motion (``froude.api.save`` writes them) and of per-frame data.
+MOTION_OUTPUTS = (".bvh", ".glb", ".gltf")
+DATA_OUTPUTS = (".csv", ".parquet", ".npz")
+
+
+def add_data_option(p) -> None:
+    p.add_argument("--data", default=None, metavar="OUT.csv|.parquet|.npz",
+                   help="also write per frame: time, COM position and velocity, ground force (the machine's for "
+                   "outputs; eq. 1 from the COM always), each foot's contact and markers, stance/flight phase")
+
+
+def data_output(args):
+    """The --data path with its suffix checked (None when not asked for)."""
+    from ..io.atomic import require_suffix
+
+    return None if args.data is None else require_suffix(args.data, DATA_OUTPUTS, "--data output")

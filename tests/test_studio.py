@@ -79,7 +79,8 @@ def test_preview_is_the_results_machine_and_skeleton(session):
 @pytest.mark.parametrize("bad, words", [
     (Params(height=0.0), "Height 0 m is outside 0.5 m to 4 m"),
     (Params(speed=0.0), "Speed 0× is outside 0.5× to 2×"),
-    (Params(mode="accelerate", to_factor=2.0, steps=1), r"cannot go from \d.\d\d m/s to \d.\d\d m/s \(×2\) in 1 steps: use more"),
+    (Params(mode="accelerate", to_factor=2.0, steps=1),
+     r"cannot go from \d.\d\d m/s to \d.\d\d m/s \(×2\) in 1 steps: use more"),
 ])
 def test_bad_params_raise_one_line_froude_errors(session, bad, words):
     with pytest.raises(FroudeError, match=words):
@@ -117,7 +118,8 @@ def test_studio_previews_only_when_the_result_would_be_slow(session, monkeypatch
     tab = studio.open_tab()
     shown = []
     publish = tab._publish
-    monkeypatch.setattr(tab, "_publish", lambda solved, status=None: (shown.append(solved), publish(solved, status)))
+    monkeypatch.setattr(tab, "_publish",
+                        lambda solved, status=None: (shown.append(solved), publish(solved, status)))
     try:
         tab.apply(Params(speed=1.05))  # a warm solve sets the expectation
         quick = tab.expected_seconds(Params(speed=1.1))

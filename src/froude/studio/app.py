@@ -896,8 +896,8 @@ class Tab:
                 self._camera_dirty = True
             if not solved.preview and solved.result.report is not None:  # numbers and plots follow the runner
                 i, _ = solved.track.frame_at(self._t)
-                self.gui_plot.data = self._force_series(solved.track, i)
-                self.gui_speed_plot.data = self._speed_series(solved.track, i)
+                self._set_plot(self.gui_plot, self._force_series(solved.track, i))
+                self._set_plot(self.gui_speed_plot, self._speed_series(solved.track, i))
                 self.gui_bands.content = self._bands_html(solved.track)
                 self.gui_table.content = self._table_md()
                 self.gui_facts.content = self._facts_md()
@@ -930,6 +930,17 @@ class Tab:
         i, _ = tr.frame_at(self._t)
         self.gui_plot.data = self._force_series(tr, i)
         self.gui_speed_plot.data = self._speed_series(tr, i)
+
+    @staticmethod
+    def _set_plot(plot, data) -> None:
+        """New data and a fixed y range from its finite values: the playhead series is NaN but for one
+        point, and uPlot's automatic range does not skip NaN."""
+        ys = np.concatenate([np.asarray(d, float) for d in data[1:]])
+        ys = ys[np.isfinite(ys)]
+        lo, hi = (float(ys.min()), float(ys.max())) if len(ys) else (0.0, 1.0)
+        pad = 0.08 * max(hi - lo, 1e-3)
+        plot.scales = {"x": {"time": False}, "y": {"range": (lo - pad, hi + pad)}}
+        plot.data = data
 
     def tick(self, dt: float, now: float) -> None:
         """The player's call, every display frame: advance the clock and draw (unless a quick change of

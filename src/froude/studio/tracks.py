@@ -20,6 +20,12 @@ from ..motion import Motion
 
 #: Every n-th frame of the COM path goes into the drawn trail (a trail needs no 120 Hz detail).
 TRAIL_STRIDE = 3
+#: ... at most this far apart in time [s] (a 30 Hz clip keeps every frame: its trail stays smooth).
+TRAIL_STEP_S = 0.025
+
+
+def _trail_stride(frame_time: float) -> int:
+    return max(1, min(TRAIL_STRIDE, int(TRAIL_STEP_S / frame_time)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,7 +69,8 @@ class Track:
         (``exact_rig``): a new result reaches the page without the ~8 ms rig build. False when the
         skeletons differ in topology (then the rig is built now)."""
         a, b = self.motion.skeleton, other.motion.skeleton
-        if other.body is None or self.body is None or a.n_joints != b.n_joints or not np.array_equal(a.parents, b.parents):
+        same = a.n_joints == b.n_joints and np.array_equal(a.parents, b.parents)
+        if other.body is None or self.body is None or not same:
             return False
         from dataclasses import replace as _replace
 
@@ -250,7 +257,8 @@ def naive_track(res, prep) -> Track:
     track = Track(
         frame_time=float(motion.frame_time), motion=motion, com=com,
         legs=spring_legs(com, np.full((F, 2, 3), np.nan)), contacts=np.zeros((0, 3)),
-        contact_foot=np.zeros(0, int), trail=trail_segments(com), force_t=np.zeros(0), force_bw=np.zeros(0),
+        contact_foot=np.zeros(0, int), trail=trail_segments(com, _trail_stride(motion.frame_time)),
+        force_t=np.zeros(0), force_bw=np.zeros(0),
         body_com=com, loop_shift=np.zeros(3), body=body,
     )
     track.__dict__["segments"] = seg
@@ -274,7 +282,8 @@ def machine_track(motion: Motion, body, path, body_com: np.ndarray | None = None
         frame_time=float(motion.frame_time), motion=motion, com=com_path,
         legs=spring_legs(com_path, path_stance_contacts(path, F)),
         contacts=np.asarray(path.contacts, float), contact_foot=np.asarray(path.foot_of_step, int),
-        trail=trail_segments(com_path), force_t=np.asarray(path.times, float), force_bw=f_bw,
+        trail=trail_segments(com_path, _trail_stride(motion.frame_time)),
+        force_t=np.asarray(path.times, float), force_bw=f_bw,
         body_com=body_com, loop_shift=np.zeros(3), body=body,
     )
     if seg is not None:
@@ -299,7 +308,8 @@ def reference_track(prep) -> Track:
     track = Track(
         frame_time=float(motion.frame_time), motion=motion, com=com, legs=spring_legs(com, contact),
         contacts=np.array([s.contact_point for s in stances]).reshape(-1, 3),
-        contact_foot=np.array([s.foot for s in stances], int), trail=trail_segments(com),
+        contact_foot=np.array([s.foot for s in stances], int),
+        trail=trail_segments(com, _trail_stride(motion.frame_time)),
         force_t=np.zeros(0), force_bw=np.zeros(0), body_com=com, loop_shift=shift, body=prep.body,
     )
     _ = track.capsules  # played from start to end for the whole session: all frames now

@@ -5,7 +5,7 @@ import time
 
 from .common import (add_character_options, add_fps, add_force, add_load_options, add_mass, add_quiet, bound_work,
                      character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
-                     print_rows, say, speed)
+                     prepare_clip, print_rows, say, speed)
 
 #: Steps of a speed change, and of the steady parts around it, froude plans at most.
 MAX_STEPS = 500
@@ -67,15 +67,14 @@ def run(args) -> int:
     from .. import pipeline
 
     t0 = time.perf_counter()
-    say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale)
+    prep = prepare_clip(args)
     rt = prep.retarget(args.character, **character_kwargs(args))
     m = prep.machine.scaled(rt.L, rt.M)
     step_s = m.step_time * m.time_unit
     n_steps = (steps if args.within is None else args.within / step_s) + args.lead_steps + args.hold_steps
-    bound_work(n_steps * step_s * (args.fps or prep.motion.fps), prep.motion.skeleton.n_joints, args.force,
-               "froude accelerate", args.quiet)
-    say(f"planning {n_steps:.0f} steps and synthesising ...", args.quiet)
+    if bound_work(n_steps * step_s * (args.fps or prep.motion.fps), prep.motion.skeleton.n_joints, args.force,
+                  "froude accelerate", args.quiet):
+        say(f"planning {n_steps:.0f} steps and synthesising ...", args.quiet)
     res = pipeline.accelerate(
         prep, args.character, to_speed=goal.m_s, to_factor=goal.factor, steps=None if args.within else steps,
         within=args.within, lead_steps=args.lead_steps, hold_steps=args.hold_steps, fps=args.fps,

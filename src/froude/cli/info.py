@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 
-from .common import add_load_options, add_mass, check_inputs, load_clip
+from .common import add_load_options, add_mass, add_quiet, check_inputs, load_clip
 
 
 def register(sub) -> None:
@@ -16,6 +16,7 @@ def register(sub) -> None:
     p.add_argument("clip", help="BVH file")
     p.add_argument("--json", action="store_true", help="print the summary as JSON instead of a table")
     add_mass(p, "body mass [kg] for the COM model")
+    add_quiet(p)
     add_load_options(p)
     p.set_defaults(func=run)
 
@@ -79,7 +80,7 @@ def run(args) -> int:
     from ..body import BodyModel
     from ..gait import detect_gait, summarize
 
-    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, quiet=args.json)
+    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, quiet=args.json or args.quiet)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers)

@@ -6,7 +6,7 @@ import time
 from ..presets import list_presets
 from .common import (add_character_options, add_fps, add_force, add_load_options, add_mass, add_quiet, bound_work,
                      character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
-                     print_rows, say, speed)
+                     prepare_clip, print_rows, say, speed)
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
 MAX_STRIDES = 10_000
@@ -60,10 +60,9 @@ def run(args) -> int:
 
     from .. import pipeline
 
-    say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale)
-    _bound(prep, args)
-    say(f"synthesising ({args.method}) ...", args.quiet)
+    prep = prepare_clip(args)
+    if _bound(prep, args):
+        say(f"synthesising ({args.method}) ...", args.quiet)
     res = pipeline.scale(prep, args.character, speed=goal.factor if goal and goal.factor else 1.0,
                          target_speed=goal.m_s if goal else None, strides=args.strides, duration=args.duration,
                          fps=args.fps, method=args.method, **character_kwargs(args))
@@ -78,9 +77,9 @@ def run(args) -> int:
     return 0
 
 
-def _bound(prep, args) -> None:
+def _bound(prep, args) -> bool:
     """Estimate the output's frames from the scaled machine's step time; refuse a runaway; note a
-    --duration shorter than the two steps froude makes at least."""
+    --duration shorter than the two steps froude makes at least. True for long work."""
     rt = prep.retarget(args.character, **character_kwargs(args))
     m = prep.machine.scaled(rt.L, rt.M)
     step_s = m.step_time * m.time_unit
@@ -89,4 +88,4 @@ def _bound(prep, args) -> None:
     if args.duration is not None and args.duration < 2 * step_s:
         say(f"note: --duration {args.duration:g} s is shorter than two steps; the output is two steps "
             f"(about {2 * step_s:.2f} s), the shortest froude makes", args.quiet)
-    bound_work(seconds * fps, prep.motion.skeleton.n_joints, args.force, "froude scale", args.quiet)
+    return bound_work(seconds * fps, prep.motion.skeleton.n_joints, args.force, "froude scale", args.quiet)

@@ -14,9 +14,13 @@ MAX_WITHIN_S = 300.0
 PLOT_SUFFIXES = (".png",)
 
 
+#: The one-line summary ``froude --help`` lists.
+HELP = "speed up or slow down a run over some steps (transition table, paper 5.3)"
+
+
 def register(sub) -> None:
     p = sub.add_parser(
-        "accelerate", help="speed up or slow down a run over some steps (transition table, paper 5.3)",
+        "accelerate", help=HELP,
         description="Plan touchdown angles step by step so that the simple machine reaches a target speed "
         "(a step is one stance and the flight after it), simulate it, time-warp the reference cycle onto "
         "the planned steps and correct the whole body with IK. Works for any character: the plan is "

@@ -6,9 +6,13 @@ import math
 from .common import add_load_options, add_mass, add_quiet, check_inputs, load_clip
 
 
+#: The one-line summary ``froude --help`` lists.
+HELP = "summarise a BVH clip: skeleton, units, speed, Froude number, steps, phases"
+
+
 def register(sub) -> None:
     p = sub.add_parser(
-        "info", help="summarise a BVH clip: skeleton, units, speed, Froude number, steps, phases",
+        "info", help=HELP,
         description="Summarise a BVH clip: skeleton (joints, DOF, leg length, height, units chosen), duration, "
         "frame rate, mean speed, Froude number U = u/sqrt(g L), foot contacts with stance and flight "
         "times, step frequency and length, COM vertical excursion, and what cleaning did.",

@@ -21,9 +21,13 @@ MIN_SNAPSHOT_PX = 8
 MAX_PIXELS = 4e9
 
 
+#: The one-line summary ``froude --help`` lists.
+HELP = "draw motions: filmstrip PNG (Fig. 3 style), still PNG, GIF or MP4 video"
+
+
 def register(sub) -> None:
     p = sub.add_parser(
-        "render", help="draw motions: filmstrip PNG (Fig. 3 style), still PNG, GIF or MP4 video",
+        "render", help=HELP,
         description="Draw one or more motions as capsule figures at one common scale (a child looks small "
         "next to a giant). --filmstrip: snapshots every --interval seconds side by side, one labelled row per "
         "motion (PNG). Otherwise a video (GIF/MP4) with one panel per motion at real time, the camera "

@@ -13,9 +13,13 @@ MAX_STRIDES = 10_000
 MAX_DURATION_S = 3600.0
 
 
+#: The one-line summary ``froude --help`` lists.
+HELP = "retarget a run to a new character and/or speed, physically (paper 5.1, 5.2, 6)"
+
+
 def register(sub) -> None:
     p = sub.add_parser(
-        "scale", help="retarget a run to a new character and/or speed, physically (paper 5.1, 5.2, 6)",
+        "scale", help=HELP,
         description="Fit the simple machine to the clip, scale it to the character by dynamic similarity "
         "(times x sqrt(L), speeds x sqrt(L)), change its speed by horizontal stretching, synthesise any "
         "number of strides and correct the whole body with IK. Writes OUT.bvh (same joint names and "

@@ -91,9 +91,9 @@ def test_preview_is_the_results_machine_and_skeleton(session):
 
 
 @pytest.mark.parametrize("bad, words", [
-    (Params(height=0.0), "height must be > 0"),
-    (Params(speed=0.0), "speed must be > 0"),
-    (Params(mode="accelerate", to_factor=5.0, steps=2), "cannot reach"),
+    (Params(height=0.0), "Height 0 m is outside 0.5 m to 4 m"),
+    (Params(speed=0.0), "Speed 0× is outside 0.5× to 2×"),
+    (Params(mode="accelerate", to_factor=2.0, steps=1), r"cannot go from \d.\d\d m/s to \d.\d\d m/s \(×2\) in 1 steps: use more"),
 ])
 def test_bad_params_raise_one_line_froude_errors(session, bad, words):
     with pytest.raises(FroudeError, match=words):
@@ -107,7 +107,7 @@ def test_studio_keeps_last_good_result_on_bad_edits(session):
     studio = Studio(session.prep, port=_free_port())
     try:
         good = studio.good
-        for bad in (Params(height=0.0), Params(mode="accelerate", to_factor=5.0, steps=2), Params(leg_scale=0.0)):
+        for bad in (Params(height=0.0), Params(mode="accelerate", to_factor=2.0, steps=1), Params(leg_scale=0.0)):
             studio.apply(bad)
             assert studio.good is good and studio.shown is good
             assert "status=error" in studio.gui_state.content
@@ -293,18 +293,21 @@ def test_studio_in_the_browser(tmp_path):
                 _type(page, "Height [m]", "0")
                 s3 = _wait_state(page, status="error")
                 assert s3["hash"] == s2["hash"]
-                page.wait_for_selector("text=height must be > 0", timeout=10000)
+                page.wait_for_selector("text=Height 0 m is outside", timeout=10000)
                 _type(page, "Height [m]", "1.1")
                 s4 = _wait_state(page, status="ok", hash=lambda h: h != s2["hash"])
                 _pick(page, "Mode", "accelerate")
-                _type(page, "Goal speed factor", "5")
+                s4 = _wait_state(page, status="ok", mode="accelerate", steps="16")
+                _type(page, "Goal speed factor", "2")
+                _type(page, "Steps to change", "1")
                 _wait_state(page, status="error", hash=s4["hash"])
-                page.wait_for_selector("text=cannot reach", timeout=10000)
+                page.wait_for_selector("text=cannot go from", timeout=10000)
                 page.wait_for_timeout(500)
                 page.screenshot(path=str(shots / "studio_error.png"))
+                _type(page, "Steps to change", "16")
                 _type(page, "Goal speed factor", "1.1")
                 s5 = _wait_state(page, status="ok", mode="accelerate", to_factor="1.1")
-                assert int(s5["n_frames"]) > int(s4["n_frames"])  # 16 steps of change + lead + hold
+                assert int(s5["n_frames"]) > int(s2["n_frames"])  # 16 steps of change + lead + hold
                 page.screenshot(path=str(shots / "studio_accelerate.png"))
                 page.get_by_text("vertical leg force").scroll_into_view_if_needed()
                 page.screenshot(path=str(shots / "studio_numbers.png"))

@@ -87,3 +87,72 @@ def test_machine_json_is_strict(tmp_path):
     m = pipeline.prepare(motion).machine
     m.save(tmp_path / "m.json")
     _strict((tmp_path / "m.json").read_text())
+
+
+def _speeding_up(motion, gain=0.35):
+    """A take that speeds up: the clip played faster and faster (source time t + gain t² / (2 T))."""
+    T = motion.duration * 0.8
+    t = np.arange(int(T * motion.fps)) / motion.fps
+    return motion.time_warp(t + 0.5 * gain * t * t / T)
+
+
+@pytest.mark.parametrize("name", clip_params(["02_03"]))
+def test_changing_speed_says_what_is_modelled(name, run_cli, tmp_path):
+    """Issue 13: a take whose speed changes: the machine runs its mean (info's), says so, and speed factors
+    refer to what it printed; --range T0:T1 models a part instead."""
+    motion = _speeding_up(load_bvh(clip(name)))
+    prep = pipeline.prepare(motion)
+    info = _summary(motion)
+    assert any("speed changes within the take" in n for n in prep.notes)
+    for s in (1.0, 1.2):
+        rep = pipeline.scale(prep, speed=s).report
+        assert rep.mean_speed_m_s == pytest.approx(s * info.mean_speed, rel=0.01)
+    assert pipeline.scale(prep).report.step_frequency_hz == pytest.approx(info.step_frequency, rel=0.01)
+    # a part of the take: its own speed
+    part = pipeline.prepare(motion, time_range=(0.0, 0.97))
+    cut = pipeline.select_range(motion, (0.0, 0.97))
+    assert part.summary.mean_speed == pytest.approx(_summary(cut).mean_speed, rel=1e-9)
+    assert part.summary.mean_speed < 0.97 * info.mean_speed
+    rep = pipeline.scale(part).report
+    assert rep.mean_speed_m_s == pytest.approx(part.summary.mean_speed, rel=0.01)
+    # the CLI prints what it models
+    code, out, err = run_cli("scale", clip(name), "--range", "0.05:", "-o", tmp_path / "o.bvh")
+    assert code == 0 and "modelled  " in out and "0.05-1.43 s of the take" in out
+    code, out, err = run_cli("scale", clip(name), "--range", "x", "-o", tmp_path / "p.bvh")
+    assert code == 2 and "T0:T1" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("name", clip_params(RUNNING))
+def test_speed_range_outputs_or_refusals(name):
+    """Issue 13 acceptance 4: --speed 0.5, 0.7, 1.5, 1.8, 2.0: inside the reachable range the output meets
+    every bar (joint jump included); outside it ``scale`` refuses (see the CLI test)."""
+    prep = pipeline.prepare(load_bvh(clip(name)))
+    rng = pipeline.reachable_speed_range(prep)
+    assert not rng.empty and rng.lo <= 0.5 and 1.2 <= rng.hi
+    assert rng.hi_m_s == pytest.approx(rng.hi * prep.summary.mean_speed, rel=1e-6)
+    for s in (0.5, 0.7, 1.5, 1.8, 2.0):
+        if rng.lo <= s <= rng.hi:
+            rep = pipeline.scale(prep, speed=s).report
+            assert not rep.check_bars(), (s, rep.check_bars())
+    # the ends themselves were produced and met every bar (4 strides here, 2 in the search)
+    assert not pipeline.scale(prep, speed=rng.hi).report.check_bars()
+
+
+def test_speed_refusals_name_the_reachable_range(run_cli, tmp_path):
+    path = clip("09_01")
+    prep = pipeline.prepare(load_bvh(path))
+    rng = pipeline.reachable_speed_range(prep)
+    assert rng.hi < 1.8  # 09_01 does not reach 1.8x: a refusal, said in one line with the range
+    code, out, err = run_cli("scale", path, "--speed", "1.8", "-o", tmp_path / "fast.bvh")
+    assert code == 2 and not (tmp_path / "fast.bvh").exists()
+    line = [l for l in err.splitlines() if "error" in l]
+    assert len(line) == 1 and f"x{rng.lo:.2f}-{rng.hi:.2f}" in line[0] and "m/s" in line[0]
+    # an output that would miss a bar: not written, exit 1, unless --keep
+    bad = next(s for s, met, _ in rng.probes if not met and s < 1.8 and s > rng.hi)
+    code, out, err = run_cli("scale", path, "--speed", f"{bad}", "-o", tmp_path / "b.bvh")
+    if code == 1:
+        assert not (tmp_path / "b.bvh").exists() and "misses physics bars" in err and "--keep" in err
+        code, out, err = run_cli("scale", path, "--speed", f"{bad}", "--keep", "-o", tmp_path / "b.bvh")
+        assert code == 0 and (tmp_path / "b.bvh").exists() and "NOT met (kept)" in out
+    else:  # a cycle that does not exist at that speed
+        assert code == 2 and "out of reach" in err

@@ -255,6 +255,25 @@ def summarize(motion: Motion, body: BodyModel, com: np.ndarray | None = None, ga
     )
 
 
+def stride_speeds(com: np.ndarray, gait: Gait, n_frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """Forward speed of each whole stride of a motion (touchdown to the same foot's next touchdown).
+
+    com: (F, 3) [m]. Returns (t_mid (S,) [s], speed (S,) [m/s]): empty when the clip holds no whole stride.
+    Used to say whether a take's speed changes (a dash that speeds up) and so which part a model stands for.
+    """
+    dt = gait.frame_time
+    t_mid, speeds = [], []
+    for foot in (0, 1):
+        on = sorted(s.t_on for s in gait.stances if s.foot == foot and s.start > 0)
+        for a, b in zip(on[:-1], on[1:]):
+            pa = np.array([np.interp(a, np.arange(n_frames), com[:, k]) for k in _HORIZONTAL])
+            pb = np.array([np.interp(b, np.arange(n_frames), com[:, k]) for k in _HORIZONTAL])
+            t_mid.append(0.5 * (a + b) * dt)
+            speeds.append(float(np.linalg.norm(pb - pa) / ((b - a) * dt)))
+    order = np.argsort(t_mid)
+    return np.asarray(t_mid)[order], np.asarray(speeds)[order]
+
+
 def classify(gait: Gait, speed: float, distance: float, leg_length: float, has_flight: bool) -> tuple[str, str]:
     """('running' | 'walking' | 'in place' | 'unknown', reason)."""
     if distance < 1.0 * leg_length or speed < 0.15 * np.sqrt(GRAVITY * leg_length):

@@ -70,6 +70,9 @@ class Report:
     flight_gravity_per_phase: list
     flight_horizontal_accel_m_s2: float
     foot_skate_mm: float
+    #: the stricter skate measure (issue 13, DESIGN.md quality bars): ball and tip, whole stance including
+    #: touchdown and lift-off, while within 2 % of L of the floor. Reported; not yet one of check_bars.
+    foot_skate_floor_mm: float
     penetration_mm: float
     float_mm: float
     peak_vertical_force_bw: float
@@ -158,6 +161,19 @@ def flight_gravity(com: np.ndarray, frame_time: float, flights, min_frames: int 
     return float(sol[-1]), [float(x) for x in gs], float(np.sqrt(np.mean(np.square(acc_h))))
 
 
+#: Skate is measured on these foot markers (index into the body's (ankle, toe, toe end)): the ball and
+#: the tip of the foot, the points a runner stands and pushes off on.
+SKATE_MARKERS = (1, 2)
+#: A marker is on or just above the floor while within this fraction of the leg length of its lowest
+#: height around the stance (2 % of L: 18 mm for an adult).
+SKATE_BAND_L = 0.02
+#: ... and only if that lowest height is within this fraction of L of the floor (a joint centre rests a
+#: sole's thickness above it; a "contact" cut by the clip's edge may be a foot in the air).
+SKATE_REACH_L = 0.04
+#: The stance window is widened by this much on each side [s] so that touchdown and lift-off are in it.
+SKATE_MARGIN_S = 0.1
+
+
 def foot_skate_mm(markers: np.ndarray, gait: Gait, leg_length: float) -> float:
     """Largest sliding of a foot marker while it is on the ground [mm].
 
@@ -190,6 +206,46 @@ def foot_skate_mm(markers: np.ndarray, gait: Gait, leg_length: float) -> float:
                 p = seg[idx[a:b], k][:, _HORIZONTAL]
                 worst = max(worst, float(np.max(np.linalg.norm(p - p[0], axis=1))))
     return 1000.0 * worst
+
+
+def foot_skate_floor_mm(markers: np.ndarray, gait: Gait, leg_length: float) -> float:
+    """Largest sliding of the ball or the tip of a foot while it is on or just above the floor [mm].
+
+    markers: (F, 2, 3, 3) [m] (ankle, toe, toe end per foot: joint centres, which sit a sole's thickness
+    above the floor when the foot is down). For each stance of a foot, widened by SKATE_MARGIN_S on each
+    side (not past the middle of the swings around it) so that touchdown and lift-off are included, each of
+    the ball and the tip (SKATE_MARKERS) rests at its lowest height in that window; it is on or just above
+    the floor while within SKATE_BAND_L × L of that height. Over each such run of frames, sliding is the
+    largest horizontal distance of the marker from where it was at its lowest point in the run. Rolling from
+    heel to toe does not slide the ball or the tip; a toe that scuffs sideways at lift-off does.
+    """
+    worst = 0.0
+    F = markers.shape[0]
+    band = SKATE_BAND_L * leg_length
+    margin = int(round(SKATE_MARGIN_S / gait.frame_time))
+    for foot in (0, 1):
+        st = sorted((s for s in gait.stances if s.foot == foot), key=lambda s: s.start)
+        for i, s in enumerate(st):
+            lo_lim = (st[i - 1].stop + s.start) // 2 if i > 0 else 0
+            hi_lim = (s.stop + st[i + 1].start + 1) // 2 if i + 1 < len(st) else F
+            a, b = max(lo_lim, s.start - margin), min(hi_lim, s.stop + margin)
+            for k in SKATE_MARKERS:
+                seg = markers[a:b, foot, k]  # (n, 3)
+                h = seg[:, UP_AXIS]
+                if h.min() > s.ground + SKATE_REACH_L * leg_length:
+                    continue  # this point never comes down to the floor around this contact
+                low = h <= h.min() + band
+                for r0, r1 in _true_runs(low):
+                    p = seg[r0:r1][:, _HORIZONTAL]
+                    p_rest = p[int(np.argmin(h[r0:r1]))]
+                    worst = max(worst, float(np.max(np.linalg.norm(p - p_rest, axis=1))))
+    return 1000.0 * worst
+
+
+def _true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) intervals where a 1-D bool array is True."""
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
 
 
 def max_joint_jump_deg(motion: Motion) -> float:
@@ -248,6 +304,7 @@ def physics_report(
     floats = [float(np.min(h_low[s.start : s.stop, s.foot]) - ground_f[s.start]) for s in gait.stances]
     float_mm = 1000.0 * max([0.0] + floats)
     skate = foot_skate_mm(markers, gait, L)
+    skate_floor = foot_skate_floor_mm(markers, gait, L)
 
     fz = vertical_force_bw(com, dt) if motion.n_frames >= 8 else np.full(motion.n_frames, np.nan)
     inner = slice(3, max(3, motion.n_frames - 3))  # filter edges are least trustworthy
@@ -260,7 +317,7 @@ def physics_report(
         step_frequency_hz=summ.step_frequency, step_length_m=summ.step_length,
         stance_times_s=summ.stance_times.tolist(), flight_times_s=summ.flight_times.tolist(),
         com_vertical_excursion_m=summ.com_vertical_excursion, flight_gravity_m_s2=g_fl,
-        flight_gravity_per_phase=g_list, flight_horizontal_accel_m_s2=acc_h, foot_skate_mm=skate,
+        flight_gravity_per_phase=g_list, flight_horizontal_accel_m_s2=acc_h, foot_skate_mm=skate, foot_skate_floor_mm=skate_floor,
         penetration_mm=penetration, float_mm=float_mm, peak_vertical_force_bw=peak_bw,
         leg_stiffness_n_m=k_leg, leg_stiffness_K=K, max_joint_jump_deg=max_joint_jump_deg(motion),
     )

@@ -61,6 +61,8 @@ RETRY_MARKER_ERROR = 3e-3
 HELD_MARKER_WEIGHT = 1.0
 #: Time [s] over which a foot's marker weight ramps between swing and stance around its events.
 WEIGHT_RAMP_S = 0.04
+#: Fraction of the stance marker weight every marker of a foot keeps around its contact (see _marker_weights).
+LANDING_WEIGHT = 0.1
 
 
 # ---- 1. prepare: load, body model, gait, fit, cycle --------------------------------------------------
@@ -78,6 +80,10 @@ class Prepared:
     cycle: ReferenceCycle
     source: str = ""
     fit: object = None  # froude.machine.fit.FitResult: everything the fit measured (plots, tables)
+    #: What the machine stands for ("0.00-2.40 s of the take: 3.150 m/s, 2.930 steps/s") and notes about
+    #: the take (its speed changes: which part is modelled, how to choose another).
+    modelled: str = ""
+    notes: tuple = ()
     #: Retargets already built for this clip, by (preset name or None, character numbers): an editor asks
     #: for the same character again and again (every speed change) and building one costs milliseconds.
     retargets: dict = field(default_factory=dict, repr=False)
@@ -116,8 +122,68 @@ def _preset_names() -> frozenset:
     return frozenset(list_presets())
 
 
-def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, length_scale=None) -> Prepared:
-    """Load (if given a path), model, check it is running, fit the simple machine and build the cycle."""
+#: A take whose stride speeds spread more than this (fastest / slowest − 1) is said to change speed: the
+#: output then says which part the machine models and how to choose another (``time_range``).
+SPEED_CHANGE_NOTE = 0.10  # a steady CMU run's strides spread 2-5 %
+
+
+def parse_time_range(text: str) -> tuple[float | None, float | None]:
+    """'T0:T1' [s] -> (T0, T1); either side may be empty ('1.5:' from 1.5 s to the end)."""
+    a, sep, b = str(text).partition(":")
+    try:
+        if not sep:
+            raise ValueError
+        return (float(a) if a.strip() else None), (float(b) if b.strip() else None)
+    except ValueError:
+        raise FroudeError(f"cannot read time range '{text}': use T0:T1 in seconds (e.g. 1.2:3.0, or 1.2: to the end)") from None
+
+
+def select_range(motion: Motion, time_range, source: str = "motion") -> Motion:
+    """The frames of ``motion`` whose times [s] lie in time_range = (T0, T1) (None: the clip's start / end)."""
+    t0, t1 = time_range
+    t0 = 0.0 if t0 is None else float(t0)
+    t1 = motion.duration if t1 is None else float(t1)
+    if not (np.isfinite(t0) and np.isfinite(t1) and 0.0 <= t0 < t1):
+        raise FroudeError(f"{source}: time range {t0:g}:{t1:g} s is empty or negative")
+    if t0 >= motion.duration:
+        raise FroudeError(f"{source}: time range starts at {t0:g} s, after the clip's end ({motion.duration:.3f} s)")
+    i0 = int(math.ceil(t0 / motion.frame_time - 1e-3))  # a frame time written to 7 digits: 1e-3 frame slack
+    i1 = min(motion.n_frames, int(math.floor(t1 / motion.frame_time + 1e-3)) + 1)
+    out = motion.cut(i0, i1)
+    meta = dict(out.meta)
+    meta["time_range_s"] = (i0 * motion.frame_time, (i1 - 1) * motion.frame_time)
+    from dataclasses import replace as _replace
+
+    return _replace(out, meta=meta)
+
+
+def modelled_part(motion: Motion, summary: GaitSummary, com: np.ndarray, gait: Gait) -> tuple[str, str | None]:
+    """What the machine of a clip stands for, in one line, and a note when the take's speed changes.
+
+    Returns (description, note or None): "0.00-2.40 s of the take: 3.150 m/s, 2.930 steps/s".
+    """
+    from .gait import stride_speeds
+
+    t0, t1 = motion.meta.get("time_range_s", (0.0, motion.duration))
+    text = (f"{t0:.2f}-{t1:.2f} s of the take: {summary.mean_speed:.3f} m/s, "
+            f"{summary.step_frequency:.3f} steps/s")
+    _, v = stride_speeds(com, gait, motion.n_frames)
+    note = None
+    if v.size >= 2 and v.max() / v.min() - 1.0 > SPEED_CHANGE_NOTE:
+        note = (f"the speed changes within the take (first stride {v[0]:.2f} m/s, last {v[-1]:.2f}, strides "
+                f"{v.min():.2f}-{v.max():.2f}): the machine runs its mean over {t0:.2f}-{t1:.2f} s, "
+                f"{summary.mean_speed:.2f} m/s, and speed factors refer to that; choose a part with "
+                "--range T0:T1 (time_range=)")
+    return text, note
+
+
+def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, length_scale=None,
+            time_range=None) -> Prepared:
+    """Load (if given a path), model, check it is running, fit the simple machine and build the cycle.
+
+    time_range: (T0, T1) [s] (either None): model only that part of the take (its speed, cadence and
+    strides); the whole take by default.
+    """
     from .io.bvh import load_bvh
     from .machine.fit import fit_machine_detailed
 
@@ -125,6 +191,8 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
         motion, source = clip, str(clip.meta.get("source", "motion"))
     else:
         motion, source = load_bvh(clip, length_scale=length_scale), str(clip)
+    if time_range is not None:
+        motion = select_range(motion, time_range, Path(source).name)
     body = BodyModel.from_skeleton(motion.skeleton, mass=mass, sex=sex, joint_map=joint_map)
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers)
@@ -133,7 +201,9 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     fit = fit_machine_detailed(motion, body, mass=mass, source=Path(source).name)
     machine = fit.machine
     cycle = extract_cycle(motion, body, gait, com, markers, events=_fit_events(machine, motion))
-    return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source, fit)
+    modelled, note = modelled_part(motion, summary, com, gait)
+    return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source, fit,
+                    modelled=modelled, notes=(note,) if note else ())
 
 
 def _fit_events(machine, motion: Motion):
@@ -474,6 +544,7 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float) -
     """
     t = path.times
     ramp = np.zeros((len(t), 2))
+    landing = np.zeros((len(t), 2))  # the ramp on the touchdown side of each contact only
     for foot in range(2):
         cols = np.flatnonzero(path.foot_of_step == foot)
         if cols.size == 0:
@@ -487,9 +558,15 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float) -
             kc = np.clip(kk, 0, cols.size - 1)
             u = np.clip(np.minimum(t - (a[kc] - WEIGHT_RAMP_S), (b[kc] + WEIGHT_RAMP_S) - t) / WEIGHT_RAMP_S, 0.0, 1.0)
             ramp[:, foot] = np.maximum(ramp[:, foot], np.where(ok, u, 0.0))
+            landing[:, foot] = np.maximum(landing[:, foot], np.where(ok & (t <= a[kc] + WEIGHT_RAMP_S), u, 0.0))
     height = markers[..., UP_AXIS]  # ground at 0
     lo, hi = 0.02 * leg_length, 0.05 * leg_length
     loaded = min_jerk((hi - height) / (hi - lo))  # 1 at or below lo, 0 at or above hi
+    # Around a touchdown every marker of the foot keeps at least LANDING_WEIGHT of the stance weight: a
+    # landing foot follows its targets down to the contact point instead of being left by the posture pull
+    # a centimetre lower and still sweeping forward (a scuff the report sees at touchdown). Not at lift-off:
+    # there the leg is nearly straight and a pulled toe can flip the knee.
+    loaded = np.maximum(loaded, LANDING_WEIGHT * min_jerk(landing)[..., None])
     return SWING_MARKER_WEIGHT + (STANCE_MARKER_WEIGHT - SWING_MARKER_WEIGHT) * min_jerk(ramp)[..., None] * loaded
 
 
@@ -516,13 +593,18 @@ class Result:
         rows = [
             ("character", f"{self.retarget.character.name} (L = {self.retarget.L:.3f}, M = {self.retarget.M:.3f})"),
             ("method", self.method),
+        ]
+        if r.extras.get("modelled"):
+            rows.append(("modelled", r.extras["modelled"]))
+        rows += [
             ("speed", f"{f(r.mean_speed_m_s, '.3f')} m/s (x{self.speed_factor:g})"),
             ("Froude number U", f"{f(r.froude_U, '.3f')}"),
             ("step frequency", f"{f(r.step_frequency_hz, '.3f')} Hz"),
             ("stance / flight", f"{f(_mean(r.stance_times_s), '.3f')} s / {f(_mean(r.flight_times_s), '.3f')} s"),
             ("flight gravity", f"{f(r.flight_gravity_m_s2, '.2f')} m/s^2"),
             ("COM tracking", f"RMS {f(r.com_tracking_rms_mm, '.2f')} mm, max {f(r.com_tracking_max_mm, '.2f')} mm"),
-            ("foot skate / penetration", f"{f(r.foot_skate_mm, '.2f')} mm / {f(r.penetration_mm, '.2f')} mm"),
+            ("foot skate / penetration", f"{f(r.foot_skate_mm, '.2f')} mm / {f(r.penetration_mm, '.2f')} mm "
+             f"(ball and tip near the floor: {f(r.foot_skate_floor_mm, '.2f')} mm)"),
             ("joint jump", f"{f(r.max_joint_jump_deg, '.1f')} deg (reference {f(r.reference_max_joint_jump_deg, '.1f')})"),
         ]
         return rows
@@ -711,6 +793,95 @@ def scale(prep: Prepared, character=None, *, report: bool = True, **options) -> 
     return plan_scale(prep, character, **options).finish(report=report)
 
 
+@dataclass(frozen=True)
+class SpeedRange:
+    """The speeds a prepared clip reaches for one character with every physics bar met.
+
+    lo, hi: speed factors on the character's dynamically scaled speed [-]; lo_m_s, hi_m_s: the same in
+    m/s; base_m_s: the character's speed at factor 1 [m/s] (the clip's mean speed for its own body).
+    probes: ((factor, met: bool, reason), ...) every output tried, in order.
+    """
+
+    lo: float
+    hi: float
+    lo_m_s: float
+    hi_m_s: float
+    base_m_s: float
+    probes: tuple = ()
+    empty: bool = False  # True when not even x1 meets every bar
+
+    def describe(self) -> str:
+        if self.empty:
+            return f"none (x1 = {self.base_m_s:.2f} m/s already misses a bar)"
+        return (f"x{self.lo:.2f}-{self.hi:.2f} ({self.lo_m_s:.2f}-{self.hi_m_s:.2f} m/s; "
+                f"x1 = {self.base_m_s:.2f} m/s)")
+
+
+#: The factors reachable_speed_range searches between, and how finely [-].
+SPEED_SEARCH_RANGE = (0.3, 3.0)
+SPEED_SEARCH_TOL = 0.03
+
+
+def _speed_ok(prep: Prepared, character, s: float, numbers: dict) -> tuple[bool, str]:
+    """Whether a 2-stride output at speed factor s meets every physics bar, and why not."""
+    from .errors import FitError
+
+    try:
+        rep = plan_scale(prep, character, speed=s, strides=2, **numbers).finish().report
+    except FitError as e:
+        return False, str(e)
+    fails = rep.check_bars()
+    return not fails, "; ".join(fails)
+
+
+def reachable_speed_range(prep: Prepared, character=None, **character_numbers) -> SpeedRange:
+    """The range of ``scale`` speed factors whose outputs meet every physics bar, for one character.
+
+    Bisection on real outputs (2 strides each, the same synthesis and IK as ``scale``) between 1 and the
+    ends of SPEED_SEARCH_RANGE, to SPEED_SEARCH_TOL; the ends returned were themselves produced and
+    checked. About a dozen short outputs (a few seconds); remembered per character on ``prep``. Assumes the
+    reachable speeds form one interval around x1 (true on the shared clips: faster outputs fail by a knee
+    that pops or a cycle that does not exist, slower ones by nothing down to x0.3).
+    For the studio's speed slider and for ``scale``'s refusals.
+    """
+    key = ("speed_range", character if isinstance(character, (str, type(None))) else id(character),
+           tuple(sorted((k, v) for k, v in character_numbers.items() if v is not None)))
+    hit = prep.retargets.get(key)
+    if hit is not None:
+        return hit
+    rt = prep.retarget(character, **character_numbers)
+    m = prep.machine.scaled(rt.L, rt.M)
+    base = m.mean_speed * m.speed_unit
+    probes = []
+
+    def ok(s):
+        good, why = _speed_ok(prep, character, s, character_numbers)
+        probes.append((float(s), good, why))
+        return good
+
+    if not ok(1.0):
+        lo = hi = 1.0  # not even the clip's own speed meets the bars: nothing is reachable (empty range)
+    else:
+        ends = []
+        for far in SPEED_SEARCH_RANGE:
+            good, bad = 1.0, far
+            if ok(far):
+                ends.append(far)
+                continue
+            while abs(bad - good) > SPEED_SEARCH_TOL:
+                mid = 0.5 * (good + bad)
+                if ok(mid):
+                    good = mid
+                else:
+                    bad = mid
+            ends.append(good)
+        lo, hi = ends
+    out = SpeedRange(lo=lo, hi=hi, lo_m_s=lo * base, hi_m_s=hi * base, base_m_s=base, probes=tuple(probes),
+                     empty=not probes[0][1])
+    prep.retargets[key] = out
+    return out
+
+
 def plan_scale(
     prep: Prepared,
     character=None,
@@ -729,7 +900,7 @@ def plan_scale(
     fps = prep.motion.fps if fps is None else float(fps)
     if not (np.isfinite(fps) and fps > 0):
         raise FroudeError(f"fps must be > 0, got {fps}")
-    notes = []
+    notes = list(prep.notes)
     m_scaled = prep.machine.scaled(retarget.L, retarget.M)
     base_speed = m_scaled.mean_speed * m_scaled.speed_unit
     if target_speed is not None:
@@ -816,7 +987,7 @@ def accelerate(
     fps = prep.motion.fps if fps is None else float(fps)
     path = machine_path(prep, retarget, n_steps=plan.n_steps, fps=fps, theta0=plan.theta0,
                         controls=plan.controls, start_state=(float(plan.U[0]), float(plan.H[0])))
-    notes = list(plan.notes)
+    notes = list(prep.notes) + list(plan.notes)
     extras = {
         "plan": {
             "start_speed_m_s": start_speed, "target_speed_m_s": target,
@@ -870,7 +1041,8 @@ def add_report(prep: Prepared, res: Result) -> Result:
     )
     report.extras.update({"character": res.retarget.character.name, "L": res.retarget.L, "M": res.retarget.M,
                           "speed_factor": res.speed_factor, "method": res.method, "notes": list(res.notes),
-                          "machine_apex_speed_m_s": res.path.apex_speed.tolist(), **res.extras})
+                          "machine_apex_speed_m_s": res.path.apex_speed.tolist(), "modelled": prep.modelled,
+                          **res.extras})
     return _replace(res, report=report)
 
 
@@ -934,7 +1106,7 @@ def _naive(prep: Prepared, retarget: Retarget, speed: float, n_steps: int, fps: 
     motion = Motion(retarget.skeleton, root, rot, 1.0 / fps, None, meta)
     report = physics_report(motion, retarget.body, reference_max_joint_jump_deg=prep.cycle.max_joint_jump_deg)
     report.extras.update({"character": retarget.character.name, "L": L, "M": retarget.M, "speed_factor": speed,
-                          "method": "naive", "notes": list(notes)})
+                          "method": "naive", "notes": list(notes), "modelled": prep.modelled})
     return Result(motion, report, None, None, retarget, "naive", speed, tuple(notes))
 
 

@@ -50,9 +50,9 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
             "similarity and simulation, then corrects the whole body with inverse kinematics."
         ),
         epilog="Start with 'froude demo'. Every command has --help. Speeds are written the same way "
-        "everywhere: 1.2x (or a bare 1.2) is a factor, 3.5m/s a speed. Exit status: 0 done, 1 done but "
-        "a physics bar missed (or batch tasks failed), 2 bad input or output, 3 internal error (a bug), "
-        "130/143 interrupted (Ctrl-C / SIGTERM).",
+        "everywhere: 1.2x (or a bare 1.2) is a factor, 3.5m/s a speed. Exit status: 0 done, 1 an output "
+        "missed a physics bar (not written unless --keep; or batch tasks failed), 2 bad input or output, "
+        "3 internal error (a bug), 130/143 interrupted (Ctrl-C / SIGTERM).",
     )
     parser.add_argument("--version", action="version", version=f"froude {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)

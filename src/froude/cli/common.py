@@ -83,7 +83,30 @@ def speed(what: str):
     return parse
 
 
+def time_range(text: str):
+    """An argparse ``type`` for ``--range T0:T1`` [s] (``pipeline.parse_time_range``): (T0, T1), either None."""
+    from ..pipeline import parse_time_range
+
+    try:
+        return parse_time_range(text)
+    except FroudeError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
 # ---- shared options ----------------------------------------------------------------------------------
+def add_keep(p) -> None:
+    p.add_argument("--keep", action="store_true",
+                   help="write the output even if it misses a physics bar (otherwise it is not written, the "
+                   "bars missed and the reachable speeds are said, and the exit status is 1)")
+
+
+def add_range_option(p) -> None:
+    p.add_argument("--range", type=time_range, default=None, metavar="T0:T1",
+                   help="model only this part of the take, in seconds (e.g. 1.2:3.0, or 1.2: to the end): its "
+                   "speed, cadence and strides; speed factors then refer to it (default: the whole take, "
+                   "said aloud when its speed changes)")
+
+
 def add_quiet(p) -> None:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress or notes on stderr (results still print)")
 
@@ -184,7 +207,7 @@ def prepare_clip(args):
     from .. import pipeline
 
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, quiet=True)
-    prep = pipeline.prepare(motion, mass=args.mass)
+    prep = pipeline.prepare(motion, mass=args.mass, time_range=getattr(args, "range", None))
     say_loaded(motion, args.clip, args.quiet)
     return prep
 

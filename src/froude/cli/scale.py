@@ -2,11 +2,12 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 from ..presets import list_presets
-from .common import (add_character_options, add_fps, add_force, add_load_options, add_mass, add_quiet, bound_work,
-                     character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
-                     prepare_clip, print_rows, say, speed)
+from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
+                     add_quiet, add_range_option, bound_work, character_input, character_kwargs,
+                     check_character, check_inputs, guard_outputs, number, prepare_clip, print_rows, say, speed)
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
 MAX_STRIDES = 10_000
@@ -48,6 +49,8 @@ def register(sub) -> None:
     add_force(p)
     add_quiet(p)
     add_load_options(p)
+    add_range_option(p)
+    add_keep(p)
     p.set_defaults(func=run)
 
 
@@ -67,16 +70,31 @@ def run(args) -> int:
     prep = prepare_clip(args)
     if _bound(prep, args):
         say(f"synthesising ({args.method}) ...", args.quiet)
-    res = pipeline.scale(prep, args.character, speed=goal.factor if goal and goal.factor else 1.0,
-                         target_speed=goal.m_s if goal else None, strides=args.strides, duration=args.duration,
-                         fps=args.fps, method=args.method, **character_kwargs(args))
+    from ..errors import FitError, FroudeError
+
+    try:
+        res = pipeline.scale(prep, args.character, speed=goal.factor if goal and goal.factor else 1.0,
+                             target_speed=goal.m_s if goal else None, strides=args.strides,
+                             duration=args.duration, fps=args.fps, method=args.method, **character_kwargs(args))
+    except FitError as e:
+        if args.method != "physical":
+            raise
+        rng = pipeline.reachable_speed_range(prep, args.character, **character_kwargs(args))
+        asked = goal.m_s if goal and goal.m_s else (goal.factor if goal and goal.factor else 1.0) * rng.base_m_s
+        raise FroudeError(f"{Path(args.clip).name}: {asked:.2f} m/s (x{asked / rng.base_m_s:.2f}) is out of reach: "
+                          f"with every physics bar met this clip runs {rng.describe()} ({e})") from None
     for note in res.notes:
         say(f"note: {note}", args.quiet)
+    fails = res.report.check_bars() if args.method == "physical" else []
+    if fails and not args.keep:
+        rng = pipeline.reachable_speed_range(prep, args.character, **character_kwargs(args))
+        say(f"froude scale: output not written: it misses physics bars ({'; '.join(fails)}); with every bar "
+            f"met this clip runs {rng.describe()}; --keep writes it anyway")
+        return 1
     with atomic_group():
         bvh, rep = pipeline.write_result(res, out)
     print_rows(res.summary_rows())
-    fails = res.report.check_bars()
-    print(f"physics bars: {'all met' if not fails else 'NOT met: ' + '; '.join(fails)}")
+    print(f"physics bars: {'all met' if not fails else 'NOT met (kept): ' + '; '.join(fails)}")
     say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep} in {time.perf_counter() - t0:.2f} s", args.quiet)
     return 0
 

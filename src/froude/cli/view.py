@@ -5,8 +5,9 @@ from __future__ import annotations
 from ..errors import FroudeError
 from .common import add_load_options, add_mass, check_inputs, number, say, speed
 
-#: Starting values the studio's controls can show: speed factor and strides (the sliders' ranges).
-VIEW_SPEED_RANGE = (0.3, 3.0)
+#: Starting values the studio's controls can show: speed factor and strides (the sliders' ranges; the same
+#: numbers as ``froude.studio.session.LIMITS``, which the server enforces; a test keeps them equal).
+VIEW_SPEED_RANGE = (0.5, 2.0)
 VIEW_STRIDES = (1, 12)
 
 
@@ -25,8 +26,10 @@ def register(sub) -> None:
         "step frequency, physics-report errors), a leg-force plot, and downloads of the result as BVH and "
         "its report. Bad edits show their message in the page and keep the last good result. "
         "Needs the optional extra: pip install 'froude[studio]'.",
-        epilog="The studio binds to 127.0.0.1 (this machine only) unless --host says otherwise; "
-        "open the printed address in a browser. Ctrl-C stops it.",
+        epilog="The studio binds to 127.0.0.1 (this machine only) unless --host says otherwise (then it warns "
+        "and prints the real addresses); open the printed address in a browser. It accepts websocket "
+        "connections only from its own page (Origin and Host checked) and checks every control value against "
+        "the control's options and limits on the server. Ctrl-C stops it.",
     )
     p.add_argument("clip", nargs="?", default=None,
                    help="running BVH clip (default: the embedded sample, CMU 09_01)")
@@ -59,6 +62,12 @@ def run(args) -> int:
     check_inputs(args.clip)
     if args.character not in ("same", *list_presets()):
         raise FroudeError(f"unknown character '{args.character}': use same or a preset ({', '.join(list_presets())})")
+    from ..studio.guard import is_loopback
+
+    if not is_loopback(args.host):
+        say(f"froude view: WARNING: --host {args.host} makes the studio reachable from other machines on the "
+            "network, with no password; anyone who can reach it can drive it. Use the default 127.0.0.1 unless "
+            "you mean to share it.")
     clip = args.clip or str(sample_path())
     if args.keep_all_frames:
         from .common import load_clip
@@ -66,7 +75,7 @@ def run(args) -> int:
         clip = load_clip(clip, args.length_scale, keep_all=True)
     say(f"froude view: preparing {args.clip or 'the embedded sample (09_01)'} (fit once, reused for every change) ...")
     prep = pipeline.prepare(clip, mass=args.mass, length_scale=args.length_scale)
-    params = Params(character=args.character, speed=_start_factor(prep, args), strides=args.strides)
+    params = Params(character=args.character, speed=_start_factor(prep, args), strides=args.strides).check()
     code = serve(prep, host=args.host, port=args.port, params=params, open_browser=args.open,
                  announce=lambda m: print(m, flush=True))
     say("froude view: stopped")

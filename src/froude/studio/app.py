@@ -22,7 +22,7 @@ import numpy as np
 
 from ..constants import UP_AXIS
 from ..errors import FroudeError
-from .session import MODES, Params, Session, Solved, with_character, with_report
+from .session import LIMITS, MODES, Params, Session, Solved, with_character, with_report
 from .tracks import Track
 
 #: Frames drawn per second (the motion itself is indexed at its own rate, 120 Hz for the sample).
@@ -138,6 +138,9 @@ class Studio:
 
         with contextlib.redirect_stdout(io.StringIO()):  # viser's banner: we print our own address line
             self.server = viser.ViserServer(host=host, port=port, label="froude studio", verbose=False)
+        from . import guard
+
+        self.refused = guard.install(self.server, self.server.get_port, host, on_refused=self._say_refused)
         self.server.scene.set_up_direction("+y")
         # no shadows: they cost more than they show for stick figures (software WebGL renders 2-5x faster)
         self.server.scene.configure_default_lights(enabled=True, cast_shadow=False)
@@ -147,11 +150,22 @@ class Studio:
         self._threads = [threading.Thread(target=self._work_loop, name="froude-studio-worker", daemon=True),
                          threading.Thread(target=self._play_loop, name="froude-studio-player", daemon=True)]
 
+    @staticmethod
+    def _say_refused(why: str) -> None:
+        print(f"froude studio: refused a connection: {why}", file=sys.stderr, flush=True)
+
     # ---- lifecycle -----------------------------------------------------------------------------------
     @property
     def url(self) -> str:
-        host = self.server.get_host()
-        return f"http://{'localhost' if host in ('0.0.0.0', '::') else host}:{self.server.get_port()}"
+        return self.urls[0]
+
+    @property
+    def urls(self) -> list[str]:
+        """Every address a browser can open (bound to all interfaces: this machine's network addresses)."""
+        from .guard import reachable_addresses
+
+        port = self.server.get_port()
+        return [f"http://{f'[{a}]' if ':' in a else a}:{port}" for a in reachable_addresses(self.server.get_host())]
 
     def start(self) -> "Studio":
         for th in self._threads:
@@ -236,13 +250,21 @@ class Studio:
             self.gui_mode = gui.add_dropdown("Mode", options=MODES, initial_value=p.mode)
             self.gui_char = gui.add_dropdown("Character", options=tuple(self.session.presets),
                                              initial_value=p.character)
-            self.gui_height = gui.add_number("Height [m]", initial_value=round(h, 3), min=0.0, max=5.0, step=0.01)
-            self.gui_mass = gui.add_number("Mass [kg]", initial_value=round(m, 1), min=0.0, max=1000.0, step=0.5)
-            self.gui_legs = gui.add_slider("Leg scale", min=0.3, max=2.0, step=0.01, initial_value=round(legs, 2))
-            self.gui_speed = gui.add_slider("Speed factor", min=0.3, max=3.0, step=0.05, initial_value=p.speed)
-            self.gui_strides = gui.add_slider("Strides", min=1, max=12, step=1, initial_value=p.strides)
-            self.gui_to = gui.add_number("Goal speed factor", initial_value=p.to_factor, min=0.1, max=5.0, step=0.05)
-            self.gui_steps = gui.add_slider("Steps to change", min=1, max=60, step=1, initial_value=p.steps)
+            L = LIMITS
+            self.gui_height = gui.add_number("Height [m]", initial_value=round(h, 3), min=L["height"].lo,
+                                             max=L["height"].hi, step=L["height"].step)
+            self.gui_mass = gui.add_number("Mass [kg]", initial_value=round(m, 1), min=L["mass"].lo, max=L["mass"].hi,
+                                           step=L["mass"].step)
+            self.gui_legs = gui.add_slider("Leg scale", min=L["leg_scale"].lo, max=L["leg_scale"].hi,
+                                           step=L["leg_scale"].step, initial_value=round(legs, 2))
+            self.gui_speed = gui.add_slider("Speed factor", min=L["speed"].lo, max=L["speed"].hi, step=L["speed"].step,
+                                            initial_value=p.speed)
+            self.gui_strides = gui.add_slider("Strides", min=L["strides"].lo, max=L["strides"].hi, step=1,
+                                              initial_value=p.strides)
+            self.gui_to = gui.add_number("Goal speed factor", initial_value=p.to_factor, min=L["to_factor"].lo,
+                                         max=L["to_factor"].hi, step=L["to_factor"].step)
+            self.gui_steps = gui.add_slider("Steps to change", min=L["steps"].lo, max=L["steps"].hi, step=1,
+                                            initial_value=p.steps)
         with gui.add_folder("Numbers", order=3):
             self.gui_status = gui.add_markdown("")
             self.gui_numbers = gui.add_markdown("")
@@ -294,12 +316,12 @@ class Studio:
             v = float(v)
             return None if abs(v - v0) <= tol else v
 
-        return Params(
+        return Params(  # checked against the controls' own options and limits (values can be crafted)
             mode=str(self.gui_mode.value), character=str(self.gui_char.value),
             height=override(self.gui_height.value, h0, 6e-3), mass=override(self.gui_mass.value, m0, 0.06),
             leg_scale=override(self.gui_legs.value, l0, 6e-3), speed=float(self.gui_speed.value),
-            strides=int(self.gui_strides.value), to_factor=float(self.gui_to.value), steps=int(self.gui_steps.value),
-        )
+            strides=self.gui_strides.value, to_factor=float(self.gui_to.value), steps=self.gui_steps.value,
+        ).check(self.session.presets)
 
     # handlers (viser's pool); programmatic value changes come with event.client None and are ignored
     def _on_play(self, event) -> None:
@@ -317,19 +339,49 @@ class Studio:
             return
         name = str(self.gui_char.value)
         try:
-            self._defaults = self.session.character_defaults(name)
+            defaults = self.session.character_defaults(name)  # refuses anything but a listed preset
         except FroudeError as e:
-            self._show_error(e)
+            self._refuse(e)
             return
+        self._defaults = defaults
         h, m, legs = self._defaults
         self.gui_height.value, self.gui_mass.value, self.gui_legs.value = round(h, 3), round(m, 1), round(legs, 2)
-        self.request(with_character(self.params_from_gui(), name))
+        try:
+            self.request(with_character(self.params_from_gui(), name))
+        except FroudeError as e:
+            self._refuse(e)
 
     def _on_change(self, event) -> None:
         if event.client is None:
             return
+        try:
+            params = self.params_from_gui()
+        except FroudeError as e:
+            self._refuse(e)
+            return
         self._sync_mode_controls()
-        self.request(self.params_from_gui())
+        self.request(params)
+
+    def _refuse(self, err) -> None:
+        """A control value outside its options or limits: say so, put the controls back to the last good
+        result's values, and compute nothing."""
+        self._show_error(err)
+        self._set_controls(self.good.params)
+
+    def _set_controls(self, p: Params) -> None:
+        """The controls showing ``p`` (the character's own numbers where ``p`` does not override them)."""
+        try:
+            self._defaults = self.session.character_defaults(p.character)
+        except FroudeError:
+            pass
+        h, m, legs = self._defaults
+        self.gui_mode.value, self.gui_char.value = p.mode, p.character
+        self.gui_height.value = round(p.height if p.height is not None else h, 3)
+        self.gui_mass.value = round(p.mass if p.mass is not None else m, 1)
+        self.gui_legs.value = round(p.leg_scale if p.leg_scale is not None else legs, 2)
+        self.gui_speed.value, self.gui_strides.value = p.speed, p.strides
+        self.gui_to.value, self.gui_steps.value = p.to_factor, p.steps
+        self._sync_mode_controls()
 
     def _on_download_bvh(self, event) -> None:
         from ..io.bvh import bvh_text
@@ -525,13 +577,6 @@ def serve(prep, *, host: str = "127.0.0.1", port: int = 8080, params: Params | N
     """Run the studio until Ctrl-C (or SIGTERM); returns 0 after a clean shutdown."""
     import signal
 
-    studio = Studio(prep, host=host, port=port, params=params).start()
-    announce(f"froude studio: {studio.url}  (Ctrl-C to stop)")
-    if open_browser:
-        import webbrowser
-
-        webbrowser.open(studio.url)
-
     def _interrupt(signum, frame):
         raise KeyboardInterrupt
 
@@ -540,13 +585,24 @@ def serve(prep, *, host: str = "127.0.0.1", port: int = 8080, params: Params | N
     old = {}
     if threading.current_thread() is threading.main_thread():
         old = {sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
+    studio = None
     try:
+        studio = Studio(prep, host=host, port=port, params=params).start()
+        # the handlers are in place before the address is out: a Ctrl-C from then on is a clean stop
+        announce(f"froude studio: {studio.url}  (Ctrl-C to stop)")
+        for other in studio.urls[1:]:
+            announce(f"froude studio: also {other}")
+        if open_browser:
+            import webbrowser
+
+            webbrowser.open(studio.url)
         while True:
             time.sleep(0.5)
     except KeyboardInterrupt:
         pass
     finally:
-        studio.stop()
+        if studio is not None:
+            studio.stop()
         for sig, handler in old.items():
             signal.signal(sig, handler)
     return 0

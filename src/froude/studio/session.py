@@ -22,6 +22,56 @@ SAME = "same"  # the reference's own body
 
 
 @dataclass(frozen=True)
+class Limit:
+    """A numeric control's range, as the page shows it and the server enforces it.
+
+    lo, hi: inclusive bounds in ``unit``; step: the control's step; whole: an integer count.
+    """
+
+    label: str
+    lo: float
+    hi: float
+    step: float
+    unit: str = ""
+    whole: bool = False
+
+    def check(self, value) -> float | int:
+        """The value as a float (int when whole) or a FroudeError in the user's terms with the fix."""
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise FroudeError(f"{self.label} must be a number from {self.range()}, got {str(value)[:40]!r}") from None
+        if not math.isfinite(v) or not (self.lo <= v <= self.hi):
+            raise FroudeError(f"{self.label} {_fmt(v)}{self.unit} is outside {self.range()}: "
+                              f"pick a value from {self.range()}")
+        if self.whole:
+            if v != int(v):
+                raise FroudeError(f"{self.label} must be a whole number from {self.range()}, got {_fmt(v)}")
+            return int(v)
+        return v
+
+    def range(self) -> str:
+        return f"{_fmt(self.lo)}{self.unit} to {_fmt(self.hi)}{self.unit}"
+
+
+def _fmt(v: float) -> str:
+    return f"{v:g}"
+
+
+#: Every numeric control: its range on the page and on the server (a value outside is refused, whatever
+#: sent it). Strides and steps bound the work of one change (the machine path and the IK grow with them).
+LIMITS = {
+    "height": Limit("Height", 0.5, 4.0, 0.01, " m"),
+    "mass": Limit("Mass", 5.0, 500.0, 0.5, " kg"),
+    "leg_scale": Limit("Leg scale", 0.5, 2.0, 0.01, "×"),
+    "speed": Limit("Speed", 0.5, 2.0, 0.05, "×"),
+    "strides": Limit("Strides", 1, 12, 1, "", whole=True),
+    "to_factor": Limit("Goal speed", 0.5, 2.0, 0.05, "×"),
+    "steps": Limit("Steps", 1, 60, 1, "", whole=True),
+}
+
+
+@dataclass(frozen=True)
 class Params:
     """Everything the user can change. height [m], mass [kg], leg_scale: None = the character's own."""
 
@@ -35,16 +85,22 @@ class Params:
     to_factor: float = 1.1  # accelerate: goal = factor × the start speed
     steps: int = 16  # accelerate: steps the change takes
 
-    def check(self) -> None:
-        """The studio's own input checks (the pipeline checks again; these guard the preview)."""
+    def check(self, presets=None) -> "Params":
+        """Every value against its control's options and limits (``LIMITS``); the checked copy, or a
+        one-line FroudeError saying which control, the value and the range. presets: the Character
+        control's options (default: the shipped presets and "same") -- a character is only ever one of them,
+        never a path, so nothing but a preset is read from disk."""
         if self.mode not in MODES:
-            raise FroudeError(f"unknown mode '{self.mode}' ({' or '.join(MODES)})")
-        for name in ("speed", "to_factor"):
+            raise FroudeError(f"Mode must be {' or '.join(MODES)}, got {str(self.mode)[:40]!r}")
+        options = presets if presets is not None else (SAME, *list_presets())
+        if self.character not in options:
+            raise FroudeError(f"Character must be one of the presets ({', '.join(options)}); "
+                              f"got {str(self.character)[:40]!r}")
+        out = {}
+        for name, lim in LIMITS.items():
             v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise FroudeError(f"{name.replace('_', ' ')} must be > 0, got {v:g}")
-        if self.mode == "scale" and self.strides < 1:
-            raise FroudeError(f"strides must be >= 1, got {self.strides}")
+            out[name] = None if v is None else lim.check(v)
+        return replace(self, **out)
 
     def character_args(self) -> tuple[str | None, dict]:
         """(character spec for the pipeline, the numbers that override it)."""
@@ -52,8 +108,8 @@ class Params:
         return (None if self.character == SAME else self.character), nums
 
     def label(self) -> str:
-        what = f"speed x{self.speed:g}, {self.strides} strides" if self.mode == "scale" else (
-            f"to x{self.to_factor:g} in {self.steps} steps")
+        what = f"speed ×{self.speed:g}, {self.strides} strides" if self.mode == "scale" else (
+            f"to ×{self.to_factor:g} in {self.steps} steps")
         return f"{self.character}: {self.mode} {what}"
 
 
@@ -80,6 +136,9 @@ class Session:
 
     def character_defaults(self, name: str) -> tuple[float, float, float]:
         """(height [m], mass [kg], leg scale) of a preset (or the reference itself) on this clip."""
+        if name not in self.presets:
+            raise FroudeError(f"Character must be one of the presets ({', '.join(self.presets)}); "
+                              f"got {str(name)[:40]!r}")
         char = pipeline.resolve_character(None if name == SAME else name)
         rt = apply_character(char, self.prep.body)
         return float(rt.body.stature), float(rt.body.total_mass), float(char.proportions.get("legs", 1.0))
@@ -93,7 +152,7 @@ class Session:
         if params.mode != "scale":
             return None
         t0 = time.perf_counter()
-        params.check()
+        params = params.check(self.presets)
         spec, nums = params.character_args()
         plan = pipeline.plan_scale(self.prep, spec, speed=params.speed, strides=int(params.strides), **nums)
         retarget, path = plan.retarget, plan.path
@@ -109,19 +168,38 @@ class Session:
         report=False leaves the physics report for ``with_report`` (the motion can be shown first).
         """
         t0 = time.perf_counter()
-        params.check()
+        params = params.check(self.presets)
         spec, nums = params.character_args()
         if params.mode == "scale":
             res = pipeline.scale(self.prep, spec, speed=params.speed, strides=int(params.strides), report=report,
                                  **nums)
         else:
-            res = pipeline.accelerate(self.prep, spec, to_factor=params.to_factor, steps=int(params.steps),
-                                      report=report, **nums)
+            try:
+                res = pipeline.accelerate(self.prep, spec, to_factor=params.to_factor, steps=int(params.steps),
+                                          report=report, **nums)
+            except FroudeError as e:
+                raise FroudeError(self._accelerate_message(params, e)) from None
         _require_finite(res.motion)
         # the corrected COM is the machine's (correct() makes it exact), so the track needs no COM pass
         track = machine_track(res.motion, res.retarget.body, res.path, body_com=res.targets.com)
         return Solved(params, track, res, False, time.perf_counter() - t0, motion_hash(res.motion),
                       res.motion.n_frames)
+
+    def start_speed(self, params: Params) -> float:
+        """The apex speed [m/s] the character runs at before an acceleration (the goal is × this)."""
+        spec, nums = params.character_args()
+        rt = self.prep.retarget(spec, **nums)
+        m = self.prep.machine.scaled(rt.L, rt.M)
+        return float(m.U * m.speed_unit)
+
+    def _accelerate_message(self, params: Params, err: FroudeError) -> str:
+        """The planner's refusal in the user's terms (m/s, ×, steps) with the fix."""
+        text = str(err).splitlines()[0] if str(err) else type(err).__name__
+        if not text.startswith("cannot reach"):
+            return text
+        v0 = self.start_speed(params)
+        return (f"cannot go from {v0:.2f} m/s to {params.to_factor * v0:.2f} m/s (×{params.to_factor:g}) in "
+                f"{params.steps} steps: use more steps or a goal nearer ×1")
 
 
 def with_report(prep: pipeline.Prepared, solved: Solved) -> Solved:

@@ -386,3 +386,28 @@ def test_os_errors_during_work_are_one_line(work, run_cli, monkeypatch):
     monkeypatch.setattr(atomic.os, "replace", failing_replace)
     refused(run_cli, work, "scale", "in.bvh", "--strides", "2", "-o", "o.bvh", "-q", needle="No space left on device")
     assert len(calls) == 2  # the BVH had landed: the group took it back
+
+
+# ---- issue 14.3: start-up (timing is benchmarks/bench_cli.py; this checks what makes it fast) ----------------
+@pytest.mark.parametrize("args", [["--help"], ["scale", "--help"], ["scale", "x.bvh", "--fps", "0", "-o", "o.bvh"],
+                                  ["batch", "--help"], []])
+def test_help_and_option_errors_import_no_numpy(args):
+    r = subprocess.run([sys.executable, "-X", "importtime", "-m", "froude.cli", *args], capture_output=True, text=True)
+    imported = {line.split("|")[-1].strip() for line in r.stderr.splitlines() if line.startswith("import time:")}
+    assert r.returncode in (0, 2)
+    assert not {"numpy", "scipy", "froude.batch", "yaml"} & imported or args == ["batch", "--help"], \
+        sorted(m for m in imported if m.split(".")[0] in ("numpy", "scipy", "froude", "yaml"))
+    if args == ["batch", "--help"]:
+        assert "numpy" not in imported
+
+
+def test_every_command_module_lists_its_help():
+    from froude.cli import SUBCOMMANDS, build_parser
+
+    full = build_parser()
+    sub = next(a for a in full._actions if a.dest == "command")
+    for name in SUBCOMMANDS:
+        lean = build_parser([name])
+        lean_sub = next(a for a in lean._actions if a.dest == "command")
+        assert set(lean_sub.choices) == set(sub.choices)
+        assert lean_sub.choices[name].format_help() == sub.choices[name].format_help()

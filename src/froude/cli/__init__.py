@@ -64,8 +64,8 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
             if e.name == f"{__name__}.{name}":
                 continue  # subcommand not built yet
             raise
-        if argv is None or name == chosen:
-            module.register(sub)
+        if argv is None or name == chosen or not hasattr(module, "HELP"):
+            module.register(sub)  # (a module without HELP is always built in full)
         else:
             sub.add_parser(name, help=module.HELP)
     return parser

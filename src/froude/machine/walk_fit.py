@@ -152,8 +152,23 @@ def force_landmarks(tau: np.ndarray, fy_bw: np.ndarray, tau_double: float) -> di
     i2 = np.flatnonzero(last)[np.argmax(fy_bw[last])]
     mid = np.arange(i1, i2 + 1)
     it = mid[np.argmin(fy_bw[mid])]
-    return {"peak1": float(fy_bw[i1]), "trough": float(fy_bw[it]), "peak2": float(fy_bw[i2]),
-            "tau_peak1": float(tau[i1]), "tau_trough": float(tau[it]), "tau_peak2": float(tau[i2])}
+    out = {}
+    for key, i in (("peak1", i1), ("trough", it), ("peak2", i2)):
+        out[key], out["tau_" + key] = _vertex(tau, fy_bw, int(i))
+    return out
+
+
+def _vertex(x, y, i):
+    """(y, x) at the vertex of the parabola through samples i − 1, i, i + 1 of an extremum (evenly spaced
+    x), so a landmark is not quantised to the sample grid; the sample itself at an end or when the vertex
+    would leave the three samples."""
+    if 0 < i < len(y) - 1:
+        den = y[i - 1] - 2.0 * y[i] + y[i + 1]
+        if den != 0.0:
+            d = 0.5 * (y[i - 1] - y[i + 1]) / den
+            if abs(d) <= 1.0:
+                return float(y[i] - 0.25 * (y[i - 1] - y[i + 1]) * d), float(x[i] + d * (x[i + 1] - x[i]))
+    return float(y[i]), float(x[i])
 
 
 @dataclass(frozen=True)

@@ -1109,16 +1109,20 @@ def report_path(out_path) -> Path:
     return p.with_name(p.stem + ".report.json")
 
 
-def write_result(result: Result, out_path) -> tuple[Path, Path]:
-    """Write OUT.bvh and OUT.report.json atomically; returns both paths."""
-    from .io.bvh import save_bvh
+def write_result(result: Result, out_path, data=None) -> tuple[Path, ...]:
+    """Write OUT (.bvh, .glb or .gltf: ``froude.api.save`` decides by suffix) and OUT.report.json, and
+    the per-frame table to ``data`` (.csv/.parquet/.npz) when given; each atomically. Returns the paths."""
+    from .api import save
 
     out_path = Path(out_path)
-    if out_path.suffix.lower() != ".bvh":
-        raise FroudeError(f"{out_path}: the output must be a .bvh file")
     rp = report_path(out_path)
-    save_bvh(result.motion, out_path)
+    save(result.motion, out_path)
     write_report(result.report, rp)
-    return out_path, rp
+    if data is None:
+        return out_path, rp
+    from .io.framedata import frame_table, write_frame_data
+
+    table = frame_table(result.motion, result.retarget.body, machine_path=result.path)
+    return out_path, rp, write_frame_data(table, data)
 
 

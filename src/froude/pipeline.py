@@ -1109,14 +1109,15 @@ def report_path(out_path) -> Path:
     return p.with_name(p.stem + ".report.json")
 
 
-def write_result(result: Result, out_path, data=None) -> tuple[Path, ...]:
+def write_result(result: Result, out_path, data=None, **bvh_options) -> tuple[Path, ...]:
     """Write OUT (.bvh, .glb or .gltf: ``froude.api.save`` decides by suffix) and OUT.report.json, and
-    the per-frame table to ``data`` (.csv/.parquet/.npz) when given; each atomically. Returns the paths."""
+    the per-frame table to ``data`` (.csv/.parquet/.npz) when given; each atomically. Returns the paths.
+    bvh_options: ``save_bvh``'s (length_scale, up, rotations_only; default: the input's conventions)."""
     from .api import save
 
     out_path = Path(out_path)
     rp = report_path(out_path)
-    save(result.motion, out_path)
+    save(result.motion, out_path, **bvh_options)
     write_report(result.report, rp)
     if data is None:
         return out_path, rp

@@ -133,6 +133,8 @@ class Session:
         self.prep = prep
         self.reference = reference_track(prep)
         self.presets = [SAME, *list_presets()]
+        #: pipeline.reachable_speed_range per preset on this clip, filled by the studio as presets are used
+        self.speed_ranges: dict = {}
 
     def character_defaults(self, name: str) -> tuple[float, float, float]:
         """(height [m], mass [kg], leg scale) of a preset (or the reference itself) on this clip."""

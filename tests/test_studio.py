@@ -239,6 +239,42 @@ def test_bvh_export_options(session, tmp_path):
         studio.stop()
 
 
+def test_open_clip_from_the_page_is_checked(session, monkeypatch):
+    """Opening a clip: size and kind checked before any work, a bad clip refused in one line naming the
+    file (not the server's temporary copy), a good one becomes the tab's reference."""
+    pytest.importorskip("viser")
+    from types import SimpleNamespace
+
+    from conftest import clip
+    from viser import UploadedFile
+
+    from froude.studio import app
+    from froude.studio.app import Studio
+
+    studio = Studio(session.prep, port=_free_port())
+    try:
+        tab = studio.open_tab()
+        posted = []
+        monkeypatch.setattr(tab, "_post", lambda job: posted.append(job))
+        monkeypatch.setattr(app, "MAX_CLIP_BYTES", 1000)
+        monkeypatch.setattr(tab, "gui_open", SimpleNamespace(value=UploadedFile("big.bvh", b"x" * 1001)))
+        tab._on_upload(None)
+        assert "big.bvh: 0.0 MB is larger than the studio's" in tab.message and not posted
+        tab.gui_open.value = UploadedFile("notes.txt", b"hello")  # (the stand-in's value)
+        tab._on_upload(None)
+        assert tab.message == "error: notes.txt: not a .bvh file; open a BVH motion clip" and not posted
+        walk = clip("02_01")
+        assert not tab.open_clip("02_01.bvh", walk.read_bytes())
+        assert tab.message.startswith("error: 02_01.bvh") and "walking" in tab.message and "/tmp" not in tab.message
+        assert tab.clip_name == "09_01.bvh"
+        run = clip("09_02")
+        assert tab.open_clip("09_02.bvh", run.read_bytes())
+        assert tab.clip_name == "09_02.bvh" and "clip=09_02.bvh" in tab.gui_state.content
+        assert tab.reference.track.motion is tab.session.prep.motion and "09_02.bvh" in tab._facts_md()
+    finally:
+        studio.stop()
+
+
 def test_two_tabs_hold_two_sessions(session):
     """Each tab its own parameters, result and scene (acceptance 15.4, without a browser)."""
     pytest.importorskip("viser")

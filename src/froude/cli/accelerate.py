@@ -4,7 +4,7 @@ from __future__ import annotations
 import time
 
 from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
-                     add_quiet, add_range_option, bound_work, character_input, character_kwargs,
+                     add_quiet, add_range_option, add_root_option, bound_work, character_input, character_kwargs,
                      check_character, check_inputs, guard_outputs, number, print_rows, say, speed)
 
 #: Steps of a speed change, and of the steady parts around it, froude plans at most.
@@ -51,6 +51,7 @@ def register(sub) -> None:
     add_load_options(p)
     add_range_option(p)
     add_keep(p)
+    add_root_option(p)
     p.set_defaults(func=run)
 
 
@@ -91,7 +92,7 @@ def run(args) -> int:
             "--keep writes it anyway")
         return 1
     with atomic_group():
-        bvh, rep = pipeline.write_result(res, out)
+        bvh, rep = pipeline.write_result(res, out, in_place=args.in_place)
         written = []
         if plot:
             from ..viz.plan_plot import plot_plan

@@ -71,6 +71,11 @@ def run(args) -> int:
 
         motion = select_range(motion, args.range, Path(args.clip).name)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
+    from ..pipeline import running_take
+
+    motion, notes = running_take(motion, body)  # a loop unrolled, an in-place take given its travel
+    for note in notes:
+        say(f"note: {note}", args.quiet)
     res = fit_machine_detailed(motion, body, source=Path(args.clip).name)
     with atomic_group():
         if plot:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from ..presets import list_presets
 from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
-                     add_quiet, add_range_option, bound_work, character_input, character_kwargs,
+                     add_quiet, add_range_option, add_root_option, bound_work, character_input, character_kwargs,
                      check_character, check_inputs, guard_outputs, number, print_rows, say, speed)
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
@@ -47,6 +47,7 @@ def register(sub) -> None:
     add_load_options(p)
     add_range_option(p)
     add_keep(p)
+    add_root_option(p)
     p.set_defaults(func=run)
 
 
@@ -89,7 +90,7 @@ def run(args) -> int:
             f"met this clip runs {rng.describe()}; --keep writes it anyway")
         return 1
     with atomic_group():
-        bvh, rep = pipeline.write_result(res, out)
+        bvh, rep = pipeline.write_result(res, out, in_place=args.in_place)
     print_rows(res.summary_rows())
     print(f"physics bars: {'all met' if not fails else 'NOT met (kept): ' + '; '.join(fails)}")
     say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep} in {time.perf_counter() - t0:.2f} s", args.quiet)

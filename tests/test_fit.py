@@ -62,7 +62,7 @@ def test_physiological_sanity(fits, clip):
     assert 0.5 < sh["vertical"] < 1 and 0.5 < sh["leg"] < 1
 
 
-@pytest.mark.parametrize("clip", ["02_01", "07_01", "02_04"])
+@pytest.mark.parametrize("clip", ["02_04"])  # walks (02_01, 07_01) get the walking machine: test_walking.py
 def test_non_running_refused(clip, tmp_path):
     out = tmp_path / "m.json"
     p = subprocess.run([sys.executable, "-m", "froude.cli", "fit", str(DATA / f"{clip}.bvh"), "-o", str(out)],

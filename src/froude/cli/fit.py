@@ -9,14 +9,18 @@ from .common import add_load_options, add_range_option, add_mass, add_quiet, che
 
 def register(sub) -> None:
     p = sub.add_parser(
-        "fit", help="fit the simple running machine (point mass on a spring leg) to a running clip",
+        "fit", help="fit the simple machine (running: one spring leg; walking: two) to a running or walking clip",
         description="Fit Pollard's simple running machine (1999, section 4) to a running clip: ground force from "
         "the COM (eq. 1), per-stance leg geometry and control fits (eq. 2), and a periodic running cycle that "
-        "matches the measured stance time, flight time and speed. Prints a table; writes the machine as JSON.",
+        "matches the measured stance time, flight time and speed. A walk gets the walking machine instead (two "
+        "spring legs with double support, docs/walking.md): a periodic cycle with the measured stance time, "
+        "double-support time and speed, fitted to the clip's vertical force and COM height. Prints a table; "
+        "writes the machine as JSON.",
     )
-    p.add_argument("clip", help="BVH file of a running motion")
+    p.add_argument("clip", help="BVH file of a running or walking motion")
     p.add_argument("-o", "--output", required=True, metavar="OUT.json",
-                   help="machine JSON to write (schema froude.machine/1); its folder must exist")
+                   help="machine JSON to write (schema froude.machine/1, froude.walking/1 for a walk); "
+                   "its folder must exist")
     p.add_argument("--plot", default=None, metavar="PNG", help="also write Figure 2 of the paper for this clip (.png)")
     add_mass(p, "body mass [kg]")
     add_quiet(p)
@@ -71,6 +75,10 @@ def run(args) -> int:
 
         motion = select_range(motion, args.range, Path(args.clip).name)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
+    from ..gait import summarize
+
+    if summarize(motion, body).kind == "walking":  # a walk gets the walking machine
+        return _run_walk(args, motion, body, out, plot)
     from ..pipeline import running_take
 
     motion, notes = running_take(motion, body)  # a loop unrolled, an in-place take given its travel
@@ -84,6 +92,55 @@ def run(args) -> int:
             plot_fit(res, plot, title=Path(args.clip).name)
         res.machine.save(out)
     print(fit_table(res))
+    if plot:
+        say(f"wrote {plot}", args.quiet)
+    say(f"wrote {out}", args.quiet)
+    return 0
+
+
+def walk_table(res) -> str:
+    """The table printed by ``froude fit`` for a walk: the cycle, then clip vs machine."""
+    m = res.machine
+    T, ref, q = m.time_unit, m.reference, m.quality
+    fr, fm = ref["force_bw"], q["force_bw"]
+    st = m.t_stance * T
+
+    def pct(x):
+        return f"{100 * x:+.1f}%"
+
+    lines = [
+        f"walking machine  u = {m.u:.4f}  v = {m.v:+.4f}  d = {m.d:.4f}  s = {m.s:.4f}  θ0 = {math.degrees(m.theta0):.2f}°"
+        f"  l_td = {m.l_td:.4f}  roll = {m.roll:.4f}",
+        f"        control  K = {m.K:.2f}  a = {m.a:+.4f}  b = {m.b:+.4f}  c = {m.c:+.4f}  T_c = {m.T_c:.4f}"
+        f"   (l0 = {m.l0:.3f} m, m = {m.mass:g} kg; periodic to {m.periodicity:.1e})",
+        "",
+        "                       clip    machine",
+        f"stance [s]           {ref['stance_time_s']:6.3f}     {st:6.3f}  {pct(q['stance_time_error'])}",
+        f"double support [s]   {ref['double_support_s']:6.3f}     {m.t_double * T:6.3f}  {pct(q['double_support_error'])}",
+        f"speed [m/s]          {ref['mean_speed_m_s']:6.3f}     {m.mean_speed * m.speed_unit:6.3f}  {pct(q['mean_speed_error'])}",
+        f"step time [s]        {ref['step_time_s']:6.3f}     {m.t_step * T:6.3f}",
+    ]
+    for key, name in (("peak1", "weight-acceptance peak"), ("trough", "trough"), ("peak2", "push-off peak")):
+        lines.append(f"{name:<22} {fr[key]:5.2f} BW at {1e3 * fr['tau_' + key] * ref['stance_time_s']:4.0f} ms   "
+                     f"{fm[key]:5.2f} BW at {1e3 * fm['tau_' + key] * st:4.0f} ms   "
+                     f"({q[key + '_error_bw']:+.2f} BW, {pct(q[key + '_timing_error_step'])} of a step)")
+    lines.append(f"COM height RMS over {ref['n_steps']} complete steps: {100 * q['com_rms_m']:.2f} cm; force over a stance "
+                 f"RMS {q['force_profile_rms_bw']:.3f} BW (machine through the clip's {ref['filter']['cutoff_hz']:g} Hz filter)")
+    return "\n".join(lines)
+
+
+def _run_walk(args, motion, body, out, plot) -> int:
+    from ..io.atomic import atomic_group
+    from ..machine.walk_fit import fit_walking_detailed
+
+    res = fit_walking_detailed(motion, body, source=Path(args.clip).name)
+    with atomic_group():
+        if plot:
+            from ..viz.walk_plot import plot_walk_fit
+
+            plot_walk_fit(res, plot, title=Path(args.clip).name)
+        res.machine.save(out)
+    print(walk_table(res))
     if plot:
         say(f"wrote {plot}", args.quiet)
     say(f"wrote {out}", args.quiet)

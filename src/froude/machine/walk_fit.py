@@ -1,0 +1,569 @@
+"""§4 for walking: fit the simple walking machine (:mod:`froude.machine.walking`) to a walking clip.
+
+    motion → body COM + foot markers → gait (contacts) → zero-lag filtered COM → eq. 1 forces
+    → per-stance geometry (touchdown point, centre-of-pressure roll) → eq. 2 control of both legs by
+    linear least squares → periodic cycle (Newton) → shape fit of the force and COM height (least
+    squares) → exact periodic cycle again → WalkingMachine
+
+Events. In walking the total vertical force never falls near zero, so the running fit's force-refined
+events do not exist; touchdown and liftoff are the sub-frame contact events of :mod:`froude.gait`
+(``Stance.t_on`` / ``t_off``).
+
+Geometry. A walking foot rolls: the centre of pressure travels from the heel to the toes. Each stance's
+contact is the least-squares line x_touchdown + roll·τ through the foot's lowest marker (τ = 0 … 1 over
+the stance); the machine's legs roll the same way (``roll``, the clips' mean, in l0 per unit τ).
+
+Control fit (eq. 2). In single support the measured sagittal force belongs to one leg; in double support
+it is the sum of two. The model force of the legs in contact is linear in (K, K a, K b, K c)::
+
+    f(t) = Σ_legs [K (1 − l_i/l0_i) + K a + K b τ_i + K c τ_i²] u_i,   u_i = unit leg vector foot → COM
+
+so one linear least-squares solve over both force components of every frame whose legs are all in
+complete stances gives a control without splitting the double-support force between the legs. On the
+real clips it explains little of the force (r² ≈ 0: the leg-length change of walking is mostly
+geometry, not compression), so it is only a start; a plain spring leg (Geyer et al.'s) is the other.
+
+Cycle search: z = (u, v, d, s, θ0, K, a, b, c, l_td) (T_c held at the measured mean stance time) must
+make the step map periodic (4 equations) and reproduce the measured step time, double-support time and
+mean speed (3): seven equations in ten unknowns, solved by minimum-norm Newton from the priors in
+coordinates scaled by ``CYCLE_SCALES`` (the periodic machine nearest them). Then the *shape fit*: least
+squares of the machine's total vertical force over a stance (measured through the clip's filter) and its
+COM height over a step against the clip's, with periodicity and the three targets as heavily weighted
+residuals; the exact cycle is then found again from its result. Of the two starts the better shape wins.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..body import BodyModel
+from ..constants import GRAVITY, UP_AXIS
+from ..errors import FitError, NotARunningMotion
+from ..gait import detect_gait, summarize
+from ..motion import Motion
+from .dynamics import Control
+from .forces import CUTOFF_HZ, ground_force, sagittal_frame, smooth_com
+from .walk_model import WalkingMachine
+from .walking import N_PER_STANCE, REASONS, WalkState, simulate_walk, walk_step
+
+__all__ = ["WalkFitResult", "fit_walking_detailed", "CYCLE_SCALES", "force_landmarks", "PROFILE_SAMPLES"]
+
+_VARS = ("u", "v", "d", "s", "theta0", "K", "a", "b", "c", "l_td")
+#: Scales of the cycle variables for the minimum-norm search (K relative to its prior).
+CYCLE_SCALES = {"u": 0.05, "v": 0.02, "d": 0.02, "s": 0.05, "theta0": 0.03, "K": 0.1, "a": 0.01, "b": 0.02,
+                "c": 0.02, "l_td": 0.01}
+#: The second start of the cycle search: a plain spring leg, Geyer et al.'s K ≈ 20 (k = 20 kN/m, m = 80 kg,
+#: l0 = 1 m gives 25), l_d = l0; (K, a, b, c).
+GEYER_CONTROL = (20.0, 0.0, 0.0, 0.0)
+#: Samples of the stance-normalised force profiles (τ = 0 … 1).
+PROFILE_SAMPLES = 51
+
+
+@dataclass(frozen=True)
+class LegSamples:
+    """The legs in contact at each usable frame (sagittal, per stance normalisation).
+
+    frame: (N,) frame index; for every sample the legs (1 or 2) as rows of (M,) arrays: sample (index
+    into frame), stance (index), c = 1 − l/l0 [-], tau [-], ux, uy (unit leg vector foot → COM).
+    """
+
+    frame: np.ndarray
+    sample: np.ndarray
+    stance: np.ndarray
+    comp: np.ndarray
+    tau: np.ndarray
+    ux: np.ndarray
+    uy: np.ndarray
+
+
+def _leg_samples(geo, p_sag, F, dt) -> LegSamples:
+    """Frames covered by complete stances only (every leg in contact has a known touchdown and liftoff)."""
+    cover = [[] for _ in range(F)]
+    usable = np.zeros(F, bool)
+    for i, sg in enumerate(geo):
+        td, lo = sg.t_touchdown / dt, sg.t_liftoff / dt
+        for k in range(int(math.ceil(td)), int(math.floor(lo)) + 1):
+            if 0 <= k < F:
+                cover[k].append(i)
+                usable[k] = True
+    for k in range(F):
+        if any(geo[i].partial for i in cover[k]):
+            usable[k] = False
+    frames, rows = [], []
+    for k in np.flatnonzero(usable):
+        for i in cover[k]:
+            rows.append((len(frames), i, k))
+        frames.append(k)
+    sample = np.array([r[0] for r in rows], int)
+    stance = np.array([r[1] for r in rows], int)
+    kk = np.array([r[2] for r in rows], int)
+    cx = np.array([geo[i].contact_x(k * dt) for i, k in zip(stance, kk)])
+    rx = p_sag[kk, 0] - cx
+    ry = p_sag[kk, 1] - np.array([geo[i].ground for i in stance])
+    l = np.hypot(rx, ry)
+    l0 = np.array([geo[i].l0 for i in stance])
+    td = np.array([geo[i].t_touchdown for i in stance])
+    dur = np.array([geo[i].duration for i in stance])
+    return LegSamples(frame=np.array(frames, int), sample=sample, stance=stance, comp=1.0 - l / l0,
+                      tau=(kk * dt - td) / dur, ux=rx / l, uy=ry / l)
+
+
+def fit_two_leg_control(ls: LegSamples, f_sag_bw: np.ndarray, w_horizontal: float = 1.0):
+    """Least squares of eq. 2 over both legs' force (see module doc).
+
+    f_sag_bw: (F, 2) measured sagittal force (forward, up) [body weights]. Returns (K, a, b, c, r2_vertical,
+    rms_bw) with r2 and rms of the vertical component.
+    """
+    n = ls.frame.size
+    if n < 12:
+        raise FitError(f"only {n} frames lie in complete stances: too few to fit the leg control")
+    cols = np.stack([ls.comp, np.ones_like(ls.tau), ls.tau, ls.tau ** 2], axis=1)  # (M, 4)
+    A = np.zeros((2 * n, 4))
+    np.add.at(A, ls.sample, cols * ls.ux[:, None] * w_horizontal)
+    np.add.at(A, n + ls.sample, cols * ls.uy[:, None])
+    y = np.concatenate([f_sag_bw[ls.frame, 0] * w_horizontal, f_sag_bw[ls.frame, 1]])
+    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    K, KA, KB, KC = coef
+    if not K > 0:
+        raise FitError(f"the legs do not act as springs in this walk (fitted K = {K:.3g})")
+    pred = A[n:] @ coef
+    fy = f_sag_bw[ls.frame, 1]
+    ss = float(np.sum((fy - fy.mean()) ** 2))
+    r2 = 1.0 - float(np.sum((fy - pred) ** 2)) / ss if ss > 0 else float("nan")
+    return float(K), float(KA / K), float(KB / K), float(KC / K), r2, float(np.sqrt(np.mean((fy - pred) ** 2)))
+
+
+def force_landmarks(tau: np.ndarray, fy_bw: np.ndarray, tau_double: float) -> dict:
+    """The two peaks and the trough of the vertical force over one stance.
+
+    tau: (N,) stance phase 0 … 1; fy_bw: (N,) total vertical ground force [BW]; tau_double: the phase
+    length of one double support. The weight-acceptance peak is the largest force in the first
+    2·tau_double of the stance, the push-off peak the largest in the last 2·tau_double (each double
+    support and as long again into single support: where the gait literature places them, around the
+    other foot's liftoff and touchdown); the trough is the smallest force between them.
+    Returns {peak1, trough, peak2 [BW], tau_peak1, tau_trough, tau_peak2 [-]}.
+    """
+    w = min(max(2.0 * tau_double, 0.15), 0.45)
+    first = tau <= w
+    last = tau >= 1.0 - w
+    i1 = np.flatnonzero(first)[np.argmax(fy_bw[first])]
+    i2 = np.flatnonzero(last)[np.argmax(fy_bw[last])]
+    mid = np.arange(i1, i2 + 1)
+    it = mid[np.argmin(fy_bw[mid])]
+    return {"peak1": float(fy_bw[i1]), "trough": float(fy_bw[it]), "peak2": float(fy_bw[i2]),
+            "tau_peak1": float(tau[i1]), "tau_trough": float(tau[it]), "tau_peak2": float(tau[i2])}
+
+
+@dataclass(frozen=True)
+class WalkFitResult:
+    """Everything the walking fit computed, for reports and plots (SI unless stated).
+
+    machine: the WalkingMachine. profile_tau (N,) stance phase; profile_ref (N,) the clip's total vertical
+    force over a stance (mean of its complete stances) [BW]; profile_model (N,) the machine's, measured
+    through the clip's filter; profile_unfiltered (N,) the machine's exact force. t_ref (M,) times of the
+    frames of the complete steps [s], h_ref (M,) their COM height above the ground [m], h_model (M,) the
+    machine's at the phase-matched times [m]. stances: the WalkStance of every contact. t_leg (K,) time
+    since touchdown [s] and l_leg (K,) leg length [m] (COM → rolling centre of pressure) over the clip's
+    first complete stance. steps (S, 3): touchdown, the other foot's liftoff, next touchdown [s].
+    """
+
+    machine: WalkingMachine
+    profile_tau: np.ndarray
+    profile_ref: np.ndarray
+    profile_model: np.ndarray
+    profile_unfiltered: np.ndarray
+    t_ref: np.ndarray
+    h_ref: np.ndarray
+    h_model: np.ndarray
+    stances: tuple
+    t_leg: np.ndarray
+    l_leg: np.ndarray
+    steps: np.ndarray
+
+
+def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40):
+    """Minimum-norm Newton for the periodic walking cycle matching targets (see module doc).
+
+    z0: (9,) priors; T_c held; targets (t_stance, t_double, mean_speed) dimensionless.
+    Returns (z, WalkStep, iterations, residual max-norm).
+    """
+    s = np.array([CYCLE_SCALES[v] for v in _VARS])
+    s[5] *= abs(z0[5])
+    h = 1e-7 * np.maximum(np.abs(z0), 1.0)
+    tgt = np.asarray(targets, float)
+
+    def evaluate(z):
+        ctl = Control(K=z[5], a=z[6], b=z[7], c=z[8], T_c=T_c)
+        w = walk_step(WalkState(*z[:4]), z[4], ctl, roll=roll, l_td=z[9], n_per_stance=n_per_stance)
+        if not w.valid:
+            return None, w
+        nx = w.next
+        R = np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3],
+                      (w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
+                      (w.step_length / w.t_step - tgt[2]) / tgt[2]])
+        return R, w
+
+    z = z0.copy()
+    R, w = evaluate(z)
+    if R is None:
+        raise FitError(f"the measured walking step is not a valid machine step: {REASONS[w.reason]}")
+    nrm = float(np.max(np.abs(R)))
+    it = 0
+    for it in range(1, max_iter + 1):
+        if nrm <= tol:
+            break
+        J = np.empty((R.size, z.size))
+        for j in range(z.size):
+            zj = z.copy()
+            zj[j] += h[j]
+            Rj, wj = evaluate(zj)
+            if Rj is None:
+                zj[j] -= 2 * h[j]
+                Rj, wj = evaluate(zj)
+                if Rj is None:
+                    raise FitError(f"no walking cycle found: the search left the feasible region "
+                                   f"({REASONS[wj.reason]})")
+                J[:, j] = (R - Rj) / h[j]
+            else:
+                J[:, j] = (Rj - R) / h[j]
+        Js = J * s[None, :]
+        y = (z - z0) / s
+        y_new, *_ = np.linalg.lstsq(Js, Js @ y - R, rcond=1e-12)
+        dz = z0 + s * y_new - z
+        for _ in range(30):
+            Rt, wt = evaluate(z + dz)
+            if Rt is not None and float(np.max(np.abs(Rt))) < nrm:
+                break
+            dz *= 0.5
+        else:
+            raise FitError(f"no periodic walking cycle found: the search stalled at residual {nrm:.2g}")
+        z = z + dz
+        R, w = Rt, wt
+        nrm = float(np.max(np.abs(R)))
+    if not nrm <= tol:
+        raise FitError(f"no periodic walking cycle found within {max_iter} iterations (residual {nrm:.2g})")
+    return z, w, it, nrm
+
+
+def stance_force_profile(state, theta0, ctl, w, tau, roll=0.0, l_td=1.0, n_per_stance=N_PER_STANCE, *,
+                         frame_time=None, cutoff_hz=CUTOFF_HZ, time_unit=1.0):
+    """Total vertical force [m g] of the periodic machine over one leg's stance at phases tau (N,).
+
+    The leg lands at the start of a step and lifts off t_stance later; the total force of both legs
+    repeats every step, so the stance profile is the step's force at (τ t_stance) mod t_step.
+    w: the WalkStep of (state, theta0, ctl). With ``frame_time`` [s] (and ``time_unit`` √(l0/g) [s]) the
+    force is *measured like the clip's*: the machine's COM is sampled at the clip's frame rate over
+    several steps and goes through the same zero-lag filter and double differentiation (eq. 1,
+    :func:`froude.machine.forces.smooth_com`), so both forces are seen through the same instrument.
+    """
+    t_m = (np.asarray(tau, float) * w.t_stance) % w.t_step
+    if frame_time is None:
+        tr = simulate_walk(state, theta0, ctl, t_m, roll=roll, l_td=l_td, n_per_stance=n_per_stance)
+        return tr.total_force[:, 1]
+    dt = frame_time / time_unit
+    n_steps = 8
+    t = np.arange(int(n_steps * w.t_step / dt)) * dt
+    k, ph = np.divmod(t, w.t_step)
+    tr = simulate_walk(state, theta0, ctl, ph, roll=roll, l_td=l_td, n_per_stance=n_per_stance)
+    pos = np.zeros((t.size, 3))
+    pos[:, 2] = tr.pos[:, 0] + k * w.step_length
+    pos[:, UP_AXIS] = tr.pos[:, 1]
+    _, _, acc = smooth_com(pos * GRAVITY * time_unit ** 2, frame_time, cutoff_hz)  # [m]: l0 = g T²
+    fy = acc[:, UP_AXIS] / GRAVITY + 1.0
+    mid = k == n_steps // 2  # one step far from the edges
+    return np.interp(t_m, ph[mid], fy[mid], period=w.t_step)
+
+
+#: Weights of the shape fit: periodicity and measured times are (nearly) hard, the force profile soft.
+SHAPE_WEIGHTS = {"periodic": 100.0, "targets": 30.0, "prior": 0.05, "com": 10.0}
+#: Simulator resolution and evaluation budget of the shape fit (the exact cycle is found after it).
+SHAPE_N_PER_STANCE = 120
+SHAPE_MAX_EVALUATIONS = 120
+#: Samples of the step-phase COM height profile (double support, then single support).
+COM_SAMPLES = (8, 24)
+
+
+def stance_leg_length(m, tau, n_per_stance=N_PER_STANCE):
+    """Leg length l and desired length l_d [l0] of one leg of the periodic machine ``m`` over its stance.
+
+    m: a WalkingMachine; tau (N,) stance phase 0 … 1 (by T_c = the stance time). The leg is the leading
+    one of a step until t_step, then the trailing one of the next (the same step, by periodicity).
+    """
+    tau = np.asarray(tau, float)
+    t = tau * m.t_stance
+    first = t <= m.t_step
+    tq = np.where(first, t, t - m.t_step)
+    tr = simulate_walk(m.state, m.theta0, m.control, tq, roll=m.roll, l_td=m.l_td, n_per_stance=n_per_stance)
+    xc = np.where(first, tr.contact_x[1], tr.contact_x[0]) + m.roll * tau
+    l = np.hypot(tr.pos[:, 0] - xc, tr.pos[:, 1])
+    return l, 1.0 + m.a + tau * (m.b + m.c * tau)
+
+
+def step_phase_times(t_double, t_step):
+    """(N,) times of the step-phase grid: COM_SAMPLES[0] in double support, COM_SAMPLES[1] in single."""
+    n1, n2 = COM_SAMPLES
+    return np.concatenate([np.linspace(0.0, t_double, n1, endpoint=False), np.linspace(t_double, t_step, n2)])
+
+
+def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_unit, n_per_stance=SHAPE_N_PER_STANCE):
+    """Least squares of the machine's stance force profile against the clip's, near-periodic.
+
+    Residuals: the vertical force over a stance at tau [BW]; the periodicity and the relative errors of
+    stance time, double-support time and speed, weighted up (``SHAPE_WEIGHTS``); a weak pull to the
+    periodic start z1 in CYCLE_SCALES units. Returns z (9,); the exact cycle is found from it after.
+    """
+    from scipy.optimize import least_squares
+
+    s = np.array([CYCLE_SCALES[v] for v in _VARS])
+    s[5] *= abs(z1[5])
+    tgt = np.asarray(targets, float)
+    wp, wt, wr = SHAPE_WEIGHTS["periodic"], SHAPE_WEIGHTS["targets"], SHAPE_WEIGHTS["prior"]
+    n_res = tau.size + h_ref.size + 7 + z1.size
+    wc = SHAPE_WEIGHTS["com"]
+
+    def resid(z):
+        ctl = Control(K=z[5], a=z[6], b=z[7], c=z[8], T_c=T_c)
+        st = WalkState(*z[:4])
+        w = walk_step(st, z[4], ctl, roll=roll, l_td=z[9], n_per_stance=n_per_stance)
+        if not w.valid:
+            return np.full(n_res, 10.0)
+        prof = stance_force_profile(st, z[4], ctl, w, tau, roll, z[9], n_per_stance, frame_time=frame_time,
+                                    time_unit=time_unit)
+        h = simulate_walk(st, z[4], ctl, step_phase_times(w.t_double, w.t_step), roll=roll, l_td=z[9],
+                          n_per_stance=n_per_stance).pos[:, 1]
+        nx = w.next
+        per = np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3]]) * wp
+        tg = np.array([(w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
+                       (w.step_length / w.t_step - tgt[2]) / tgt[2]]) * wt
+        return np.concatenate([prof - prof_ref, wc * (h - h_ref), per, tg, wr * (z - z1) / s])
+
+    sol = least_squares(resid, z1, x_scale=s, diff_step=1e-6, max_nfev=SHAPE_MAX_EVALUATIONS, method="trf")
+    return sol.x, float(sol.cost)
+
+
+def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: float = 70.0, *,
+                         cutoff_hz: float = CUTOFF_HZ, n_per_stance: int = N_PER_STANCE,
+                         source: str | None = None) -> WalkFitResult:
+    """Fit the simple walking machine to a walking motion (see module doc).
+
+    Raises NotARunningMotion when the clip is not a walk (with the gait's reason) or has too few
+    complete steps, FitError when no periodic cycle is found.
+    """
+    src = source or str(motion.meta.get("source") or "motion")
+    if body is None:
+        body = BodyModel.from_skeleton(motion.skeleton, mass=mass)
+    mass = body.total_mass
+    mg = mass * GRAVITY
+    com, markers = body.com_and_markers(motion)
+    gait = detect_gait(motion, body, markers)
+    summary = summarize(motion, body, com, gait)
+    if summary.kind != "walking":
+        raise NotARunningMotion(f"{src}: not a walk ({summary.reason})")
+    dt = motion.frame_time
+    F = motion.n_frames
+    times = np.arange(F) * dt
+    p, v, acc = smooth_com(com, dt, cutoff_hz)
+    f = ground_force(acc, mass)
+    heading, lateral = sagittal_frame(summary.heading)
+    lat = p @ lateral
+    line = np.polyfit(times, lat, 1)
+
+    x_fwd = p @ heading
+    geo, stances = [], []
+    for st in gait.stances:
+        td = st.t_on if math.isfinite(st.t_on) else st.start - 0.5
+        lo = st.t_off if math.isfinite(st.t_off) else st.stop - 0.5
+        td, lo = max(td, 0.0), min(lo, F - 1.0)
+        if lo - td < 4:
+            continue
+        stances.append(st)
+        geo.append(_stance(st, td, lo, x_fwd, p[:, UP_AXIS], markers, heading, dt))
+    # Complete steps: a touchdown (lead) while the other foot's stance (trail) is on, then the trail's
+    # liftoff, then the next touchdown (the other foot again).
+    steps = []
+    for j, gl in enumerate(geo):
+        if stances[j].start == 0:
+            continue
+        trail = [i for i in range(j) if geo[i].foot != gl.foot and geo[i].t_touchdown < gl.t_touchdown
+                 < geo[i].t_liftoff and not geo[i].partial]
+        nxt = [k for k in range(j + 1, len(geo)) if geo[k].foot != gl.foot and stances[k].start > 0
+               and geo[k].t_touchdown > gl.t_touchdown]
+        if trail and nxt:
+            steps.append((trail[-1], j, nxt[0]))
+    full = [sg for sg in geo if not sg.partial]
+    if len(steps) < 1 or len(full) < 1:
+        raise NotARunningMotion(f"{src}: no complete walking step (touchdown, the other foot's liftoff, "
+                                "the next touchdown) inside the clip")
+
+    t_td = np.array([geo[j].t_touchdown for _, j, _ in steps])
+    t_lo = np.array([geo[i].t_liftoff for i, _, _ in steps])
+    t_nx = np.array([geo[k].t_touchdown for _, _, k in steps])
+    stance_time = float(np.mean([sg.duration for sg in full]))
+    double_time = float(np.mean(t_lo - t_td))
+    step_time = float(np.mean(t_nx - t_td))
+    t_first, t_last = float(t_td.min()), float(t_nx.max())
+    mean_speed = float((np.interp(t_last, times, x_fwd) - np.interp(t_first, times, x_fwd)) / (t_last - t_first))
+
+    # Priors at the touchdowns (dimensionless, l0 = mean touchdown leg length).
+    l0 = float(np.mean([geo[j].l0 for _, j, _ in steps]))
+    T = math.sqrt(l0 / GRAVITY)
+    V = math.sqrt(GRAVITY * l0)
+    u0 = float(np.mean(np.interp(t_td, times, v @ heading))) / V
+    v0 = float(np.mean(np.interp(t_td, times, v[:, UP_AXIS]))) / V
+    d0 = float(np.mean([np.interp(geo[j].t_touchdown, times, x_fwd) - geo[i].x_touchdown
+                        for i, j, _ in steps])) / l0
+    roll = float(np.mean([sg.roll for sg in full])) / l0
+    th0 = float(np.mean([geo[j].theta_touchdown for _, j, _ in steps]))
+
+    f_sag = np.stack([f @ heading, f[:, UP_AXIS]], axis=1) / mg
+    p_sag = np.stack([x_fwd, p[:, UP_AXIS]], axis=1)
+    ls = _leg_samples(geo, p_sag, F, dt)
+    starts = [GEYER_CONTROL]
+    try:
+        K0, a0, b0, c0, r2, rms = fit_two_leg_control(ls, f_sag)
+        starts.insert(0, (K0, a0, b0, c0))
+    except FitError as e:  # the plain spring start remains; the failure is reported in the machine's fit
+        K0 = a0 = b0 = c0 = r2 = rms = float("nan")
+        fit_note = str(e)
+    else:
+        fit_note = ""
+    T_c = stance_time / T  # τ runs 0 … 1 over the clip's mean stance
+    targets = (step_time / T, double_time / T, mean_speed / V)
+    tau = np.linspace(0.0, 1.0, PROFILE_SAMPLES)
+    prof_ref = np.mean([np.interp(sg.t_touchdown + tau * sg.duration, times, f_sag[:, 1]) for sg in full], axis=0)
+    # COM height above the ground (interpolated between the stances' grounds) over a step, phase-matched.
+    tk = np.array([0.5 * (sg.t_touchdown + sg.t_liftoff) for sg in geo])
+    gk = np.array([sg.ground for sg in geo])
+
+    def height(t):
+        return np.interp(t, times, p[:, UP_AXIS]) - np.interp(t, tk, gk)
+
+    ph = step_phase_times(double_time, step_time)
+    h_ref_step = np.mean([height(np.interp(ph, [0.0, double_time, step_time], [a, b, c]))
+                          for a, b, c in zip(t_td, t_lo, t_nx)], axis=0) / l0
+
+    # Two starts: the least-squares control, and a plain spring leg (Geyer's K ≈ 20, l_d = l0) in case
+    # the force of the clip does not determine the control well; the better shape fit wins.
+    best = None
+    errors = []
+    for ctl0 in starts:
+        z0 = np.array([u0, v0, d0, step_time / T, th0, *ctl0, 1.0])
+        try:
+            z1, _, it1, _ = _cycle_search(z0, T_c, roll, targets, n_per_stance)
+            z2, cost = _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref_step, dt, T)
+            z, w, it2, _ = _cycle_search(z2, T_c, roll, targets, n_per_stance)
+        except FitError as e:
+            errors.append(str(e))
+            continue
+        if best is None or cost < best[1]:
+            best = (z, cost, w, it1 + it2, z0)
+    if best is None:
+        raise FitError(f"{src}: {errors[-1]}")
+    z, cost, w, iters, z0 = best
+    state = WalkState(*map(float, z[:4]))
+    th, ctl = float(z[4]), Control(K=float(z[5]), a=float(z[6]), b=float(z[7]), c=float(z[8]), T_c=T_c)
+    l_td = float(z[9])
+    nx = w.next
+    periodicity = float(max(abs(nx.u - state.u), abs(nx.v - state.v), abs(nx.d - state.d), abs(nx.s - state.s)))
+    prof_model = stance_force_profile(state, th, ctl, w, tau, roll, l_td, n_per_stance, frame_time=dt, time_unit=T)
+    prof_raw = stance_force_profile(state, th, ctl, w, tau, roll, l_td, n_per_stance)
+    lm_ref = force_landmarks(tau, prof_ref, double_time / stance_time)
+    lm_mod = force_landmarks(tau, prof_model, w.t_double / w.t_stance)
+    lm_raw = force_landmarks(tau, prof_raw, w.t_double / w.t_stance)
+
+    # COM height over every complete step, phase-matched (double support → double support, single →
+    # single).
+    t_ref, h_ref, h_mod = [], [], []
+    for a, b, c in zip(t_td, t_lo, t_nx):
+        tt = times[(times >= a) & (times <= c)]
+        tm = np.interp(tt, [a, b, c], [0.0, w.t_double, w.t_step])
+        trj = simulate_walk(state, th, ctl, tm, roll=roll, l_td=l_td, n_per_stance=n_per_stance)
+        t_ref.append(tt)
+        h_ref.append(height(tt))
+        h_mod.append(trj.pos[:, 1] * l0)
+    t_ref, h_ref, h_mod = map(np.concatenate, (t_ref, h_ref, h_mod))
+    com_rms = float(np.sqrt(np.mean((h_mod - h_ref) ** 2)))
+
+    def timing(key):
+        # stance phase → time since touchdown [s], as a share of the clip's step
+        return float((lm_mod[key] * w.t_stance * T - lm_ref[key] * stance_time) / step_time)
+
+    reference = {"stance_time_s": stance_time, "double_support_s": double_time, "step_time_s": step_time,
+                 "mean_speed_m_s": mean_speed, "theta0_rad": th0, "roll_m": roll * l0, "n_steps": len(steps),
+                 "steps_s": [[float(a), float(b), float(c)] for a, b, c in zip(t_td, t_lo, t_nx)],
+                 "force_bw": lm_ref, "frame_time_s": dt,
+                 "filter": {"kind": "butterworth forward-backward, quadratic edge extension", "cutoff_hz": cutoff_hz}}
+    quality = {
+        "com_rms_m": com_rms,
+        "stance_time_error": w.t_stance * T / stance_time - 1.0,
+        "double_support_error": w.t_double * T / double_time - 1.0,
+        "step_time_error": w.t_step * T / step_time - 1.0,
+        "mean_speed_error": w.step_length / w.t_step * V / mean_speed - 1.0,
+        "force_bw": lm_mod, "force_unfiltered_bw": lm_raw,
+        "peak1_error_bw": lm_mod["peak1"] - lm_ref["peak1"], "trough_error_bw": lm_mod["trough"] - lm_ref["trough"],
+        "peak2_error_bw": lm_mod["peak2"] - lm_ref["peak2"],
+        "peak1_timing_error_step": timing("tau_peak1"), "trough_timing_error_step": timing("tau_trough"),
+        "peak2_timing_error_step": timing("tau_peak2"),
+        "force_profile_rms_bw": float(np.sqrt(np.mean((prof_model - prof_ref) ** 2))),
+    }
+    fit = {"K": K0, "a": a0, "b": b0, "c": c0, "r2_vertical": r2, "rms_bw": rms, "note": fit_note,
+           "prior": dict(zip(_VARS, map(float, z0))), "shape_cost": float(cost)}
+    machine = WalkingMachine(
+        u=state.u, v=state.v, d=state.d, s=state.s, theta0=th, l_td=l_td, roll=roll, K=ctl.K, a=ctl.a, b=ctl.b,
+        c=ctl.c, T_c=T_c, t_stance=w.t_stance, t_double=w.t_double, t_step=w.t_step, step_length=w.step_length,
+        mean_speed=w.step_length / w.t_step, periodicity=periodicity, iterations=iters, mass=mass, l0=l0,
+        g=GRAVITY, source=src, heading=heading, lateral=lateral, up=np.eye(3)[UP_AXIS], ground=float(gait.ground),
+        reference=reference, quality=quality, fit=fit)
+    # The clip's leg length over its first complete stance (COM → rolling centre of pressure).
+    sg = full[0]
+    t_leg = times[(times >= sg.t_touchdown) & (times <= sg.t_liftoff)]
+    l_leg = np.hypot(np.interp(t_leg, times, x_fwd) - sg.contact_x(t_leg), height(t_leg))
+    return WalkFitResult(machine=machine, profile_tau=tau, profile_ref=prof_ref, profile_model=prof_model,
+                         profile_unfiltered=prof_raw, t_ref=t_ref, h_ref=h_ref, h_model=h_mod, stances=tuple(geo),
+                         t_leg=t_leg - sg.t_touchdown, l_leg=l_leg, steps=np.array([t_td, t_lo, t_nx]).T)
+
+
+@dataclass(frozen=True)
+class WalkStance:
+    """One foot contact of a walk (SI, sagittal; times from the clip's first frame).
+
+    foot 0 left / 1 right; partial: cut by the clip's edge; t_touchdown, t_liftoff [s] (marker events,
+    see module doc); ground [m]; the centre of pressure rolls along the line x_touchdown + roll·τ [m]
+    (least squares of the foot's lowest marker over the stance, τ = 0 … 1); l0: COM distance from the
+    touchdown point at touchdown [m]; theta_touchdown: leg angle from vertical there [rad], + ahead.
+    """
+
+    foot: int
+    partial: bool
+    t_touchdown: float
+    t_liftoff: float
+    ground: float
+    x_touchdown: float
+    roll: float
+    l0: float
+    theta_touchdown: float
+
+    @property
+    def duration(self) -> float:
+        return self.t_liftoff - self.t_touchdown
+
+    def contact_x(self, t):
+        """Centre of pressure [m] (forward) at times t [s]."""
+        return self.x_touchdown + self.roll * (np.asarray(t, float) - self.t_touchdown) / self.duration
+
+
+def _stance(st, td, lo, x_fwd, y_com, markers, heading, dt) -> WalkStance:
+    """Geometry of one marker stance [td, lo] (fractional frames); x_fwd, y_com (F,) COM [m]."""
+    frames = np.arange(int(math.ceil(td)), int(math.floor(lo)) + 1)
+    mk = markers[frames, st.foot]  # (N, 3 markers, 3)
+    low = mk[np.arange(frames.size), np.argmin(mk[..., UP_AXIS], axis=1)] @ heading
+    tau = (frames - td) / (lo - td)
+    roll, x0 = np.polyfit(tau, low, 1)
+    fr = np.arange(x_fwd.size)
+    rx = x0 - np.interp(td, fr, x_fwd)
+    ry = np.interp(td, fr, y_com) - st.ground
+    return WalkStance(foot=int(st.foot), partial=bool(st.partial), t_touchdown=td * dt, t_liftoff=lo * dt,
+                      ground=float(st.ground), x_touchdown=float(x0), roll=float(roll), l0=float(np.hypot(rx, ry)),
+                      theta_touchdown=float(np.arctan2(rx, ry)))

@@ -1,0 +1,166 @@
+"""The fitted simple walking machine: dimensionless core + SI view, versioned JSON (``froude.walking/1``).
+
+The walking counterpart of :class:`froude.machine.model.SimpleMachine`. Canonical content is
+dimensionless (l0 = 1, g = 1, m = 1; see :mod:`froude.machine.walking`): the periodic touchdown state
+(u, v, d, s), the touchdown geometry (θ0, l_td), the centre-of-pressure roll, the eq. 2 control of both
+legs (K, a, b, c, T_c) and the cycle's times. The SI view multiplies by l0 [m], m [kg] and g, so
+:meth:`WalkingMachine.scaled` is dynamic similarity (Table 1): lengths × L, times × √L, speeds × √L,
+forces × M; dimensionless numbers, angles and body-weight forces unchanged.
+
+JSON (all keys always present)::
+
+  schema, kind: "walking", source, mass_kg, l0_m, g_m_s2,
+  cycle: {u, v, d, s, theta0_rad, l_td, roll, K, a, b, c, T_c, t_stance, t_double, t_step, step_length,
+          mean_speed, periodicity, iterations}                                  # dimensionless
+  cycle_si: {...}                                                               # derived, informative
+  frame: {heading, lateral, up, ground_m}
+  reference: {...measured on the clip, SI...}, quality: {...}, fit: {...}
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..constants import GRAVITY
+from ..errors import FitError
+from ..io.atomic import atomic_write_text
+from ..io.jsonable import dumps
+from .dynamics import Control
+from .walking import WalkState
+
+__all__ = ["WALK_SCHEMA", "WalkingMachine", "load_walking_machine"]
+
+WALK_SCHEMA = "froude.walking/1"
+_CYCLE = ("u", "v", "d", "s", "l_td", "roll", "K", "a", "b", "c", "T_c", "t_stance", "t_double", "t_step",
+          "step_length", "mean_speed", "periodicity")
+
+
+@dataclass(frozen=True)
+class WalkingMachine:
+    """A periodic walking cycle of the two-leg machine fitted to a reference walk.
+
+    Dimensionless (units l0, √(l0/g), √(g l0), m g): touchdown state u, v (COM velocity), d (COM ahead of
+    the trailing touchdown point), s (time since the trailing touchdown); theta0 [rad] and l_td (leg
+    length at touchdown) place the landing foot; roll: centre-of-pressure travel per unit τ; K, a, b, c,
+    T_c: eq. 2 control of both legs; t_stance, t_double (one double support), t_step; step_length;
+    mean_speed (the Froude number U of the gait); periodicity: max |next − state| at the cycle.
+    SI: mass [kg], l0 [m] (mean touchdown leg length COM → touchdown point), g [m/s²].
+    reference / quality / fit: measured figures, fit-quality figures and the control fit (SI, BW).
+    """
+
+    u: float
+    v: float
+    d: float
+    s: float
+    theta0: float
+    l_td: float
+    roll: float
+    K: float
+    a: float
+    b: float
+    c: float
+    T_c: float
+    t_stance: float
+    t_double: float
+    t_step: float
+    step_length: float
+    mean_speed: float
+    periodicity: float
+    iterations: int
+    mass: float
+    l0: float
+    g: float = GRAVITY
+    source: str = ""
+    heading: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    lateral: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
+    up: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
+    ground: float = 0.0
+    reference: dict = field(default_factory=dict)
+    quality: dict = field(default_factory=dict)
+    fit: dict = field(default_factory=dict)
+
+    kind = "walking"
+
+    @property
+    def time_unit(self) -> float:
+        """√(l0/g) [s]."""
+        return math.sqrt(self.l0 / self.g)
+
+    @property
+    def speed_unit(self) -> float:
+        """√(g l0) [m/s]."""
+        return math.sqrt(self.g * self.l0)
+
+    @property
+    def control(self) -> Control:
+        return Control(K=self.K, a=self.a, b=self.b, c=self.c, T_c=self.T_c)
+
+    @property
+    def state(self) -> WalkState:
+        return WalkState(self.u, self.v, self.d, self.s)
+
+    @property
+    def double_support_fraction(self) -> float:
+        """Share of the gait cycle with both feet down: 2 t_double / (2 t_step)."""
+        return self.t_double / self.t_step
+
+    def si(self) -> dict:
+        """The cycle in SI."""
+        T, L, V = self.time_unit, self.l0, self.speed_unit
+        return {"k_N_m": self.K * self.mass * self.g / L, "l0_m": L, "theta0_deg": math.degrees(self.theta0),
+                "touchdown_leg_m": self.l_td * L, "roll_m": self.roll * L, "stance_time_s": self.t_stance * T,
+                "double_support_s": self.t_double * T, "step_time_s": self.t_step * T,
+                "step_frequency_hz": 1.0 / (self.t_step * T), "step_length_m": self.step_length * L,
+                "mean_speed_m_s": self.mean_speed * V, "double_support_fraction": self.double_support_fraction}
+
+    def scaled(self, L: float, M: float = 1.0) -> "WalkingMachine":
+        """The dynamically similar machine for a character L times longer and M times heavier."""
+        if not (L > 0 and M > 0):
+            raise FitError(f"scale factors must be > 0 (L={L}, M={M})")
+        return replace(self, mass=self.mass * M, l0=self.l0 * L, ground=self.ground * L,
+                       source=self.source + f" (scaled L={L:g}, M={M:g})")
+
+    def to_dict(self) -> dict:
+        cyc = {k: getattr(self, k) for k in _CYCLE}
+        cyc["theta0_rad"] = self.theta0
+        cyc["iterations"] = self.iterations
+        return {"schema": WALK_SCHEMA, "kind": "walking", "source": self.source, "mass_kg": self.mass,
+                "l0_m": self.l0, "g_m_s2": self.g, "cycle": cyc, "cycle_si": self.si(),
+                "frame": {"heading": self.heading, "lateral": self.lateral, "up": self.up, "ground_m": self.ground},
+                "reference": self.reference, "quality": self.quality, "fit": self.fit}
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "machine") -> "WalkingMachine":
+        if not isinstance(d, dict) or d.get("schema") != WALK_SCHEMA:
+            got = d.get("schema") if isinstance(d, dict) else type(d).__name__
+            raise FitError(f"{where}: not a froude walking machine file (schema {got!r}, expected {WALK_SCHEMA!r})")
+        try:
+            c, fr = d["cycle"], d["frame"]
+            kw = {k: float(c[k]) for k in _CYCLE}
+            return cls(**kw, theta0=float(c["theta0_rad"]), iterations=int(c["iterations"]),
+                       mass=float(d["mass_kg"]), l0=float(d["l0_m"]), g=float(d["g_m_s2"]), source=str(d["source"]),
+                       heading=np.asarray(fr["heading"], float), lateral=np.asarray(fr["lateral"], float),
+                       up=np.asarray(fr["up"], float), ground=float(fr["ground_m"]),
+                       reference=dict(d["reference"]), quality=dict(d["quality"]), fit=dict(d["fit"]))
+        except (KeyError, TypeError, ValueError) as e:
+            raise FitError(f"{where}: malformed {WALK_SCHEMA} file ({type(e).__name__}: {e})") from None
+
+    def save(self, path) -> None:
+        """Write the machine as JSON, atomically (no NaN: unmeasurable figures are null)."""
+        atomic_write_text(path, dumps(self.to_dict(), indent=1) + "\n")
+
+
+def load_walking_machine(path) -> WalkingMachine:
+    """Read a ``froude.walking/1`` JSON file; FitError with the path on any problem."""
+    p = Path(path)
+    try:
+        d = json.loads(p.read_text())
+    except OSError as e:
+        raise FitError(f"{path}: cannot read ({e.strerror})") from None
+    except json.JSONDecodeError as e:
+        raise FitError(f"{path}:{e.lineno}: not valid JSON ({e.msg})") from None
+    return WalkingMachine.from_dict(d, str(path))

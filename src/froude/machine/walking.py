@@ -1,0 +1,349 @@
+"""The dimensionless simple walking machine: a bipedal spring-mass model with controlled legs.
+
+The walking counterpart of :mod:`froude.machine.dynamics` (Geyer, Seyfarth & Blickhan 2006, Proc. R.
+Soc. B 273:2861: a point mass on two massless compliant legs, with double support, which reproduces
+the M-shaped vertical force and the vaulting COM path of human walking). Each leg is controlled as in
+Pollard's eq. 2, with the same control for both legs (a symmetric gait)::
+
+    f_i = K (l_d(τ_i) − l_i),   l_d(τ) = 1 + a + b τ + c τ²,   τ_i = (t − t_touchdown,i) / T_c
+
+along the leg from its contact point to the COM, in the sagittal plane: x forward, y up, ground y = 0.
+Units are those of the running machine (touchdown leg length l0 = 1, g = 1, m = 1; see the table in
+:mod:`froude.machine.dynamics`; its ``to_si_*`` helpers convert).
+
+One *step* runs from a touchdown to the next (the Poincaré section of the gait):
+
+* touchdown: the swinging leg lands at angle θ0 from vertical, ahead of the COM, when the COM height
+  falls to cos θ0 (Geyer's landing rule, dimensionless). The state there is ``WalkState``:
+  (u, v) the COM velocity, d the COM's distance ahead of the trailing foot, s the time since the
+  trailing leg touched down;
+* double support: both legs push (a leg is clamped at ≥ 0 force until it first pushes, "armed", as in
+  the running machine); it ends when the trailing leg's force falls to zero (its liftoff);
+* single support on the leading leg until the next touchdown. A leg force falling to zero here would
+  be a flight phase (running, not walking): the step is invalid.
+
+A periodic gait is a fixed point of the step map (u', v', d', s') = (u, v, d, s); its stance time is
+s + t_double and its double-support time t_double. Integration is classical RK4 with a fixed step
+``T_c / N_PER_STANCE``; events are located inside a step by secant iterations on partial RK4 steps
+(≈1e-13), so the step map is smooth in its inputs for finite-difference Jacobians. Rows are integrated
+one at a time with plain floats: a cycle search needs ~10 rows per call, where scalar code beats
+NumPy (as in the running machine's small-batch path).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import PlanError
+from .dynamics import Control
+
+__all__ = ["WalkState", "WalkStep", "WalkTrajectory", "walk_step", "simulate_walk", "N_PER_STANCE",
+           "REASONS", "OK"]
+
+#: RK4 steps per nominal stance T_c.
+N_PER_STANCE = 240
+#: COM height [l0] at or below which the machine has collapsed.
+MIN_COM_HEIGHT = 0.2
+#: Longest allowed phase, in units of T_c.
+MAX_PHASE_FACTOR = 3.0
+
+OK = 0
+BAD_INPUT = 1        #: non-finite input, K ≤ 0, T_c ≤ 0, s < 0, or θ0 outside (0, π/2)
+NO_DOUBLE_SUPPORT = 2  #: the trailing leg pushes no more at touchdown (a flight phase came before)
+COLLAPSE = 3         #: COM height ≤ MIN_COM_HEIGHT
+STALL = 4            #: forward velocity ≤ 0
+NO_EVENT = 5         #: a phase longer than MAX_PHASE_FACTOR · T_c
+FLIGHT = 6           #: the stance leg's force fell to zero in single support: running, not walking
+LOW_VAULT = 7        #: the COM fell below the landing height before passing over the stance foot
+REASONS = {
+    OK: "ok", BAD_INPUT: "bad input (non-finite, K <= 0, T_c <= 0, s < 0 or theta0 outside (0, 90) deg)",
+    NO_DOUBLE_SUPPORT: "the trailing leg is already unloaded at touchdown (no double support)",
+    COLLAPSE: "COM collapsed (height <= 0.2 l0)", STALL: "forward velocity <= 0 (stall)",
+    NO_EVENT: "no liftoff or touchdown within the phase time limit",
+    FLIGHT: "the stance leg unloaded in single support (a flight phase: running, not walking)",
+    LOW_VAULT: "the COM fell below the landing height before vaulting over the stance foot",
+}
+
+
+@dataclass(frozen=True)
+class WalkState:
+    """The state at a touchdown (dimensionless): COM velocity (u forward, v up) [√(g l0)], the COM's
+    horizontal distance d ahead of the trailing contact [l0], the time s since the trailing leg's
+    touchdown [√(l0/g)]. The COM height there is cos θ0 and the new contact is sin θ0 ahead of it."""
+
+    u: float
+    v: float
+    d: float
+    s: float
+
+    def as_tuple(self):
+        return (self.u, self.v, self.d, self.s)
+
+
+@dataclass(frozen=True)
+class WalkStep:
+    """One step touchdown → touchdown (dimensionless; x from the COM at the first touchdown).
+
+    next: the WalkState at the next touchdown; t_double: double support (touchdown → trailing liftoff);
+    t_step: touchdown → next touchdown; t_stance = s + t_double: the trailing leg's whole stance;
+    step_length: contact → next contact [l0]; y_min: lowest COM height (in double support) [l0];
+    y_max: highest [l0]; valid, reason (see REASONS).
+    """
+
+    next: WalkState | None
+    t_double: float
+    t_step: float
+    t_stance: float
+    step_length: float
+    y_min: float
+    y_max: float
+    valid: bool
+    reason: int
+
+
+def _ld(tau, a1, b, c):
+    return a1 + tau * (b + c * tau)
+
+
+class _Machine:
+    """Scalar RK4 of the two-leg machine for one control; legs given as (contact x, touchdown time)."""
+
+    def __init__(self, ctl: Control, n_per_stance: int, roll: float = 0.0):
+        self.roll = float(roll)
+        self.K = float(ctl.K)
+        self.a1 = 1.0 + float(ctl.a)
+        self.b = float(ctl.b)
+        self.c = float(ctl.c)
+        self.Tc = float(ctl.T_c)
+        self.h = self.Tc / n_per_stance
+
+    def leg(self, x, y, t, xc, t0, armed):
+        """(force along the leg [m g], unclamped g = l_d − l, ux, uy) of one leg.
+
+        The centre of pressure rolls forward from the touchdown point xc at ``roll`` l0 per unit τ.
+        """
+        tau = (t - t0) / self.Tc
+        dx = x - xc - self.roll * tau
+        l = math.sqrt(dx * dx + y * y)
+        g = _ld(tau, self.a1, self.b, self.c) - l
+        f = self.K * (g if armed else max(g, 0.0))
+        return f, g, dx / l, y / l
+
+    def accel(self, x, y, t, legs, armed):
+        ax, ay = 0.0, -1.0
+        for (xc, t0), arm in zip(legs, armed):
+            f, _, ux, uy = self.leg(x, y, t, xc, t0, arm)
+            ax += f * ux
+            ay += f * uy
+        return ax, ay
+
+    def rk4(self, s, t, h, legs, armed):
+        """One RK4 step of size h from state s = (x, y, vx, vy) at time t."""
+        x, y, vx, vy = s
+        k1x, k1y = self.accel(x, y, t, legs, armed)
+        hh = 0.5 * h
+        x2, y2, vx2, vy2 = x + hh * vx, y + hh * vy, vx + hh * k1x, vy + hh * k1y
+        k2x, k2y = self.accel(x2, y2, t + hh, legs, armed)
+        x3, y3, vx3, vy3 = x + hh * vx2, y + hh * vy2, vx + hh * k2x, vy + hh * k2y
+        k3x, k3y = self.accel(x3, y3, t + hh, legs, armed)
+        x4, y4, vx4, vy4 = x + h * vx3, y + h * vy3, vx + h * k3x, vy + h * k3y
+        k4x, k4y = self.accel(x4, y4, t + h, legs, armed)
+        h6 = h / 6.0
+        return (x + h6 * (vx + 2 * vx2 + 2 * vx3 + vx4), y + h6 * (vy + 2 * vy2 + 2 * vy3 + vy4),
+                vx + h6 * (k1x + 2 * k2x + 2 * k3x + k4x), vy + h6 * (k1y + 2 * k2y + 2 * k3y + k4y))
+
+    def run_phase(self, s, t, legs, armed, event, t_max, nodes=None):
+        """Integrate until event(state, t) crosses from > 0 to ≤ 0; returns (state, t, armed, reason).
+
+        armed: list of bools, updated when a leg's force first becomes positive. nodes: optional list
+        to which (t, x, y, vx, vy) of every node is appended (the event's exact point included).
+        """
+        armed = list(armed)
+        e0 = event(s, t)
+        h = self.h
+        while True:
+            if t > t_max:
+                return s, t, armed, NO_EVENT
+            s1 = self.rk4(s, t, h, legs, armed)
+            e1 = event(s1, t + h)
+            if e0 > 0.0 and e1 <= 0.0:
+                # Secant (regula falsi, Illinois) on the partial step size σ ∈ (0, h].
+                lo, hi, flo, fhi = 0.0, h, e0, e1
+                sig = h * e0 / (e0 - e1)
+                for _ in range(60):
+                    sm = self.rk4(s, t, sig, legs, armed)
+                    em = event(sm, t + sig)
+                    if abs(em) <= 1e-14 or hi - lo <= 1e-15:
+                        break
+                    if em > 0.0:
+                        lo, flo = sig, em
+                        fhi *= 0.5
+                    else:
+                        hi, fhi = sig, em
+                        flo *= 0.5
+                    sig = lo + (hi - lo) * flo / (flo - fhi)
+                s_end = self.rk4(s, t, sig, legs, armed)
+                if nodes is not None:
+                    nodes.append((t + sig, *s_end))
+                return s_end, t + sig, armed, OK
+            s, t, e0 = s1, t + h, e1
+            if nodes is not None:
+                nodes.append((t, *s))
+            for i, (xc, t0) in enumerate(legs):
+                if not armed[i] and self.leg(s[0], s[1], t, xc, t0, True)[1] > 0.0:
+                    armed[i] = True
+            if s[1] <= MIN_COM_HEIGHT:
+                return s, t, armed, COLLAPSE
+            if s[2] <= 0.0:
+                return s, t, armed, STALL
+
+
+def _valid_inputs(state: WalkState, theta0: float, ctl: Control) -> bool:
+    vals = (*state.as_tuple(), theta0, *map(float, ctl.as_tuple()))
+    return (all(math.isfinite(v) for v in vals) and ctl.K > 0 and ctl.T_c > 0 and state.s >= 0
+            and 0.0 < theta0 < 0.5 * math.pi)
+
+
+def _one_step(state: WalkState, theta0: float, ctl: Control, n_per_stance: int, record: bool, roll: float = 0.0,
+              l_td: float = 1.0):
+    """The step map with optional node recording; returns (WalkStep, nodes, t_liftoff, legs)."""
+    bad = WalkStep(None, math.nan, math.nan, math.nan, math.nan, math.nan, math.nan, False, BAD_INPUT)
+    if not (_valid_inputs(state, theta0, ctl) and l_td > 0 and math.isfinite(roll)):
+        return bad, None, math.nan, None
+    mc = _Machine(ctl, n_per_stance, roll)
+    y_td = l_td * math.cos(theta0)
+    x_lead = l_td * math.sin(theta0)
+    legs = [(-state.d, -state.s), (x_lead, 0.0)]  # trailing, leading
+    s0 = (0.0, y_td, state.u, state.v)
+    f_trail, g_trail, _, _ = mc.leg(0.0, y_td, 0.0, -state.d, -state.s, True)
+    if not g_trail > 0.0:
+        return replace_reason(bad, NO_DOUBLE_SUPPORT), None, math.nan, None
+    nodes = [(0.0, *s0)] if record else None
+    t_max = MAX_PHASE_FACTOR * mc.Tc
+    lead_armed = mc.leg(0.0, y_td, 0.0, x_lead, 0.0, True)[1] > 0.0
+
+    def trail_event(s, t):
+        return mc.leg(s[0], s[1], t, -state.d, -state.s, True)[1]
+
+    s1, t_lo, armed, code = mc.run_phase(s0, 0.0, legs, [True, lead_armed], trail_event, t_max, nodes)
+    if code != OK:
+        return replace_reason(bad, code), nodes, math.nan, legs
+    y_min = min(n[2] for n in nodes) if nodes else math.nan
+    stance_leg = [legs[1]]
+
+    def td_event(s, t):
+        # Next touchdown: the COM descends through cos θ0 after vaulting over the stance foot. Until
+        # then the stance leg must push (the second event below): a flight phase is not a walk.
+        return s[1] - y_td if (s[3] < 0.0 and s[0] > x_lead) else 1.0
+
+    # Single support: watch for the leg unloading as well as for the touchdown.
+    def both(s, t):
+        g = mc.leg(s[0], s[1], t, x_lead, 0.0, True)[1]
+        return min(td_event(s, t), g if armed[1] else 1.0)
+
+    s2, t_td, _, code = mc.run_phase(s1, t_lo, stance_leg, [armed[1]], both, t_lo + t_max, nodes)
+    if code != OK:
+        return replace_reason(bad, code), nodes, t_lo, legs
+    if abs(s2[1] - y_td) > 1e-9:
+        unloaded = mc.leg(s2[0], s2[1], t_td, x_lead, 0.0, True)[1] <= 1e-9
+        return replace_reason(bad, FLIGHT if unloaded else LOW_VAULT), nodes, t_lo, legs
+    ys = [n[2] for n in nodes] if nodes else [s1[1], s2[1]]
+    nxt = WalkState(u=s2[2], v=s2[3], d=s2[0] - x_lead, s=t_td)
+    ws = WalkStep(next=nxt, t_double=t_lo, t_step=t_td, t_stance=state.s + t_lo, step_length=s2[0],
+                  y_min=min(y_min, min(ys)) if record else math.nan,
+                  y_max=max(ys) if record else math.nan, valid=True, reason=OK)
+    return ws, nodes, t_lo, legs
+
+
+def replace_reason(w: WalkStep, code: int) -> WalkStep:
+    return WalkStep(None, math.nan, math.nan, math.nan, math.nan, math.nan, math.nan, False, code)
+
+
+def walk_step(state: WalkState, theta0: float, control: Control, *, roll: float = 0.0, l_td: float = 1.0,
+              n_per_stance: int = N_PER_STANCE) -> WalkStep:
+    """One step of the walking machine, touchdown → next touchdown (see module doc).
+
+    state: the touchdown state; theta0: touchdown angle from vertical [rad]; control: the eq. 2 control
+    of both legs (scalar fields). Returns a WalkStep (``valid`` False with a ``reason`` code, never raises).
+    """
+    return _one_step(state, float(theta0), control, n_per_stance, False, roll, l_td)[0]
+
+
+@dataclass(frozen=True)
+class WalkTrajectory:
+    """Dense machine trajectory of one step (dimensionless), starting at a touchdown at x = 0, t = 0.
+
+    t: (S,) [√(l0/g)]; pos, vel: (S, 2) COM; force: (S, 2, 2) per leg (0 trailing, 1 leading) force on
+    the COM [m g], zero when the leg is off the ground; contact_x: (2,) trailing, leading contact x [l0];
+    t_touchdown: (2,) their touchdown times (trailing < 0); t_liftoff: trailing leg's liftoff;
+    t_step: time of the next touchdown.
+    """
+
+    t: np.ndarray
+    pos: np.ndarray
+    vel: np.ndarray
+    force: np.ndarray
+    contact_x: np.ndarray
+    t_touchdown: np.ndarray
+    t_liftoff: float
+    t_step: float
+
+    @property
+    def total_force(self) -> np.ndarray:
+        """(S, 2) ground force on the COM from both legs [m g]."""
+        return self.force.sum(axis=1)
+
+
+def simulate_walk(state: WalkState, theta0: float, control: Control, times, *, roll: float = 0.0,
+                  l_td: float = 1.0, n_per_stance: int = N_PER_STANCE) -> WalkTrajectory:
+    """Dense samples of one step at ``times`` (S,) in [0, t_step] [√(l0/g)] (clipped).
+
+    Positions and velocities are cubic Hermite interpolations of the RK4 nodes; leg forces are
+    evaluated from the model (eq. 2) at the interpolated positions. Raises PlanError if the step is
+    invalid.
+    """
+    ws, nodes, t_lo, legs = _one_step(state, float(theta0), control, n_per_stance, True, roll, l_td)
+    if not ws.valid:
+        raise PlanError(f"walking step invalid: {REASONS[ws.reason]} (u={state.u:.4g}, v={state.v:.4g}, "
+                        f"d={state.d:.4g}, s={state.s:.4g}, theta0={theta0:.4g})")
+    mc = _Machine(control, n_per_stance, roll)
+    arr = np.array(nodes)  # (M, 5): t, x, y, vx, vy
+    # drop duplicate times (an event node can coincide with the next regular node)
+    keep = np.concatenate([[True], np.diff(arr[:, 0]) > 1e-12])
+    arr = arr[keep]
+    t = np.clip(np.asarray(times, float), 0.0, ws.t_step)
+    # accelerations at nodes (for Hermite velocities): phase-dependent active legs
+    acc = np.empty((arr.shape[0], 2))
+    for k, (tk, x, y, _, _) in enumerate(arr):
+        act = legs if tk <= t_lo else [legs[1]]
+        acc[k] = mc.accel(x, y, tk, act, [True] * len(act))
+    k = np.clip(np.searchsorted(arr[:, 0], t, side="right") - 1, 0, arr.shape[0] - 2)
+    n0, n1 = arr[k], arr[k + 1]
+    pos = np.empty((t.size, 2))
+    vel = np.empty((t.size, 2))
+    for d in range(2):
+        pos[:, d] = _hermite(n0[:, 0], n1[:, 0], n0[:, 1 + d], n0[:, 3 + d], n1[:, 1 + d], n1[:, 3 + d], t)
+        vel[:, d] = _hermite(n0[:, 0], n1[:, 0], n0[:, 3 + d], acc[k, d], n1[:, 3 + d], acc[k + 1, d], t)
+    force = np.zeros((t.size, 2, 2))
+    for i, (xc, t0) in enumerate(legs):
+        on = t <= t_lo if i == 0 else np.ones(t.size, bool)
+        tau = (t - t0) / mc.Tc
+        rel = pos - np.stack([xc + roll * tau, np.zeros_like(tau)], axis=1)
+        l = np.linalg.norm(rel, axis=1)
+        f = mc.K * np.maximum(_ld(tau, mc.a1, mc.b, mc.c) - l, 0.0)
+        force[:, i] = np.where(on[:, None], (f / l)[:, None] * rel, 0.0)
+    return WalkTrajectory(t=t, pos=pos, vel=vel, force=force, contact_x=np.array([legs[0][0], legs[1][0]]),
+                          t_touchdown=np.array([legs[0][1], legs[1][1]]), t_liftoff=float(t_lo),
+                          t_step=float(ws.t_step))
+
+
+def _hermite(t0, t1, y0, d0, y1, d1, t):
+    """Cubic Hermite interpolation between nodes t0 < t1 (arrays broadcast)."""
+    hh = t1 - t0
+    s = (t - t0) / hh
+    s2 = s * s
+    s3 = s2 * s
+    return ((2 * s3 - 3 * s2 + 1) * y0 + (s3 - 2 * s2 + s) * hh * d0
+            + (-2 * s3 + 3 * s2) * y1 + (s3 - s2) * hh * d1)

@@ -1,0 +1,147 @@
+"""The walking machine (issue 17): the two-leg step map, the fit on real walks, the JSON, ``froude fit``.
+
+Acceptance 1 of issue 17 is checked on every real walk: a periodic cycle; stance and double-support
+times within 5 % of the clip's; COM height within 1.5 cm RMS; the vertical force's two peaks and trough
+within 0.1 BW and 5 % of a step of the clip's (not met yet: marked xfail, strict, with the figures).
+"""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from conftest import WALKING, clip, clip_params
+from froude.errors import FitError
+from froude.io.bvh import load_bvh
+from froude.io.jsonable import jsonable
+from froude.machine.dynamics import Control
+from froude.machine.walk_fit import fit_walking_detailed, force_landmarks, stance_leg_length
+from froude.machine.walk_model import WalkingMachine, load_walking_machine
+from froude.machine.walking import (NO_DOUBLE_SUPPORT, OK, REASONS, WalkState, simulate_walk, walk_step)
+
+GEYER = Control(K=25.0, a=0.0, b=0.0, c=0.0, T_c=2.0)
+TH = math.radians(21.0)
+
+
+def _energy(tr, i, K):
+    """½|v|² + y + the springs' energy ½ K (1 − l)² of the legs on the ground at sample i (passive legs)."""
+    e = 0.5 * float(tr.vel[i] @ tr.vel[i]) + float(tr.pos[i, 1])
+    for leg in range(2):
+        if np.any(tr.force[i, leg] != 0):
+            l = math.hypot(tr.pos[i, 0] - tr.contact_x[leg], tr.pos[i, 1])
+            e += 0.5 * K * (1.0 - l) ** 2
+    return e
+
+
+def test_passive_legs_conserve_energy_over_a_step():
+    # Geyer's passive bipedal spring-mass model (l_d ≡ l0, no roll) is conservative: the energy at the next
+    # touchdown equals the energy at this one (both legs unloaded at their own events or at rest length).
+    st = WalkState(u=0.35, v=-0.05, d=0.3, s=1.5)
+    w = walk_step(st, TH, GEYER)
+    assert w.valid, REASONS[w.reason]
+    tr = simulate_walk(st, TH, GEYER, np.linspace(0.0, w.t_step, 400))
+    e = np.array([_energy(tr, i, GEYER.K) for i in range(tr.t.size)])
+    assert np.ptp(e) < 1e-6
+    # the next touchdown is at the landing height again, the COM vaulted over the stance foot
+    end = simulate_walk(st, TH, GEYER, [w.t_step])
+    assert end.pos[0, 1] == pytest.approx(math.cos(TH), abs=1e-10)
+    assert w.next.d > 0 and w.t_double > 0 and w.t_step > w.t_double
+
+
+def test_step_without_double_support_is_invalid_not_an_exception():
+    # the trailing leg far past its rest length: it would already be off the ground (a flight phase came)
+    w = walk_step(WalkState(u=0.4, v=-0.05, d=0.9, s=1.5), TH, GEYER)
+    assert not w.valid and w.reason == NO_DOUBLE_SUPPORT and w.next is None
+    bad = walk_step(WalkState(u=float("nan"), v=0.0, d=0.3, s=1.0), TH, GEYER)
+    assert not bad.valid and bad.reason != OK
+
+
+def test_force_landmarks_find_an_m_shape():
+    tau = np.linspace(0, 1, 101)
+    f = 1.0 + 0.2 * np.cos(2 * np.pi * (tau - 0.1) / 0.8) * (tau < 0.9) + 0.2 * (tau >= 0.9)
+    lm = force_landmarks(tau, f, 0.15)
+    assert lm["peak1"] == pytest.approx(1.2) and lm["tau_peak1"] == pytest.approx(0.1)
+    assert lm["trough"] == pytest.approx(0.8) and lm["tau_trough"] == pytest.approx(0.5)
+
+
+@pytest.fixture(scope="module")
+def walk_fits():
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            cache[name] = fit_walking_detailed(load_bvh(clip(name)), source=name)
+        return cache[name]
+
+    return get
+
+
+@pytest.mark.parametrize("name", clip_params(WALKING))
+def test_fit_on_real_walks_meets_cycle_times_and_com(name, walk_fits):
+    res = walk_fits(name)
+    m, q, ref = res.machine, res.machine.quality, res.machine.reference
+    assert m.periodicity < 1e-6                      # a periodic cycle (dimensionless)
+    assert abs(q["stance_time_error"]) <= 0.05       # stance time within 5 % of the clip's
+    assert abs(q["double_support_error"]) <= 0.05    # double-support time within 5 %
+    assert abs(q["mean_speed_error"]) <= 0.01
+    assert q["com_rms_m"] <= 0.015                   # COM height within 1.5 cm RMS
+    # the measured figures are the clip's, as `froude info` sees them (walking: 0.6-0.7 s stances)
+    assert 0.5 < ref["stance_time_s"] < 0.8 and 0.05 < ref["double_support_s"] < 0.2
+    assert 0.1 < m.double_support_fraction < 0.35
+    # the machine's force over a stance has the shape of walking: two peaks above body weight, a trough below
+    fm = q["force_bw"]
+    assert fm["peak1"] > 1.0 > fm["trough"] and fm["peak2"] > 1.0
+    assert fm["tau_peak1"] < fm["tau_trough"] < fm["tau_peak2"]
+    # the leg is a spring pushing in stance, never pulling
+    l, ld = stance_leg_length(m, np.linspace(0, 1, 51))
+    assert np.all(np.isfinite(l)) and m.K > 0
+
+
+@pytest.mark.xfail(strict=True, reason="issue 17 acceptance 1, force landmarks: not met yet (the clips' single-"
+                   "support force has a mid-stance bump a quadratic l_d cannot make; see docs/walking.md)")
+@pytest.mark.parametrize("name", clip_params(WALKING))
+def test_fit_force_peaks_and_trough_match_the_clip(name, walk_fits):
+    q = walk_fits(name).machine.quality
+    for key in ("peak1", "trough", "peak2"):
+        assert abs(q[key + "_error_bw"]) <= 0.1
+        assert abs(q[key + "_timing_error_step"]) <= 0.05
+
+
+@pytest.mark.parametrize("name", clip_params(WALKING[:1]))
+def test_machine_json_round_trip_and_similarity(name, walk_fits, tmp_path):
+    m = walk_fits(name).machine
+    path = tmp_path / "w.json"
+    m.save(path)
+    text = path.read_text()
+    assert "NaN" not in text and "Infinity" not in text
+    d = json.loads(text)
+    assert d["schema"] == "froude.walking/1" and d["kind"] == "walking"
+    back = load_walking_machine(path)
+    assert jsonable(back.to_dict()) == jsonable(m.to_dict()) == d
+    w = walk_step(back.state, back.theta0, back.control, roll=back.roll, l_td=back.l_td)
+    assert w.valid and w.t_step == pytest.approx(m.t_step, rel=1e-12)
+    # dynamic similarity: a character twice as long steps at 1/√2 the frequency, same Froude number
+    g = m.scaled(2.0, 8.0)
+    assert g.si()["step_frequency_hz"] == pytest.approx(m.si()["step_frequency_hz"] / math.sqrt(2), rel=1e-12)
+    assert g.mean_speed == m.mean_speed and g.double_support_fraction == m.double_support_fraction
+    with pytest.raises(FitError, match="not a froude walking machine"):
+        WalkingMachine.from_dict({"schema": "froude.machine/1"})
+
+
+def test_fit_refuses_a_run():
+    from froude.errors import NotARunningMotion
+
+    with pytest.raises(NotARunningMotion, match="not a walk"):
+        fit_walking_detailed(load_bvh(clip("09_01")), source="09_01")
+
+
+@pytest.mark.parametrize("name", clip_params(WALKING[:1]))
+def test_cli_fit_on_a_walk_writes_the_walking_machine_and_plot(name, tmp_path, run_cli):
+    out, png = tmp_path / "walk.json", tmp_path / "walk.png"
+    code, stdout, _ = run_cli("fit", clip(name), "-o", out, "--plot", png, "-q")
+    assert code == 0
+    assert "double support [s]" in stdout and "push-off peak" in stdout
+    assert json.loads(out.read_text())["schema"] == "froude.walking/1"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -181,8 +181,8 @@ def modelled_part(motion: Motion, summary: GaitSummary, com: np.ndarray, gait: G
     return text, note
 
 
-#: A clip is a loop when its last pose is this close to its first, relative to the change between
-#: neighbouring frames (the median, or the first or last step if larger): below LOOP_DUPLICATE the last frame repeats the first, below LOOP_CONTINUES the first
+#: A clip is a loop when its last pose is this close to its first (mean joint angle), relative to the
+#: median change between neighbouring frames: below LOOP_DUPLICATE the last frame repeats the first, below LOOP_CONTINUES the first
 #: frame follows the last.
 LOOP_DUPLICATE = 0.25
 LOOP_CONTINUES = 1.5
@@ -209,10 +209,10 @@ def unroll_loop(motion: Motion, body: BodyModel) -> tuple[Motion, str] | None:
     if F < 4:
         return None
     rot = quat.make_continuous(motion.rotations)
-    step = quat.angle_between(rot[1:], rot[:-1]).max(axis=1)
-    close = float(quat.angle_between(rot[-1], rot[0]).max())
-    # the change to compare with: the frames around the seam may move faster than the median (a foot landing)
-    typical = float(max(np.median(step), step[0], step[-1]))
+    # mean over joints: one joint landing fast at the seam (or a glitch at a clip's edge) does not decide
+    step = quat.angle_between(rot[1:], rot[:-1]).mean(axis=1)
+    close = float(quat.angle_between(rot[-1], rot[0]).mean())
+    typical = float(np.median(step))
     if not typical > 0:
         return None
     com = body.com(motion)
@@ -279,8 +279,10 @@ def running_take(motion: Motion, body: BodyModel) -> tuple[Motion, list[str]]:
     if moving is not None:
         motion, note = moving
         notes.append(note)
-    loop = unroll_loop(motion, body)
-    if loop is not None and _full_stances(loop[0], body) > _full_stances(motion, body):
+    # only a take too short to fit is unrolled (fewer than two complete stances): a longer one that happens
+    # to end near its first pose is analysed as it is
+    loop = unroll_loop(motion, body) if _full_stances(motion, body) < 2 else None
+    if loop is not None and _full_stances(loop[0], body) >= 2:
         motion, note = loop
         notes.append(note)
     return motion, notes

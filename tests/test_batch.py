@@ -119,7 +119,8 @@ def test_runaway_plan_is_refused_at_once(tmp_path, run_cli):
     assert code == 2 and out == "" and "at most 10,000 variations" in err, err
     assert time.perf_counter() - t0 < 5.0  # unbounded, it grew 180 MB/s until it died
     # tasks are bounded too: clips x variations
-    many = batch.parse_plan({"characters": [{"height": {"from": 1, "to": 10, "steps": 5_000}}], "strides": [1, 2]})
+    many = batch.parse_plan({"characters": [{"height": {"from": 1.0, "to": 2.0, "steps": 100},
+                                                 "mass": {"from": 50, "to": 99, "steps": 50}}], "strides": [1, 2]})
     clips = [batch.Clip(f"c{i}", f"c{i}.bvh") for i in range(101)]
     with pytest.raises(BatchError, match="at most 1,000,000: split it"):
         batch.make_tasks(clips, many)

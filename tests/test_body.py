@@ -308,8 +308,10 @@ def test_unmapped_roles_are_named_in_the_error():
     msg = str(e.value)
     assert "left_toe" in msg and "right_elbow" in msg
     assert "right_toe" not in msg.split("(")[0] and "left_elbow" not in msg.split("(")[0]
-    assert "Zeh_L" in msg  # the joints are listed to help write the map
-    assert "\n" not in msg
+    lines = msg.splitlines()
+    assert len(lines) == 3  # what to do, then one line per missing role with its likeliest joints
+    assert lines[1].split(",")[0] == "  left_toe: likeliest Zeh_L"
+    assert lines[2].split(",")[0] == "  right_elbow: likeliest Unterarm_R"
 
 
 def test_joint_map_errors(tmp_path):
@@ -326,15 +328,22 @@ def test_joint_map_errors(tmp_path):
         load_joint_map(tmp_path / "missing.yaml")
 
 
-def test_cli_reports_unmapped_roles_in_one_line(run_cli, tmp_path):
+def test_cli_reports_unmapped_roles_in_a_few_lines(run_cli, tmp_path):
     text = (FIXTURES / "humanoid_metres.bvh").read_text().replace("LeftToe", "Zeh_L")
     p = tmp_path / "h.bvh"
     p.write_text(text)
     code, out, err = run_cli("info", p)
     assert code == 2 and out == ""
-    last = err.splitlines()[-1]  # after the loader's notes (units), the error is one line
-    assert last.startswith("froude info: error: cannot map joints for roles: left_toe ")
+    lines = err.splitlines()
+    head = next(i for i, l in enumerate(lines) if l.startswith("froude info: error: cannot find the joints"))
+    assert "--joint-map" in lines[head]
+    assert lines[head + 1:] == ["  left_toe: likeliest Zeh_L, Chest, Spine"]  # one line per missing role
     assert "Traceback" not in err
+    # the map the message asks for makes the clip readable
+    jm = tmp_path / "map.yaml"
+    jm.write_text("left_toe: Zeh_L\n")
+    code, out, err = run_cli("info", p, "--joint-map", jm)
+    assert code == 0, err
 
 
 # ---- foot markers ----------------------------------------------------------------------------------------------

@@ -188,11 +188,11 @@ def test_implausible_size_asks_for_a_length_scale(tmp_path):
 def test_cli_prints_units_and_cleaning(run_cli):
     code, out, err = run_cli("info", clip("09_01"))
     assert code == 0
-    assert "CMU units detected" in err and "CMU units detected" in out
+    assert "units: CMU units (stature 1.51 m" in err and "detected by the flight gravity" in out
     assert "T-pose" in err
     code, out, err = run_cli("info", FIXTURES / "humanoid_inches.bvh")
     assert code == 0
-    assert "inches detected" in err
+    assert "units: inches (stature 1.80 m), detected as the most human stature" in err
 
 
 # ---- cleaning --------------------------------------------------------------------------------------

@@ -3,6 +3,9 @@
 Quick tour::
 
     import froude
+    result = froude.scale("run.bvh", "child", speed=0.8)   # also froude.fit, froude.accelerate (api.py)
+    result.com, result.ground_force, result.contacts       # (F, 3) [m], (F, 3) [N], (F, 2) bool
+    result.save("child.glb"); result.save_data("child.csv")
     motion = froude.load_bvh("run.bvh")              # SI units, +Y up, cleaning reported in motion.meta
     body = froude.BodyModel.from_skeleton(motion.skeleton, mass=70.0)
     com = body.com(motion)                           # (F, 3) [m]
@@ -20,6 +23,8 @@ __version__ = "0.1.0"
 
 #: Public name -> the module that defines it (one line per name: add new public names here).
 _LAZY = {
+    "Result": ".api", "accelerate": ".api", "fit": ".api", "ground_reaction_force": ".api", "load": ".api",
+    "save": ".api", "scale": ".api",
     "BodyModel": ".body", "find_roles": ".body", "load_joint_map": ".body",
     "BvhError": ".errors", "CharacterError": ".errors", "FitError": ".errors", "FroudeError": ".errors",
     "IkError": ".errors", "NotARunningMotion": ".errors", "PlanError": ".errors",
@@ -47,6 +52,7 @@ def __dir__():
 
 
 if TYPE_CHECKING:  # static analysers and IDEs see the real imports
+    from .api import Result, accelerate, fit, ground_reaction_force, load, save, scale
     from .body import BodyModel, find_roles, load_joint_map
     from .errors import BvhError, CharacterError, FitError, FroudeError, IkError, NotARunningMotion, PlanError
     from .gait import Gait, GaitSummary, Stance, detect_gait, summarize

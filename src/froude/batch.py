@@ -470,14 +470,12 @@ def _jsonable(x):
     return json.loads(json.dumps(x))
 
 
-#: The temporaries of ``io.atomic.atomic_write``: ``.{stem}.{8 random characters}{suffix}`` beside the
-#: destination (tempfile.mkstemp's names; ``.tmp`` when the destination has no suffix).
-_TEMPORARY = re.compile(r"\.(?P<stem>.+)\.[a-z0-9_]{8}(?P<suffix>\.[^.]+)")
-
-
 def is_temporary(name: str) -> bool:
-    """True for a file name ``atomic_write`` uses while it writes (batch outputs never start with '.')."""
-    return name != LOCK_NAME and _TEMPORARY.fullmatch(name) is not None
+    """True for a file name ``atomic_write`` uses while it writes (``io.atomic.is_temporary``), never the
+    driver's lock (batch outputs never start with '.')."""
+    from .io.atomic import is_temporary as atomic_temporary
+
+    return name != LOCK_NAME and atomic_temporary(name)
 
 
 def temporaries(outdir) -> list[Path]:

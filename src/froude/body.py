@@ -50,98 +50,164 @@ LIMB_ROLES = ("hip", "knee", "ankle", "toe", "shoulder", "elbow", "wrist")
 REQUIRED_ROLES = ("pelvis", "head") + tuple(f"{s}_{r}" for s in SIDES for r in LIMB_ROLES)
 OPTIONAL_ROLES = ("neck", "head_end") + tuple(f"{s}_{r}" for s in SIDES for r in ("toe_end", "hand_end"))
 
-# Core words (name without side and punctuation, lower case) for each limb role, in priority order.
+# Core words (name without side, prefix and punctuation, lower case) for each limb role, in priority
+# order. A joint takes one role per side: SMPL's "L_Foot" (the toe joint) is left to the toe once
+# "L_Ankle" has taken the ankle.
 _CORE_WORDS = {
     "hip": ("upleg", "thigh", "upperleg", "femur", "hip"),
     "knee": ("leg", "shin", "calf", "lowerleg", "knee", "tibia", "shank"),
-    "ankle": ("foot", "ankle"),
-    "toe": ("toebase", "toe", "toes", "ball", "football"),
+    "ankle": ("ankle", "foot"),
+    "toe": ("toebase", "toe", "toes", "ball", "football", "foot"),
     "toe_end": ("toeend", "toesend", "toetip", "toebaseend"),
     "shoulder": ("arm", "upperarm", "humerus", "shoulder"),
     "elbow": ("forearm", "lowerarm", "elbow"),
     "wrist": ("hand", "wrist"),
-    "hand_end": ("handmiddle1", "handindex1", "hand_end", "handend", "fingerbase"),
+    "hand_end": ("handmiddle1", "handindex1", "handend", "fingerbase"),
 }
 _CENTRAL_WORDS = {
     "head": ("head",),
     "head_end": ("headtopend", "headend", "headtop", "headsite"),
-    "neck": ("neck", "neck1", "neck01"),
+    "neck": ("neck", "neck1", "neck01", "necktwist01"),
 }
-# Side markers. Strong ones (a "left"/"right" word, or a single letter set off by "_" or ".") decide
-# alone; a bare leading letter ("LThigh", "RShin") counts only when the rest is a known joint word, so
-# that "lowerarm_l" or "ribs" are not read as left/right by their first letter.
-_STRONG_SIDE = (
-    ("left", re.compile(r"^left|^l[_.]|[_.]l$|left$")),
-    ("right", re.compile(r"^right|^r[_.]|[_.]r$|right$")),
-)
+_SIDE_TOKENS = {"l": "left", "left": "left", "lf": "left", "r": "right", "right": "right", "rt": "right"}
+# Side inside a word: "LeftUpLeg", "upperlegleft"; a bare leading letter ("LThigh", "RShin") counts only
+# when the rest is a known joint word, so that "lowerarm" or "ribs" are not read as sides.
+_STRONG_SIDE = (("left", re.compile(r"^left|left$")), ("right", re.compile(r"^right|right$")))
 _WEAK_SIDE = (("left", re.compile(r"^l(?=[a-z])")), ("right", re.compile(r"^r(?=[a-z])")))
 _KNOWN_CORES = {w for words in _CORE_WORDS.values() for w in words}
 
 
 def _normalize(name: str) -> str:
+    """Lower case, namespace ("mixamorig:") and path ("|") prefixes removed, only [a-z0-9_.] kept."""
     name = name.split(":")[-1].split("|")[-1]
     return re.sub(r"[^a-z0-9_.]", "", name.lower())
 
 
+def _side_and_cores(name: str) -> tuple[str | None, tuple[str, ...]]:
+    """(side or None, core candidates longest first) of a joint name.
+
+    The side is a token of its own ("thigh_l", "thigh.L", "CC_Base_L_Thigh", "L_Hip") or a word at
+    either end ("LeftUpLeg"). The cores are the remaining tokens joined, and the same without leading
+    tokens, so that a rig prefix ("CC_Base_", "Bip01_") does not hide the joint word.
+    """
+    tokens = [t for t in re.split(r"[_.]+", _normalize(name)) if t]
+    side = None
+    for i, t in enumerate(tokens):
+        if t in _SIDE_TOKENS and len(tokens) > 1:
+            side = _SIDE_TOKENS[t]
+            del tokens[i]
+            break
+    if side is None and tokens:
+        for pats, need_known in ((_STRONG_SIDE, False), (_WEAK_SIDE, True)):
+            for s, pat in pats:
+                for k in (len(tokens) - 1, 0):  # the word at either end carries the side
+                    rest = pat.sub("", tokens[k], count=1)
+                    if rest != tokens[k] and rest and (not need_known or rest in _KNOWN_CORES):
+                        tokens = tokens[:k] + [rest] + tokens[k + 1:]
+                        side = s
+                        break
+                if side:
+                    break
+            if side:
+                break
+    cores = tuple("".join(tokens[i:]) for i in range(len(tokens)))
+    return side, cores
+
+
 def _side_and_core(name: str) -> tuple[str | None, str]:
-    n = _normalize(name)
-    for side, pat in _STRONG_SIDE:
-        if pat.search(n):
-            return side, re.sub(r"[^a-z0-9]", "", pat.sub("", n, count=1))
-    for side, pat in _WEAK_SIDE:
-        core = re.sub(r"[^a-z0-9]", "", pat.sub("", n, count=1))
-        if pat.search(n) and core in _KNOWN_CORES:
-            return side, core
-    return None, re.sub(r"[^a-z0-9]", "", n)
+    """(side or None, the whole core) of a joint name."""
+    side, cores = _side_and_cores(name)
+    return side, cores[0] if cores else ""
 
 
 def find_roles(skeleton: Skeleton, joint_map: Mapping[str, str] | None = None) -> dict[str, int]:
     """Role -> joint index for a skeleton, from its joint names and an optional user map (role -> name).
 
-    Raises JointMapError naming every required role that could not be found.
+    The pelvis is the joint where the two legs meet (a static reference root above it is skipped).
+    Raises JointMapError naming every required role that could not be found, with the likeliest joints.
     """
     # Remembered by names: every retarget of a clip (an editor makes one per slider step) has its names.
+    if joint_map is None:
+        joint_map = dict(skeleton.joint_map or ())
     jm = tuple(sorted(joint_map.items())) if joint_map else None
-    return dict(_roles_of_names(tuple(skeleton.names), jm))
+    return dict(_roles_of_names(tuple(skeleton.names), tuple(int(p) for p in skeleton.parents), jm))
+
+
+def _common_ancestor(parents: tuple[int, ...], a: int, b: int) -> int:
+    chain = set()
+    while a >= 0:
+        chain.add(a)
+        a = parents[a]
+    while b >= 0 and b not in chain:
+        b = parents[b]
+    return max(b, 0)
 
 
 @functools.lru_cache(maxsize=64)
-def _roles_of_names(names: tuple[str, ...], joint_map: tuple[tuple[str, str], ...] | None) -> dict[str, int]:
-    """``find_roles`` for joint names and a joint map as sorted (role, name) pairs (callers copy the dict)."""
-    joint_map = dict(joint_map) if joint_map else None
-    roles: dict[str, int] = {"pelvis": 0}
-    parsed = [_side_and_core(n) for n in names]
+def _roles_of_names(names: tuple[str, ...], parents: tuple[int, ...],
+                    joint_map: tuple[tuple[str, str], ...] | None) -> dict[str, int]:
+    """``find_roles`` for joint names, parents and a joint map as sorted (role, name) pairs."""
+    joint_map = dict(joint_map) if joint_map else {}
+    for role, name in joint_map.items():
+        if role not in REQUIRED_ROLES + OPTIONAL_ROLES:
+            raise JointMapError(
+                f"unknown role '{role}' in the joint map; roles are: {', '.join(REQUIRED_ROLES + OPTIONAL_ROLES)}"
+            )
+        if name not in names:
+            raise JointMapError(f"joint map: role '{role}' names joint '{name}', which the skeleton lacks")
+    roles: dict[str, int] = {r: names.index(n) for r, n in joint_map.items()}
+    parsed = [_side_and_cores(n) for n in names]
     for side in SIDES:
+        used = {roles[f"{side}_{r}"] for r in _CORE_WORDS if f"{side}_{r}" in roles}
         for role, words in _CORE_WORDS.items():
+            if f"{side}_{role}" in roles:
+                continue
             for w in words:
-                hits = [j for j, (s, c) in enumerate(parsed) if s == side and c == w]
+                # the whole core first ("foot_l" before "ik_foot_l"), then a core under a rig prefix
+                hits = ([j for j, (s, c) in enumerate(parsed) if s == side and c[:1] == (w,) and j not in used]
+                        or [j for j, (s, c) in enumerate(parsed) if s == side and w in c and j not in used])
                 if hits:
                     roles[f"{side}_{role}"] = hits[0]
+                    used.add(hits[0])
                     break
     for role, words in _CENTRAL_WORDS.items():
+        if role in roles:
+            continue
         for w in words:
-            hits = [j for j, (s, c) in enumerate(parsed) if s is None and c == w]
+            hits = ([j for j, (s, c) in enumerate(parsed) if s is None and c[:1] == (w,)]
+                    or [j for j, (s, c) in enumerate(parsed) if s is None and w in c])
             if hits:
                 roles[role] = hits[0]
                 break
     # Some skeletons (CMU) name the clavicle "Shoulder" and the upper arm "Arm"; others name the
     # shoulder joint "Shoulder". The priority order above prefers "arm".
-    if joint_map:
-        for role, name in joint_map.items():
-            if role not in REQUIRED_ROLES + OPTIONAL_ROLES:
-                raise JointMapError(
-                    f"unknown role '{role}' in the joint map; roles are: {', '.join(REQUIRED_ROLES + OPTIONAL_ROLES)}"
-                )
-            if name not in names:
-                raise JointMapError(f"joint map: role '{role}' names joint '{name}', which the skeleton lacks")
-            roles[role] = names.index(name)
+    if "pelvis" not in roles and "left_hip" in roles and "right_hip" in roles:
+        roles["pelvis"] = _common_ancestor(parents, roles["left_hip"], roles["right_hip"])
     missing = [r for r in REQUIRED_ROLES if r not in roles]
     if missing:
-        raise JointMapError(
-            "cannot map joints for roles: " + ", ".join(missing)
-            + " (give a joint map YAML 'role: JointName'; joints are: " + ", ".join(names) + ")"
-        )
+        raise JointMapError(_missing_roles_message(names, parsed, missing, set(roles.values())))
     return roles
+
+
+def _missing_roles_message(names, parsed, missing, assigned) -> str:
+    """A few lines: the missing roles, the likeliest joints for each (joints without a role, on the
+    role's side, whose name is nearest a word of the role), and how to give a joint map."""
+    import difflib
+
+    lines = [f"cannot find the joints for {len(missing)} role(s) among the skeleton's {len(names)} joints; "
+             "give them with --joint-map FILE.yaml (lines 'role: JointName'):"]
+    for role in missing:
+        side, _, base = role.partition("_") if role.split("_")[0] in SIDES else (None, "", role)
+        words = _CORE_WORDS.get(base) or _CENTRAL_WORDS.get(base) or (base,)
+        scored = []
+        for j, (s, cores) in enumerate(parsed):
+            if (side is not None and s not in (side, None)) or j in assigned:
+                continue
+            best = max((difflib.SequenceMatcher(None, w, c).ratio() for w in words for c in cores), default=0.0)
+            scored.append((best + (0.2 if s == side else 0.0), j))
+        likely = [names[j] for _, j in sorted(scored, key=lambda t: (-t[0], t[1]))[:3]]
+        lines.append(f"  {role}: likeliest {', '.join(likely) if likely else '(none)'}")
+    return "\n".join(lines)
 
 
 def load_joint_map(path: str | Path) -> dict[str, str]:
@@ -201,7 +267,8 @@ class BodyModel:
         overrides: segment name -> mass fraction (e.g. {"head": 0.10}); the remaining fractions are
             rescaled so that the total stays 1. Segment names: head, upper_trunk, middle_trunk,
             lower_trunk, and left_/right_ upper_arm, forearm, hand, thigh, shank, foot.
-        joint_map: role -> joint name, for skeletons whose names are not recognised.
+        joint_map: role -> joint name, for skeletons whose names are not recognised (default: the
+            skeleton's own, given when it was read).
         """
         if not (np.isfinite(mass) and mass > 0):
             raise FroudeError(f"body mass must be > 0 kg, got {mass}")
@@ -209,8 +276,12 @@ class BodyModel:
             raise FroudeError(f"sex must be 'male' or 'female', got '{sex}'")
         k = 0 if sex == "male" else 1
         roles = find_roles(skeleton, joint_map)
-        rest = skeleton.rest_positions()
-        ends = {j: np.asarray(off) for j, off in reversed(skeleton.end_sites)}  # first end site wins
+        # Built in the upright reference pose: the zero-rotation rest pose for most rigs, a pose read from
+        # the motion for rigs whose rest pose is folded by bind orientations (see Skeleton.reference_pose).
+        rest, R_ref = skeleton.reference_world()
+        # first end site wins; zero-length end sites (some exporters write "OFFSET 0 0 0") mark nothing
+        ends = {j: R_ref[j] @ np.asarray(off) for j, off in reversed(skeleton.end_sites)
+                if np.linalg.norm(off) > 1e-9}
         notes = []
 
         def pos(role):
@@ -238,23 +309,38 @@ class BodyModel:
             segs.append((name, joint, c, key))
 
         # Head+neck: vertex -> C7. Vertex = head end site; C7 ≈ the neck joint (or the head joint).
-        vertex = end_point("head", "head_end", "neck" if "neck" in roles else "pelvis")
         c7 = pos("neck") if "neck" in roles else pos("head")
+        head_j = roles["head"]
+        if ("head_end" in roles or head_j in ends or "neck" not in roles
+                or any(np.linalg.norm(skeleton.offsets[c]) > 0 for c in skeleton.children(head_j))):
+            vertex = end_point("head", "head_end", "neck" if "neck" in roles else "pelvis")
+        else:
+            # No point above the head joint: the vertex from de Leva's proportions, C7 -> vertex being
+            # 0.285 of the leg (hip -> ankle) along the neck -> head line.
+            leg_mean = np.mean([np.linalg.norm(pos(s + "_knee") - pos(s + "_hip"))
+                                + np.linalg.norm(pos(s + "_ankle") - pos(s + "_knee")) for s in SIDES])
+            d = pos("head") - c7
+            d = d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9 else body_up(skeleton, rest, rest[0], rest[0] + np.eye(3)[UP_AXIS])
+            vertex = c7 + 0.285 * leg_mean * d
+            notes.append(f"no end point for '{skeleton.names[head_j]}': the head vertex estimated from the leg length")
         add("head", roles["head"], vertex, c7, "head")
         # Trunk: three parts along mid-hip JC -> mid-shoulder JC, each fixed to the spine joint below it.
         mid_hip = 0.5 * (pos("left_hip") + pos("right_hip"))
         mid_sh = 0.5 * (pos("left_shoulder") + pos("right_shoulder"))
+        up = body_up(skeleton, rest, mid_hip, mid_sh)
         path = []
         j = roles["head"]
         while j >= 0:
             path.append(j)
+            if j == roles["pelvis"]:
+                break  # joints above the pelvis (a static reference root) carry no mass
             j = skeleton.parents[j]
-        path = path[::-1]  # root ... head
+        path = path[::-1]  # pelvis ... head
         for key, lo, hi in _TRUNK_PARTS:
             bottom = mid_hip + lo * (mid_sh - mid_hip)
             top = mid_hip + hi * (mid_sh - mid_hip)
             c = top + DE_LEVA[key][1][k] * (bottom - top)  # fractions are measured from the top landmark
-            below = [p for p in path[:-1] if rest[p][UP_AXIS] <= c[UP_AXIS] + 1e-9] or [path[0]]
+            below = [p for p in path[:-1] if rest[p] @ up <= c @ up + 1e-9] or [path[0]]
             segs.append((key, below[-1], c, key))
         for side in SIDES:
             s = side + "_"
@@ -283,7 +369,7 @@ class BodyModel:
             fractions[~fixed] *= (1 - fixed_total) / fractions[~fixed].sum()
             fractions[fixed] = [overrides[n] for n in np.array(names)[fixed]]
         seg_joint = np.array([j for _, j, _, _ in segs])
-        seg_local = np.array([c - rest[j] for _, j, c, _ in segs])
+        seg_local = np.array([R_ref[j].T @ (c - rest[j]) for _, j, c, _ in segs])
 
         marker_joint = np.zeros((2, 3), dtype=np.int64)
         marker_local = np.zeros((2, 3, 3))
@@ -291,14 +377,19 @@ class BodyModel:
             s = side + "_"
             a, t = roles[s + "ankle"], roles[s + "toe"]
             marker_joint[i] = (a, t, t)
-            marker_local[i, 2] = end_point(s + "toe", s + "toe_end", s + "ankle") - rest[t]
+            marker_local[i, 2] = R_ref[t].T @ (end_point(s + "toe", s + "toe_end", s + "ankle") - rest[t])
 
         leg = [
             np.linalg.norm(pos(s + "_knee") - pos(s + "_hip")) + np.linalg.norm(pos(s + "_ankle") - pos(s + "_knee"))
             for s in SIDES
         ]
         leg_length = float(np.mean(leg))
-        stature = _stature(skeleton, roles, rest, vertex, marker_local, leg_length)
+        if skeleton.reference_pose is None:
+            trunk = None  # upright rest pose: measured as it stands
+        else:  # a pose from the motion: the spine straightened, like the legs (it flexes from frame to frame)
+            trunk = float(sum(np.linalg.norm(skeleton.offsets[p]) for p in path[1:])
+                          + np.linalg.norm(vertex - rest[roles["head"]]))
+        stature = _stature(roles, rest, up, vertex, marker_local, R_ref, leg_length, trunk)
         return cls(
             skeleton, float(mass), sex, names, seg_joint, seg_local, fractions * mass,
             marker_joint, marker_local, dict(roles), leg_length, stature, tuple(notes),
@@ -397,18 +488,42 @@ class BodyModel:
         return from_soa(*self.fk(motion))
 
 
-def _stature(skeleton, roles, rest, vertex, marker_local, leg_length) -> float:
+def body_up(skeleton: Skeleton, rest: np.ndarray, mid_hip: np.ndarray, mid_shoulder: np.ndarray) -> np.ndarray:
+    """(3,) unit "up" of the body in its reference pose: world +Y for an upright rest pose; the trunk line
+    (mid-hip -> mid-shoulder) in a pose read from the motion, so that a forward lean while running does
+    not shorten the stature or reorder the spine joints."""
+    if skeleton.reference_pose is None:
+        return np.eye(3)[UP_AXIS]
+    d = mid_shoulder - mid_hip
+    return d / max(float(np.linalg.norm(d)), 1e-12)
+
+
+def _stature(roles, rest, up, vertex, marker_local, R_ref, leg_length, trunk) -> float:
     """Standing height [m]: the limbs straightened (rest poses of mocap skeletons often splay the legs).
 
     Sum of: the ankle's height above the sole (the larger of the toe markers' drop below the ankle in the
-    rest pose), shank and thigh lengths, the hip joint centres' drop below the mid-hip line to the
-    pelvis, and the vertical extent from the pelvis up to the head vertex.
+    reference pose; in a pose read from the motion, that of the lower foot, which stands flat), shank and
+    thigh lengths, the hip joint centres' drop below the pelvis, and the extent from the pelvis up to the
+    head vertex, all along the body's up (``body_up``). ``trunk`` [m], when given, replaces that last
+    extent (the spine chain's length plus the head's, for a pose read from the motion).
     """
-    up = UP_AXIS
-    ankle_height = 0.0
+    upright = trunk is None
+    heights = []
     for side in SIDES:
         a = rest[roles[side + "_ankle"]]
         t = rest[roles[side + "_toe"]]
-        ankle_height = max(ankle_height, a[up] - t[up], a[up] - (t + marker_local[0, 2])[up])
-    hip_drop = rest[roles["pelvis"]][up] - 0.5 * (rest[roles["left_hip"]][up] + rest[roles["right_hip"]][up])
-    return float(ankle_height + leg_length + hip_drop + (vertex[up] - rest[roles["pelvis"]][up]))
+        tip = t + R_ref[roles[side + "_toe"]] @ marker_local[0, 2]
+        heights.append((a[UP_AXIS], max(a @ up - t @ up, a @ up - tip @ up)))
+    if upright:
+        ankle_height = max(h for _, h in heights)
+    else:  # the stance foot of a mid-stance frame (the lower ankle), measured along world up
+        side = int(np.argmin([y for y, _ in heights]))
+        a = rest[roles[SIDES[side] + "_ankle"]]
+        t = rest[roles[SIDES[side] + "_toe"]]
+        tip = t + R_ref[roles[SIDES[side] + "_toe"]] @ marker_local[side, 2]
+        ankle_height = max(a[UP_AXIS] - t[UP_AXIS], a[UP_AXIS] - tip[UP_AXIS])
+    pelvis = rest[roles["pelvis"]]
+    hip_drop = pelvis @ up - 0.5 * (rest[roles["left_hip"]] @ up + rest[roles["right_hip"]] @ up)
+    if trunk is None:
+        trunk = vertex @ up - pelvis @ up
+    return float(ankle_height + leg_length + hip_drop + trunk)

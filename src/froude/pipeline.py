@@ -1252,25 +1252,29 @@ def _travel_direction(motion: Motion, result: Result) -> np.ndarray:
     return d / n if n > 0 else np.eye(3)[0]
 
 
-def write_result(result: Result, out_path, in_place: bool | None = None) -> tuple[Path, Path]:
-    """Write OUT.bvh and OUT.report.json atomically; returns both paths.
+def write_result(result: Result, out_path, data=None, in_place: bool | None = None) -> tuple[Path, ...]:
+    """Write OUT (.bvh, .glb or .gltf: ``froude.api.save`` decides by suffix) and OUT.report.json, and
+    the per-frame table to ``data`` (.csv/.parquet/.npz) when given; each atomically. Returns the paths.
 
     in_place: write the motion without root travel (``in_place_motion``); None: as the input was (an
     in-place take gives in-place outputs). The report is always that of the travelling motion (its speed,
     skate and gravity are physical there) and says which was written.
     """
-    from .io.bvh import save_bvh
+    from .api import save
 
     out_path = Path(out_path)
-    if out_path.suffix.lower() != ".bvh":
-        raise FroudeError(f"{out_path}: the output must be a .bvh file")
+    rp = report_path(out_path)
     if in_place is None:
         in_place = bool(result.report.extras.get("input_in_place")) if result.report is not None else False
-    rp = report_path(out_path)
-    save_bvh(in_place_motion(result) if in_place else result.motion, out_path)
+    save(in_place_motion(result) if in_place else result.motion, out_path)
     if result.report is not None:
         result.report.extras["written"] = "in place (root travel removed)" if in_place else "with root travel"
     write_report(result.report, rp)
-    return out_path, rp
+    if data is None:
+        return out_path, rp
+    from .io.framedata import frame_table, write_frame_data
+
+    table = frame_table(result.motion, result.retarget.body, machine_path=result.path)
+    return out_path, rp, write_frame_data(table, data)
 
 

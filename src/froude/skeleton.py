@@ -18,6 +18,13 @@ class Skeleton:
     offsets: (J, 3) rest translation of each joint in its parent's frame [m].
     channels: per joint, the BVH channel names in file order (e.g. ("Zrotation", "Yrotation", "Xrotation")).
     end_sites: ((joint index, (3,) offset [m]), ...) — BVH ``End Site`` blocks, in file order.
+    reference_pose: None when the zero-rotation rest pose stands upright (+Y up, the CMU habit); else
+        (J, 4) local unit quaternions of a pose that does, read from the motion (rigs whose rest pose
+        is folded by bind orientations, the Maya/MotionBuilder habit). The body model is built in it.
+    file_up: the up axis of the file the skeleton was read from ("Y" or "Z"); offsets here are +Y up
+        whatever it is, and writers turn them back.
+    joint_map: ((role, joint name), ...) given by the user for names froude does not recognise; the
+        body model uses it (``body.find_roles``).
     """
 
     names: tuple[str, ...]
@@ -25,6 +32,9 @@ class Skeleton:
     offsets: np.ndarray
     channels: tuple[tuple[str, ...], ...]
     end_sites: tuple[tuple[int, np.ndarray], ...] = field(default=())
+    reference_pose: np.ndarray | None = None
+    file_up: str = "Y"
+    joint_map: tuple[tuple[str, str], ...] | None = None
 
     def __post_init__(self):
         parents = np.asarray(self.parents, dtype=np.int64)
@@ -38,6 +48,12 @@ class Skeleton:
             raise ValueError("parents must satisfy parents[0] == -1 and 0 <= parents[j] < j")
         parents.setflags(write=False)
         offsets.setflags(write=False)
+        if self.reference_pose is not None:
+            pose = np.array(self.reference_pose, dtype=float)
+            if pose.shape != (n, 4):
+                raise ValueError("reference_pose must be (J, 4) quaternions")
+            pose.setflags(write=False)
+            object.__setattr__(self, "reference_pose", pose)
 
     @property
     def n_joints(self) -> int:
@@ -71,6 +87,16 @@ class Skeleton:
             p[j] = p[self.parents[j]] + self.offsets[j]
         return p
 
+    def reference_world(self) -> tuple[np.ndarray, np.ndarray]:
+        """World joint positions (J, 3) [m] and rotations (J, 3, 3) of the upright reference pose (the
+        rest pose when ``reference_pose`` is None), root at the origin."""
+        if self.reference_pose is None:
+            return self.rest_positions(), np.broadcast_to(np.eye(3), (self.n_joints, 3, 3)).copy()
+        from .kinematics import forward_kinematics
+
+        p, R = forward_kinematics(self, np.zeros((1, 3)), self.reference_pose[None])
+        return p[0], R[0]
+
     def rest_end_sites(self) -> np.ndarray:
         """(E, 3) world end-site positions [m] in the rest pose (root at the origin)."""
         p = self.rest_positions()
@@ -90,14 +116,22 @@ class Skeleton:
         ends = tuple(
             (j, np.asarray(off) * (f[j] if f.ndim == 1 else f)) for j, off in self.end_sites
         )
-        return Skeleton(self.names, self.parents, self.offsets * per_joint, self.channels, ends)
+        return Skeleton(self.names, self.parents, self.offsets * per_joint, self.channels, ends,
+                        self.reference_pose, self.file_up, self.joint_map)
 
     def with_offsets(self, offsets: np.ndarray, end_sites=None) -> "Skeleton":
         """A copy with new offsets (J, 3) [m] (and optionally new end sites)."""
         return Skeleton(
             self.names, self.parents, offsets, self.channels,
-            self.end_sites if end_sites is None else tuple(end_sites),
+            self.end_sites if end_sites is None else tuple(end_sites), self.reference_pose, self.file_up,
+            self.joint_map,
         )
+
+    def with_(self, **changes) -> "Skeleton":
+        """A copy with fields replaced (dataclasses.replace)."""
+        from dataclasses import replace
+
+        return replace(self, **changes)
 
     def same_topology(self, other: "Skeleton") -> str | None:
         """None if ``other`` has the same joint names and parents, else a description of the first mismatch."""

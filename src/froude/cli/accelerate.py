@@ -5,7 +5,9 @@ import time
 
 from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
                      add_quiet, add_range_option, add_root_option, bound_work, character_input, character_kwargs,
-                     check_character, check_inputs, guard_outputs, number, print_rows, say, speed)
+                     check_character, check_inputs, guard_outputs, load_clip, number, print_rows, say,
+                     speed)
+from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Steps of a speed change, and of the steady parts around it, froude plans at most.
 MAX_STEPS = 500
@@ -20,14 +22,16 @@ def register(sub) -> None:
         description="Plan touchdown angles step by step so that the simple machine reaches a target speed "
         "(a step is one stance and the flight after it), simulate it, time-warp the reference cycle onto "
         "the planned steps and correct the whole body with IK. Works for any character: the plan is "
-        "dimensionless. Writes OUT.bvh and OUT.report.json (with the per-step speed profile), and the plot "
+        "dimensionless. Writes OUT.bvh (or .glb/.gltf) and OUT.report.json (with the per-step speed profile), "
+        "and the plot "
         "if asked, all or none.",
         epilog="Examples: froude accelerate run.bvh --to-speed 0.5x --steps 8 -o slow.bvh ; "
         "froude accelerate run.bvh --to-speed 4.5m/s --within 2.0 --character troll -o troll_fast.bvh",
     )
     p.add_argument("clip", help="reference running clip (BVH)")
-    p.add_argument("-o", "--output", required=True, metavar="OUT.bvh",
-                   help="output BVH (OUT.report.json is written beside it); its folder must exist")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.bvh|.glb|.gltf",
+                   help="output motion: BVH, or glTF/GLB (skin, joints, animation, a mannequin mesh); "
+                   "OUT.report.json is written beside it; its folder must exist")
     p.add_argument("--to-speed", required=True, type=speed("--to-speed"), metavar="Fx|Vm/s",
                    help="goal: a factor of the start speed (0.5x, or a bare 0.5) or a speed (3.0m/s)")
     g = p.add_mutually_exclusive_group()
@@ -46,6 +50,7 @@ def register(sub) -> None:
     add_fps(p)
     add_mass(p)
     add_force(p)
+    add_data_option(p)
     add_quiet(p)
     add_character_options(p)
     add_load_options(p)
@@ -59,10 +64,12 @@ def run(args) -> int:
     from ..io.atomic import atomic_group, require_suffix
     from ..pipeline import report_path
 
-    out = require_suffix(args.output, (".bvh",))
+    out = require_suffix(args.output, MOTION_OUTPUTS)
+    data = data_output(args)
     plot = require_suffix(args.plot, PLOT_SUFFIXES, "plot") if args.plot else None
     check_inputs(args.clip)
-    guard_outputs([out, report_path(out), *_plot_files(plot)], [args.clip, character_input(args)])
+    guard_outputs([out, report_path(out), *_plot_files(plot)] + ([data] if data else []),
+                  [args.clip, character_input(args)])
     check_character(args)
     goal = args.to_speed
     steps = args.steps if (args.steps is not None or args.within is not None) else 8
@@ -71,7 +78,8 @@ def run(args) -> int:
 
     t0 = time.perf_counter()
     say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale, time_range=args.range)
+    clip = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.quiet, args.joint_map, args.up)
+    prep = pipeline.prepare(clip, mass=args.mass, time_range=args.range)
     rt = prep.retarget(args.character, **character_kwargs(args))
     m = prep.machine.scaled(rt.L, rt.M)
     step_s = m.step_time * m.time_unit
@@ -92,7 +100,7 @@ def run(args) -> int:
             "--keep writes it anyway")
         return 1
     with atomic_group():
-        bvh, rep = pipeline.write_result(res, out, in_place=args.in_place)
+        bvh, rep, *data_written = pipeline.write_result(res, out, data, in_place=args.in_place)
         written = []
         if plot:
             from ..viz.plan_plot import plot_plan
@@ -112,7 +120,8 @@ def run(args) -> int:
     print(f"physics bars: {'all met' if not fails else 'NOT met (kept): ' + '; '.join(fails)}")
     for w in written:
         say(f"wrote {w}", args.quiet)
-    say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep} in {time.perf_counter() - t0:.2f} s", args.quiet)
+    also = "".join(f" and {d}" for d in data_written)
+    say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep}{also} in {time.perf_counter() - t0:.2f} s", args.quiet)
     return 0
 
 

@@ -140,7 +140,12 @@ def add_fps(p, help_text: str = "output frame rate [Hz] (default: the input's)",
 def add_load_options(p) -> None:
     lo, hi = LENGTH_SCALE_RANGE
     p.add_argument("--length-scale", type=number(lo, hi, "m per unit", lo_open=False), default=None, metavar="M",
-                   help="metres per file unit (default: detected from the skeleton's height)")
+                   help="metres per file unit (default: detected from the motion: the flight gravity, else the "
+                   "most human stature; said aloud)")
+    p.add_argument("--joint-map", default=None, metavar="FILE.yaml",
+                   help="joint roles for unusual joint names, lines 'role: JointName' (e.g. left_knee: Shin_L)")
+    p.add_argument("--up", default=None, choices=("Y", "Z"), type=str.upper,
+                   help="the file's up axis (default: detected from the motion)")
     p.add_argument("--keep-all-frames", action="store_true",
                    help="do not drop a synthetic T-pose frame or invalid leading/trailing rows")
 
@@ -192,12 +197,19 @@ def check_inputs(*paths) -> None:
             raise FroudeError(f"{p}: no such file")
 
 
-def load_clip(path: str, length_scale: float | None = None, keep_all: bool = False, quiet: bool = False):
-    """Load a BVH clip and say which units were chosen and what cleaning did."""
+def load_clip(path: str, length_scale: float | None = None, keep_all: bool = False, quiet: bool = False,
+              joint_map: str | None = None, up: str | None = None):
+    """Load a BVH clip and say which units and conventions were read and what cleaning did.
+
+    joint_map: a YAML file 'role: JointName' (``body.load_joint_map``); up: "Y"/"Z" (None: detected)."""
+    from ..body import load_joint_map
     from ..io.bvh import load_bvh
 
-    motion = load_bvh(path, length_scale=length_scale, clean=not keep_all)
-    say(f"{path}: {motion.n_frames} frames at {motion.fps:.0f} Hz; units: {motion.meta['units']}", quiet)
+    jm = load_joint_map(joint_map) if joint_map else None
+    motion = load_bvh(path, length_scale=length_scale, clean=not keep_all, joint_map=jm, up=up)
+    say(f"{path}: {motion.n_frames} frames at {motion.fps:.3f} Hz; units: {motion.meta['units']}", quiet)
+    for note in motion.meta.get("conventions", ()):
+        say(f"{path}: {note}", quiet)
     for note in motion.meta.get("cleaning", ()):
         say(f"{path}: cleaning: {note}", quiet)
     return motion
@@ -234,3 +246,22 @@ def print_rows(rows) -> None:
     width = max(len(k) for k, _ in rows)
     for k, v in rows:
         print(f"{k:<{width}}  {v}")
+
+
+# ---- exports -----------------------------------------------------------------------------------------
+#: Output suffixes of a motion (``froude.api.save`` writes them) and of per-frame data.
+MOTION_OUTPUTS = (".bvh", ".glb", ".gltf")
+DATA_OUTPUTS = (".csv", ".parquet", ".npz")
+
+
+def add_data_option(p) -> None:
+    p.add_argument("--data", default=None, metavar="OUT.csv|.parquet|.npz",
+                   help="also write per frame: time, COM position and velocity, ground force (the machine's for "
+                   "outputs; eq. 1 from the COM always), each foot's contact and markers, stance/flight phase")
+
+
+def data_output(args):
+    """The --data path with its suffix checked (None when not asked for)."""
+    from ..io.atomic import require_suffix
+
+    return None if args.data is None else require_suffix(args.data, DATA_OUTPUTS, "--data output")

@@ -69,7 +69,7 @@ def run(args) -> int:
     from ..body import BodyModel
     from ..machine.fit import fit_machine_detailed
 
-    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, quiet=args.quiet)
+    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.quiet, args.joint_map, args.up)
     if args.range:
         from ..pipeline import select_range
 

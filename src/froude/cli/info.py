@@ -2,8 +2,9 @@
 from __future__ import annotations
 
 import math
+import sys
 
-from .common import add_load_options, add_mass, check_inputs, load_clip
+from .common import add_data_option, add_load_options, add_mass, check_inputs, data_output, guard_outputs, load_clip
 
 
 def register(sub) -> None:
@@ -16,6 +17,7 @@ def register(sub) -> None:
     p.add_argument("clip", help="BVH file")
     p.add_argument("--json", action="store_true", help="print the summary as JSON instead of a table")
     add_mass(p, "body mass [kg] for the COM model")
+    add_data_option(p)
     add_load_options(p)
     p.set_defaults(func=run)
 
@@ -76,10 +78,13 @@ def _fmt_list(values, unit="s") -> str:
 
 def run(args) -> int:
     check_inputs(args.clip)
+    data = data_output(args)
+    if data is not None:
+        guard_outputs([data], [args.clip])
     from ..body import BodyModel
     from ..gait import detect_gait, summarize
 
-    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, quiet=args.json)
+    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.json, args.joint_map, args.up)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers)
@@ -87,6 +92,12 @@ def run(args) -> int:
     from ..io.jsonable import dumps, jsonable
 
     d = jsonable(info_dict(motion, body, summary, gait))
+    if data is not None:
+        from ..io.framedata import frame_table, write_frame_data
+
+        write_frame_data(frame_table(motion, body), data)
+        if not args.json:
+            print(f"wrote {data}", file=sys.stderr)
     if args.json:
         print(dumps(d, indent=2))
         return 0

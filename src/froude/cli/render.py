@@ -84,7 +84,8 @@ def run(args) -> int:
 
     from ..viz import render as R
 
-    motions = [load_clip(c, args.length_scale, args.keep_all_frames, quiet=args.quiet) for c in args.clips]
+    motions = [load_clip(c, args.length_scale, args.keep_all_frames, args.quiet, args.joint_map, args.up)
+               for c in args.clips]
     longest = max(m.duration for m in motions)
     if not args.filmstrip and ext == ".png" and args.at > longest:
         raise FroudeError(f"--at {args.at:g} s is after the end of the longest clip ({longest:.3f} s); "

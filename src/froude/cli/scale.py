@@ -7,7 +7,9 @@ from pathlib import Path
 from ..presets import list_presets
 from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
                      add_quiet, add_range_option, add_root_option, bound_work, character_input, character_kwargs,
-                     check_character, check_inputs, guard_outputs, number, print_rows, say, speed)
+                     check_character, check_inputs, guard_outputs, load_clip, number, print_rows, say,
+                     speed)
+from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
 MAX_STRIDES = 10_000
@@ -19,7 +21,8 @@ def register(sub) -> None:
         "scale", help="retarget a run to a new character and/or speed, physically (paper 5.1, 5.2, 6)",
         description="Fit the simple machine to the clip, scale it to the character by dynamic similarity "
         "(times x sqrt(L), speeds x sqrt(L)), change its speed by horizontal stretching, synthesise any "
-        "number of strides and correct the whole body with IK. Writes OUT.bvh (same joint names and "
+        "number of strides and correct the whole body with IK. Writes OUT.bvh or OUT.glb/.gltf (same joint names "
+        "and "
         "channel orders as the input, the target's bone lengths) and OUT.report.json (the physics report), "
         "both or neither. Every option is checked before the work starts; an output that would replace an "
         "input is refused.",
@@ -27,8 +30,9 @@ def register(sub) -> None:
         "-o child.bvh",
     )
     p.add_argument("clip", help="reference running clip (BVH)")
-    p.add_argument("-o", "--output", required=True, metavar="OUT.bvh",
-                   help="output BVH (OUT.report.json is written beside it); its folder must exist")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.bvh|.glb|.gltf",
+                   help="output motion: BVH, or glTF/GLB (skin, joints, animation, a mannequin mesh); "
+                   "OUT.report.json is written beside it; its folder must exist")
     add_character_options(p)
     g = p.add_argument_group("speed and length")
     g.add_argument("--speed", type=speed("--speed"), default=None, metavar="Fx|Vm/s",
@@ -43,6 +47,7 @@ def register(sub) -> None:
                    help="physical (froude) or naive (what engines do: angles copied, root x L, timing kept)")
     add_mass(p)
     add_force(p)
+    add_data_option(p)
     add_quiet(p)
     add_load_options(p)
     add_range_option(p)
@@ -55,9 +60,10 @@ def run(args) -> int:
     from ..io.atomic import atomic_group, require_suffix
     from ..pipeline import report_path
 
-    out = require_suffix(args.output, (".bvh",))
+    out = require_suffix(args.output, MOTION_OUTPUTS)
+    data = data_output(args)
     check_inputs(args.clip)
-    guard_outputs([out, report_path(out)], [args.clip, character_input(args)])
+    guard_outputs([out, report_path(out)] + ([data] if data else []), [args.clip, character_input(args)])
     check_character(args)
     goal = args.speed
     t0 = time.perf_counter()
@@ -65,7 +71,8 @@ def run(args) -> int:
     from .. import pipeline
 
     say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    prep = pipeline.prepare(args.clip, mass=args.mass, length_scale=args.length_scale, time_range=args.range)
+    clip = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.quiet, args.joint_map, args.up)
+    prep = pipeline.prepare(clip, mass=args.mass, time_range=args.range)
     _bound(prep, args)
     say(f"synthesising ({args.method}) ...", args.quiet)
     from ..errors import FitError, FroudeError
@@ -90,10 +97,11 @@ def run(args) -> int:
             f"met this clip runs {rng.describe()}; --keep writes it anyway")
         return 1
     with atomic_group():
-        bvh, rep = pipeline.write_result(res, out, in_place=args.in_place)
+        bvh, rep, *data_written = pipeline.write_result(res, out, data, in_place=args.in_place)
     print_rows(res.summary_rows())
     print(f"physics bars: {'all met' if not fails else 'NOT met (kept): ' + '; '.join(fails)}")
-    say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep} in {time.perf_counter() - t0:.2f} s", args.quiet)
+    also = "".join(f" and {d}" for d in data_written)
+    say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep}{also} in {time.perf_counter() - t0:.2f} s", args.quiet)
     return 0
 
 

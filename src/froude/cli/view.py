@@ -65,12 +65,11 @@ def run(args) -> int:
             "network, with no password; anyone who can reach it can drive it. Use the default 127.0.0.1 unless "
             "you mean to share it.")
     clip = args.clip or str(sample_path())
-    if args.keep_all_frames:
-        from .common import load_clip
+    from .common import load_clip
 
-        clip = load_clip(clip, args.length_scale, keep_all=True)
+    clip = load_clip(clip, args.length_scale, args.keep_all_frames, False, args.joint_map, args.up)
     say(f"froude view: preparing {args.clip or 'the embedded sample (09_01)'} (fit once, reused for every change) ...")
-    prep = pipeline.prepare(clip, mass=args.mass, length_scale=args.length_scale)
+    prep = pipeline.prepare(clip, mass=args.mass)
     params = Params(character=args.character, speed=_start_factor(prep, args), strides=args.strides).check()
     code = serve(prep, host=args.host, port=args.port, params=params, open_browser=args.open,
                  announce=lambda m: print(m, flush=True))

@@ -20,6 +20,7 @@ import numpy as np
 
 from .. import quat
 from ..errors import BvhError
+from ..conventions import understand
 from ..motion import Motion
 from .atomic import atomic_write_text
 from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
@@ -290,11 +291,15 @@ def _pose_jump_deg(rot: np.ndarray) -> np.ndarray:
     return np.degrees(np.median(jumps, axis=1))
 
 
-def load_bvh(path: str | os.PathLike, *, length_scale: float | None = None, clean: bool = True) -> Motion:
+def load_bvh(path: str | os.PathLike, *, length_scale: float | None = None, clean: bool = True,
+             joint_map=None, up: str | None = None) -> Motion:
     """Read a BVH file into a ``Motion`` in SI units (+Y up).
 
     path: the file.
-    length_scale: metres per file unit; None detects it from the rest-pose stature (meta["units"]).
+    length_scale: metres per file unit; None detects it from the motion (``conventions.choose_unit``:
+        the flight gravity, else the most human stature; meta["units"] says which and why).
+    joint_map: role -> joint name for rigs whose joint names are not recognised (``body.find_roles``).
+    up: "Y" or "Z", the file's up axis; None detects it from the motion (meta["up_axis"]).
     clean: drop (and report in meta["cleaning"]) a synthetic rest/T-pose first frame and invalid
         leading/trailing rows (all-zero, NaN or inf). With clean=False every row is kept and any
         non-finite value is an error.
@@ -325,43 +330,38 @@ def load_bvh(path: str | os.PathLike, *, length_scale: float | None = None, clea
     root_line = parser.root_line
     del parser  # the text lines
 
-    # Rest offsets and units
-    offsets_file = np.array(offsets, dtype=float)
-    skel_file = Skeleton(tuple(names), np.array(parents), offsets_file, tuple(channels),
+    # Cleaning is about rotations and rows: done in file units; the conventions are then read from the
+    # motion (froude.conventions): units, up axis, the rest pose, translation channels.
+    skel_file = Skeleton(tuple(names), np.array(parents), np.array(offsets, dtype=float), tuple(channels),
                          tuple((j, np.array(o, float)) for j, o in end_sites))
-    stature_file = skel_file.standing_height()
-    if length_scale is None:
-        try:
-            length_scale, unit_name = detect_length_scale(stature_file)
-        except BvhError as e:
-            raise BvhError(str(e), path, root_line) from None
-        notes_units = f"{unit_name} detected from a rest-pose stature of {stature_file:g} file units"
-    else:
-        if not (np.isfinite(length_scale) and length_scale > 0):
-            raise BvhError(f"length_scale must be > 0, got {length_scale}", path)
-        notes_units = f"length scale {length_scale:g} m per file unit (given)"
-    skeleton = skel_file.scaled(length_scale)
-
     finite = np.isfinite(values).all(axis=1)
     if not clean:
         bad = np.flatnonzero(~finite)
         if bad.size:
             raise _non_finite_error(path, values, linenos, channel_names, int(bad[0]), "")
-        root_positions, rotations, translations = _channels_to_pose(skeleton, values, length_scale)
+        root_positions, rotations, translations = _channels_to_pose(skel_file, values, 1.0)
         notes: list[str] = []
     else:
         root_positions, rotations, translations, linenos, notes = _clean(
-            path, skeleton, values, linenos, finite, channel_names, length_scale
+            path, skel_file, values, linenos, finite, channel_names, 1.0
         )
-
+    del values
+    raw_motion = Motion(skel_file, root_positions, rotations, frame_time, translations)
+    try:
+        motion, conv = understand(raw_motion, joint_map=joint_map, length_scale=length_scale, up=up)
+    except ValueError as e:
+        raise BvhError(str(e), path, root_line) from None
     meta = {
         "source": path,
-        "length_scale": float(length_scale),
-        "units": notes_units,
+        "length_scale": conv["length_scale"],
+        "units": conv["units"],
+        "units_ambiguous": conv["units_ambiguous"],
+        "up_axis": conv["up_axis"],
+        "conventions": conv["notes"],
         "cleaning": tuple(notes),
         "first_line": int(linenos[0]),
     }
-    return Motion(skeleton, root_positions, rotations, frame_time, translations, meta)
+    return motion.with_(meta=meta)
 
 
 def _non_finite_error(path, values, linenos, channel_names, k: int, where: str) -> BvhError:

@@ -119,10 +119,11 @@ def build_rig(body: BodyModel) -> Rig:
     J = sk.n_joints
     anc = ancestor_mask(sk)  # anc[b, k]: k is b or an ancestor of b
     stature = body.stature
-    rest = sk.rest_positions()
+    rest, R_ref = sk.reference_world()  # the upright reference pose (the rest pose unless it is folded)
     ends = {}
     for j, off in sk.end_sites:
-        ends.setdefault(int(j), np.asarray(off, dtype=float))
+        if np.linalg.norm(off) > 0:  # zero-length end sites ("OFFSET 0 0 0") mark nothing
+            ends.setdefault(int(j), np.asarray(off, dtype=float))
 
     def subtree(j):
         return anc[:, j]  # (J,) joints at or below j
@@ -174,8 +175,9 @@ def build_rig(body: BodyModel) -> Rig:
         return "torso" if anc[neck, child] else "neck"
 
     min_len = 1e-3 * stature
+    body_joints = subtree(roles["pelvis"])  # a static or ground-level reference root above it is not drawn
     for j in range(1, J):
-        if fingers[j] or np.linalg.norm(sk.offsets[j]) < min_len:
+        if fingers[j] or np.linalg.norm(sk.offsets[j]) < min_len or j == roles["pelvis"] or not body_joints[j]:
             continue
         bones.append((int(sk.parents[j]), j, kind_of(j), side[j]))
     for s in ("left", "right"):
@@ -197,11 +199,11 @@ def build_rig(body: BodyModel) -> Rig:
             bones.append((wrist, b, "hand", code))
     head = roles["head"]
     if "head_end" in roles:
-        vertex_local = rest[roles["head_end"]] - rest[head]
+        vertex_local = R_ref[head].T @ (rest[roles["head_end"]] - rest[head])
     elif head in ends:
         vertex_local = ends[head]
     else:
-        vertex_local = np.asarray(UP, dtype=float) * 0.12 * stature
+        vertex_local = R_ref[head].T @ (np.asarray(UP, dtype=float) * 0.12 * stature)
     # the head disc touches the vertex: its centre sits one radius below it along the head's axis
     radius = _HEAD_RADIUS * stature
     vlen = np.linalg.norm(vertex_local)

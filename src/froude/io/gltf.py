@@ -1,0 +1,336 @@
+"""glTF 2.0 / GLB: a Motion as a skinned, animated skeleton (and back), with an optional mannequin mesh.
+
+Conventions match froude's and glTF's alike: metres, +Y up, right-handed. Each joint is a node whose
+translation is its rest offset [m] (the root's and any joint with position channels are animated) and
+whose rotation is animated from the local quaternions; a joint's world transform is then
+parent · T(offset) · R(local), exactly the BVH forward kinematics (``kinematics.fk``). The skin lists every
+joint with the inverse of its rest-pose world matrix (every rotation identity, the root at its offset:
+``Skeleton.rest_positions`` shifted by the root offset), the pose the mannequin is modelled in.
+
+The mannequin is one octahedral "bone" per parent→child segment (and per end site), each skinned rigidly
+to the parent joint, so the file shows a body in any viewer. BVH channel orders and the frame rate are kept
+in the scene's ``extras`` so that ``load_gltf`` of a froude file gives back the same BVH layout.
+
+pygltflib (the optional extra ``froude[gltf]``) is imported inside the functions.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import FroudeError
+from ..motion import Motion
+from ..skeleton import Skeleton
+from .atomic import atomic_write
+
+#: glTF component types and accessor types used here.
+_FLOAT, _USHORT, _UINT, _UBYTE = 5126, 5123, 5125, 5121
+_ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
+#: Thickness of the mannequin's bones as a fraction of their length (and at least this many metres).
+BONE_WIDTH_FRACTION = 0.12
+BONE_MIN_WIDTH_M = 0.01
+EXTRAS_KEY = "froude"
+
+
+def _require_pygltflib():
+    try:
+        import pygltflib
+    except ImportError:
+        raise FroudeError("glTF/GLB files need pygltflib: pip install 'froude[gltf]'") from None
+    return pygltflib
+
+
+class _Blob:
+    """One binary buffer built view by view (each view 4-byte aligned, as glTF requires)."""
+
+    def __init__(self, gl):
+        self.gl = gl
+        self.data = bytearray()
+
+    def add(self, array: np.ndarray, component: int, kind: str, target=None, minmax: bool = False) -> int:
+        """Append array as a bufferView + accessor; returns the accessor index."""
+        gl = self.gl
+        arr = np.ascontiguousarray(array)
+        while len(self.data) % 4:
+            self.data.append(0)
+        offset = len(self.data)
+        self.data += arr.tobytes()
+        gl.bufferViews.append(self._pyg.BufferView(buffer=0, byteOffset=offset, byteLength=arr.nbytes, target=target))
+        count = arr.shape[0]
+        acc = self._pyg.Accessor(bufferView=len(gl.bufferViews) - 1, componentType=component, count=count, type=kind)
+        if minmax:
+            flat = arr.reshape(count, -1)
+            acc.min = [float(x) for x in flat.min(axis=0)]
+            acc.max = [float(x) for x in flat.max(axis=0)]
+        gl.accessors.append(acc)
+        return len(gl.accessors) - 1
+
+
+def _rest_world(skeleton: Skeleton) -> np.ndarray:
+    """(J, 4, 4) rest-pose world matrices: identity rotations, root at its offset (as the nodes' rest)."""
+    p = skeleton.rest_positions() + skeleton.offsets[0]
+    m = np.tile(np.eye(4), (skeleton.n_joints, 1, 1))
+    m[:, :3, 3] = p
+    return m
+
+
+def mannequin(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A simple body for the rest pose: one octahedron per bone (parent→child and joint→end site).
+
+    Returns vertices (V, 3) [m] in the rest pose (root at its offset), triangles (T, 3) int and the joint
+    each vertex follows (V,) int (rigid skinning to the bone's parent joint).
+    """
+    rest = skeleton.rest_positions() + skeleton.offsets[0]
+    segs = [(int(skeleton.parents[j]), rest[skeleton.parents[j]], rest[j]) for j in range(1, skeleton.n_joints)]
+    segs += [(j, rest[j], rest[j] + np.asarray(off)) for j, off in skeleton.end_sites]
+    verts, tris, joints = [], [], []
+    for joint, a, b in segs:
+        d = b - a
+        length = float(np.linalg.norm(d))
+        if length < 1e-6:
+            continue
+        u = d / length
+        # two directions across the bone
+        helper = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
+        s = np.cross(u, helper)
+        s /= np.linalg.norm(s)
+        t = np.cross(u, s)
+        w = max(BONE_WIDTH_FRACTION * length, BONE_MIN_WIDTH_M) / 2.0
+        mid = a + 0.2 * d
+        base = len(verts)
+        verts += [a, mid + w * s, mid + w * t, mid - w * s, mid - w * t, b]
+        joints += [joint] * 6
+        ring = [1, 2, 3, 4]
+        for k in range(4):
+            r0, r1 = ring[k], ring[(k + 1) % 4]
+            tris += [(base, base + r1, base + r0), (base + 5, base + r0, base + r1)]
+    return np.array(verts, float).reshape(-1, 3), np.array(tris, np.int64).reshape(-1, 3), np.array(joints, np.int64)
+
+
+def gltf_document(motion: Motion, *, mesh: bool = True):
+    """The pygltflib.GLTF2 document of a motion (binary data set as its blob)."""
+    pyg = _require_pygltflib()
+    sk = motion.skeleton
+    J, F = sk.n_joints, motion.n_frames
+    for name, arr in (("root positions", motion.root_positions), ("rotations", motion.rotations)):
+        if not np.all(np.isfinite(arr)):
+            raise FroudeError(f"the motion's {name} hold non-finite values: nothing written")
+    gl = pyg.GLTF2(asset=pyg.Asset(version="2.0", generator="froude"))
+    blob = _Blob(gl)
+    blob._pyg = pyg
+    gl.buffers.append(pyg.Buffer(byteLength=0))
+
+    # joint nodes (node j = joint j), the hierarchy
+    rot_xyzw = np.roll(motion.continuous().rotations, -1, axis=-1)  # glTF quaternions are (x, y, z, w)
+    rot_xyzw /= np.linalg.norm(rot_xyzw, axis=-1, keepdims=True)
+    for j in range(J):
+        t = motion.root_positions[0] if j == 0 else (
+            motion.translations[0, j] if motion.translations is not None else sk.offsets[j])
+        node = pyg.Node(name=sk.names[j], translation=[float(x) for x in t],
+                        rotation=[float(x) for x in rot_xyzw[0, j]])
+        node.children = sk.children(j)
+        gl.nodes.append(node)
+    scene_nodes = [0]
+
+    # animation: root translation, every joint's rotation, translations of joints with position channels
+    times = (np.arange(F) * motion.frame_time).astype(np.float32)
+    anim = pyg.Animation(name=Path(str(motion.meta.get("source") or "motion")).stem or "motion")
+    t_acc = blob.add(times, _FLOAT, "SCALAR", minmax=True)
+
+    def channel(node: int, path: str, values: np.ndarray, kind: str):
+        out = blob.add(values.astype(np.float32), _FLOAT, kind)
+        anim.samplers.append(pyg.AnimationSampler(input=t_acc, output=out, interpolation="LINEAR"))
+        anim.channels.append(pyg.AnimationChannel(sampler=len(anim.samplers) - 1,
+                                                  target=pyg.AnimationChannelTarget(node=node, path=path)))
+
+    channel(0, "translation", motion.root_positions, "VEC3")
+    for j in range(J):
+        channel(j, "rotation", rot_xyzw[:, j], "VEC4")
+    if motion.translations is not None:
+        for j in range(1, J):
+            if sk.has_translation_channels(j):
+                channel(j, "translation", motion.translations[:, j], "VEC3")
+    gl.animations.append(anim)
+
+    # skin: every joint, inverse bind matrices of the rest pose (column-major, as glTF stores matrices)
+    ibm = np.linalg.inv(_rest_world(sk)).transpose(0, 2, 1).astype(np.float32)
+    skin = pyg.Skin(name="skeleton", joints=list(range(J)), skeleton=0,
+                    inverseBindMatrices=blob.add(ibm.reshape(J, 16), _FLOAT, "MAT4"))
+    gl.skins.append(skin)
+
+    if mesh:
+        verts, tris, vjoint = mannequin(sk)
+        pos = blob.add(verts.astype(np.float32), _FLOAT, "VEC3", _ARRAY_BUFFER, minmax=True)
+        jt = np.zeros((len(verts), 4), np.uint16 if J > 255 else np.uint8)
+        jt[:, 0] = vjoint
+        wt = np.zeros((len(verts), 4), np.float32)
+        wt[:, 0] = 1.0
+        j_acc = blob.add(jt, _USHORT if J > 255 else _UBYTE, "VEC4", _ARRAY_BUFFER)
+        w_acc = blob.add(wt, _FLOAT, "VEC4", _ARRAY_BUFFER)
+        idx_dtype, idx_type = (np.uint16, _USHORT) if len(verts) < 65535 else (np.uint32, _UINT)
+        i_acc = blob.add(tris.astype(idx_dtype).reshape(-1), idx_type, "SCALAR", _ELEMENT_ARRAY_BUFFER)
+        prim = pyg.Primitive(attributes=pyg.Attributes(POSITION=pos, JOINTS_0=j_acc, WEIGHTS_0=w_acc), indices=i_acc)
+        gl.meshes.append(pyg.Mesh(name="mannequin", primitives=[prim]))
+        gl.nodes.append(pyg.Node(name="mannequin", mesh=0, skin=0))
+        scene_nodes.append(len(gl.nodes) - 1)
+
+    gl.scenes.append(pyg.Scene(name="froude", nodes=scene_nodes, extras={EXTRAS_KEY: {
+        "channels": [list(c) for c in sk.channels],
+        "end_sites": [[int(j), [float(x) for x in off]] for j, off in sk.end_sites],
+        "frame_time_s": float(motion.frame_time),
+        "units": "m, +Y up",
+    }}))
+    gl.scene = 0
+    while len(blob.data) % 4:
+        blob.data.append(0)
+    gl.buffers[0].byteLength = len(blob.data)
+    gl.set_binary_blob(bytes(blob.data))
+    return gl
+
+
+def save_gltf(motion: Motion, path: str | os.PathLike, *, mesh: bool = True) -> Path:
+    """Write ``motion`` as ``.glb`` (binary) or ``.gltf`` (JSON, data embedded) atomically; returns the path.
+
+    mesh: include the mannequin (False: skeleton and animation only).
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".glb", ".gltf"):
+        raise FroudeError(f"{path}: a glTF output ends in .glb or .gltf")
+    gl = gltf_document(motion, mesh=mesh)
+
+    def write(tmp: str) -> None:
+        if suffix == ".glb":
+            gl.save_binary(tmp)
+        else:
+            pyg = _require_pygltflib()
+            gl.convert_buffers(pyg.BufferFormat.DATAURI)
+            gl.save_json(tmp)
+
+    return atomic_write(path, write)
+
+
+# ---- reading ------------------------------------------------------------------------------------------
+def _accessor_array(gl, index: int) -> np.ndarray:
+    """An accessor's data as a float array (count, n)."""
+    acc = gl.accessors[index]
+    view = gl.bufferViews[acc.bufferView]
+    n = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}[acc.type]
+    dtype = {_FLOAT: np.float32, _USHORT: np.uint16, _UINT: np.uint32, _UBYTE: np.uint8, 5120: np.int8,
+             5122: np.int16}[acc.componentType]
+    data = gl.get_data_from_buffer_uri(gl.buffers[view.buffer].uri) if gl.buffers[view.buffer].uri else gl.binary_blob()
+    start = (view.byteOffset or 0) + (acc.byteOffset or 0)
+    stride = view.byteStride or n * np.dtype(dtype).itemsize
+    raw = np.frombuffer(data, np.uint8, count=stride * (acc.count - 1) + n * np.dtype(dtype).itemsize, offset=start)
+    rows = np.lib.stride_tricks.as_strided(raw, shape=(acc.count, n * np.dtype(dtype).itemsize), strides=(stride, 1))
+    return np.ascontiguousarray(rows).view(dtype).reshape(acc.count, n).astype(float)
+
+
+def load_gltf(path: str | os.PathLike, *, fps: float | None = None) -> Motion:
+    """Read the first skin's skeleton and the first animation of a .glb/.gltf file as a Motion.
+
+    The skeleton's offsets are the joints' rest translations [m] (glTF's units); animated rotations (and the
+    root's translation) become the motion. fps: sampling rate (default: the file's own for froude files,
+    else 30 Hz); channel orders come from froude's extras or default to ZYX rotations.
+    Raises FroudeError (one line) for files froude cannot read as a skeletal animation.
+    """
+    pyg = _require_pygltflib()
+    path = Path(path)
+    import warnings
+
+    try:
+        with warnings.catch_warnings():  # pygltflib warns, then fails or returns None, on a foreign file
+            warnings.simplefilter("ignore")
+            gl = pyg.GLTF2().load(str(path))
+    except Exception as e:  # noqa: BLE001 - pygltflib raises many kinds on a bad file
+        raise FroudeError(f"{path}: not a readable glTF file ({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''})") from None
+    if gl is None or not gl.skins:
+        raise FroudeError(f"{path}: no skin (skeleton) in this glTF file")
+    joints = list(gl.skins[0].joints)
+    index = {node: k for k, node in enumerate(joints)}
+    parents = np.full(len(joints), -1)
+    for k, node in enumerate(joints):
+        for c in gl.nodes[node].children or []:
+            if c in index:
+                parents[index[c]] = k
+    # depth-first order with parents first (froude's Skeleton needs parents[j] < j)
+    roots = [k for k in range(len(joints)) if parents[k] < 0]
+    if len(roots) != 1:
+        raise FroudeError(f"{path}: the skin's joints form {len(roots)} trees; froude needs one skeleton root")
+    order = []
+
+    def visit(k):
+        order.append(k)
+        for c in gl.nodes[joints[k]].children or []:
+            if c in index:
+                visit(index[c])
+
+    visit(roots[0])
+    new = {k: i for i, k in enumerate(order)}
+    nodes = [gl.nodes[joints[k]] for k in order]
+    J = len(order)
+    par = np.array([-1 if parents[k] < 0 else new[parents[k]] for k in order])
+    offsets = np.array([n.translation or [0.0, 0.0, 0.0] for n in nodes], float)
+    rest_rot = np.array([n.rotation or [0.0, 0.0, 0.0, 1.0] for n in nodes], float)
+    if any(n.scale not in (None, [1.0, 1.0, 1.0], [1, 1, 1]) for n in nodes) or any(n.matrix for n in nodes):
+        raise FroudeError(f"{path}: joints with scale or matrix transforms are not supported")
+    extras = (gl.scenes[gl.scene or 0].extras or {}).get(EXTRAS_KEY, {}) if gl.scenes else {}
+    saved_channels = extras.get("channels")
+    if not gl.animations:
+        raise FroudeError(f"{path}: no animation in this glTF file")
+    anim = gl.animations[0]
+    tracks = {}
+    t_end = 0.0
+    for ch in anim.channels:
+        node = ch.target.node
+        if node not in index:
+            continue
+        if ch.target.path == "scale":
+            raise FroudeError(f"{path}: animated joint scale is not supported (node '{gl.nodes[node].name}')")
+        if ch.target.path not in ("rotation", "translation"):
+            continue
+        s = anim.samplers[ch.sampler]
+        t = _accessor_array(gl, s.input)[:, 0]
+        v = _accessor_array(gl, s.output)
+        if s.interpolation == "CUBICSPLINE":
+            v = v.reshape(len(t), 3, -1)[:, 1]
+        tracks[(new[index[node]], ch.target.path)] = (t, v, s.interpolation or "LINEAR")
+        t_end = max(t_end, float(t[-1]))
+    frame_time = 1.0 / fps if fps else float(extras.get("frame_time_s", 1.0 / 30.0))
+    n = int(round(t_end / frame_time)) + 1
+    times = np.arange(n) * frame_time
+
+    def sample(key, default):
+        if key not in tracks:
+            return np.broadcast_to(default, (n, len(default))).copy()
+        t, v, interp = tracks[key]
+        if interp == "STEP":
+            return v[np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 1)]
+        return np.stack([np.interp(times, t, v[:, c]) for c in range(v.shape[1])], axis=1)
+
+    from .. import quat
+
+    rot = np.empty((n, J, 4))
+    for j in range(J):
+        q = sample((j, "rotation"), rest_rot[j])  # (x, y, z, w), linearly interpolated then normalised
+        rot[:, j] = quat.normalize(np.roll(q, 1, axis=-1))
+    root = sample((0, "translation"), offsets[0])
+    moving = [j for j in range(1, J) if (j, "translation") in tracks]
+    translations = None
+    if moving:
+        translations = np.broadcast_to(offsets, (n, J, 3)).copy()
+        for j in moving:
+            translations[:, j] = sample((j, "translation"), offsets[j])
+    if saved_channels and len(saved_channels) == J:
+        channels = tuple(tuple(c) for c in saved_channels)
+    else:
+        pos = ("Xposition", "Yposition", "Zposition")
+        rotc = ("Zrotation", "Yrotation", "Xrotation")
+        channels = tuple(pos + rotc if j == 0 or j in moving else rotc for j in range(J))
+    ends = tuple((int(j), np.asarray(off, float)) for j, off in extras.get("end_sites", ())) if saved_channels else ()
+    names = tuple(n.name or f"joint{k}" for k, n in enumerate(nodes))
+    skel = Skeleton(names, par, offsets, channels, ends)
+    meta = {"source": str(path), "units": "metres (glTF)", "length_scale": 1.0}
+    return Motion(skel, root, rot, frame_time, translations, meta)

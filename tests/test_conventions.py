@@ -1,0 +1,214 @@
+"""Any rig, any file: the same real motion re-expressed in other conventions reads the same.
+
+Each shared running clip is rewritten by ``rig_variants`` (independent of froude) in other units, Z-up,
+a folded bind pose, other naming families, under a static extra root, with six channels on every joint
+and at 30/60 Hz; froude's reading of it (info, fit, scale) must agree with its reading of the original.
+Also: froude's own outputs read back at their true size, and the load-time conventions units.
+"""
+from __future__ import annotations
+
+import functools
+import json
+import math
+
+import numpy as np
+import pytest
+
+import rig_variants as rv
+from conftest import BANDAI_RUNS, RUNNING, clip, clip_params, read_bvh_oracle
+from froude import conventions
+from froude.body import BodyModel, find_roles
+from froude.gait import detect_gait, summarize
+from froude.io.bvh import load_bvh
+
+CMU_SCALE = 0.056444
+
+
+def _kind(name):
+    return "bandai" if name.startswith("dataset-") else "cmu"
+
+
+def _variants(name):
+    """name -> function(OracleBvh) for the variants of one clip."""
+    kind = _kind(name)
+    src = 0.01 if kind == "bandai" else CMU_SCALE
+    parts = rv.BANDAI_PARTS if kind == "bandai" else rv.CMU_PARTS
+    out = {}
+    for unit, s in rv.UNITS.items():
+        if s != src:
+            out[unit] = functools.partial(rv.units, metres_per_unit_from=src, metres_per_unit_to=s)
+    out["z_up"] = rv.z_up
+    out["folded"] = rv.folded
+    for fam in rv.FAMILIES:
+        if not (fam == "bandai" and kind == "bandai"):
+            out[fam] = functools.partial(rv.renamed, family=fam, parts=parts)
+    out["extra_root"] = rv.extra_root
+    out["six_channels"] = rv.six_channels
+    if kind == "cmu":  # 120 Hz clips; the Bandai clips are 30 Hz already
+        out["60Hz"] = functools.partial(rv.every, n=2)
+        out["30Hz"] = functools.partial(rv.every, n=4)
+    return out
+
+
+def _cases(names):
+    if clip_params(names)[0] is not None and isinstance(clip_params(names)[0], str):
+        return [(n, v) for n in names for v in _variants(n)]
+    return [pytest.param(None, None, marks=pytest.mark.skip(reason="real clips not found"))]
+
+
+@functools.lru_cache(maxsize=None)
+def _variant_file(name, variant, tmp_root):
+    b = read_bvh_oracle(clip(name))
+    path = f"{tmp_root}/{name}.{variant}.bvh"
+    with open(path, "w") as f:
+        f.write(rv.bvh_text(_variants(name)[variant](b)))
+    return path
+
+
+@pytest.fixture(scope="module")
+def tmp_root(tmp_path_factory):
+    return str(tmp_path_factory.mktemp("variants"))
+
+
+@functools.lru_cache(maxsize=None)
+def _info(path):
+    motion = load_bvh(path)
+    body = BodyModel.from_skeleton(motion.skeleton)
+    com, markers = body.com_and_markers(motion)
+    gait = detect_gait(motion, body, markers)
+    s = summarize(motion, body, com, gait)
+    return {"speed": s.mean_speed, "froude": s.froude, "leg": body.leg_length, "step_hz": s.step_frequency,
+            "height": body.stature, "units": motion.meta["units"], "scale": motion.meta["length_scale"]}
+
+
+ALL_RUNS = RUNNING + BANDAI_RUNS
+
+
+@pytest.mark.parametrize("name,variant", _cases(ALL_RUNS))
+def test_info_is_the_same_in_every_convention(name, variant, tmp_root):
+    ref = _info(str(clip(name)))
+    got = _info(_variant_file(name, variant, tmp_root))
+    for key in ("speed", "froude", "leg"):
+        assert got[key] == pytest.approx(ref[key], rel=0.01), (key, got, ref)
+    if variant not in ("60Hz", "30Hz"):  # the contacts at other frame rates: test_step_frequency_at_low_rates
+        assert got["step_hz"] == pytest.approx(ref["step_hz"], rel=0.01)
+    # the height is read in a pose from the motion when the rest pose is folded: a few per cent apart
+    assert got["height"] == pytest.approx(ref["height"], rel=0.06 if variant == "folded" else 0.005)
+
+
+@pytest.mark.xfail(reason="contacts found at 30/60 Hz give another step frequency on some clips (gait.py, "
+                          "issue 13: engineer take)", strict=False)
+@pytest.mark.parametrize("name", clip_params(RUNNING))
+@pytest.mark.parametrize("variant", ["60Hz", "30Hz"])
+def test_step_frequency_at_low_rates(name, variant, tmp_root):
+    ref = _info(str(clip(name)))
+    got = _info(_variant_file(name, variant, tmp_root))
+    assert got["step_hz"] == pytest.approx(ref["step_hz"], rel=0.01)
+
+
+FIT_CLIPS = ("09_01", "09_05", "02_03", "dataset-1_run_tired_001", "dataset-1_dash_active_001")
+
+
+@functools.lru_cache(maxsize=None)
+def _fit(path):
+    from froude.machine.fit import fit_machine_detailed
+
+    motion = load_bvh(path)
+    m = fit_machine_detailed(motion).machine
+    return m.K, m.theta0
+
+
+_RATE_XFAIL = pytest.mark.xfail(reason="the fit at 30/60 Hz (machine/fit.py, issue 13: engineer take) gives K "
+                                       "a few per cent apart on some clips", strict=False)
+
+
+def _fit_cases():
+    return [pytest.param(*c, marks=_RATE_XFAIL) if len(c) == 2 and c[1] in ("30Hz", "60Hz") else c
+            for c in _cases(FIT_CLIPS)]
+
+
+@pytest.mark.parametrize("name,variant", _fit_cases())
+def test_fit_is_the_same_in_every_convention(name, variant, tmp_root):
+    K0, th0 = _fit(str(clip(name)))
+    K, th = _fit(_variant_file(name, variant, tmp_root))
+    assert K == pytest.approx(K0, rel=0.03)
+    assert abs(math.degrees(th - th0)) <= 0.5
+
+
+@pytest.mark.parametrize("variant", ["centimetres", "inches", "z_up", "folded", "cc", "extra_root", "30Hz"])
+def test_scaling_to_a_child_meets_the_bars_in_every_convention(variant, tmp_root):
+    from froude import pipeline
+
+    path = _variant_file("09_01", variant, tmp_root)
+    res = pipeline.scale(pipeline.prepare(path), "child")
+    assert res.report.check_bars() == []
+
+
+# ---- what the loader says ----------------------------------------------------------------------------
+@pytest.mark.parametrize("name", clip_params(BANDAI_RUNS))
+def test_bandai_rig_reads_in_centimetres_at_human_size(name):
+    m = load_bvh(clip(name))
+    assert m.meta["length_scale"] == 0.01 and m.meta["units"].startswith("centimetres")
+    assert m.skeleton.reference_pose is not None  # the folded bind pose was recognised
+    body = BodyModel.from_skeleton(m.skeleton)
+    assert 1.45 <= body.stature <= 1.75
+    assert 0.75 <= body.leg_length <= 0.85
+    assert m.skeleton.names[body.roles["pelvis"]] == "Hips"  # not the static joint_Root
+    # every trunk segment hangs on the spine between the hips and the head, not on joint_Root
+    spine = {m.skeleton.index(n) for n in ("Hips", "Spine", "Chest", "Neck", "Head")}
+    trunk = [body.seg_joint[i] for i, n in enumerate(body.seg_names) if n.endswith("trunk")]
+    assert set(trunk) <= spine
+
+
+def test_cmu_clips_keep_their_rest_pose_and_units():
+    m = load_bvh(clip("09_01"))
+    assert m.meta["length_scale"] == CMU_SCALE and m.skeleton.reference_pose is None
+    assert m.meta["up_axis"] == "Y"
+
+
+@pytest.mark.parametrize("stature,gravity,expected", [
+    (170.0, 981.0, "centimetres"), (50.0, 981.0, "centimetres"), (500.0, 981.0, "centimetres"),
+    (170.0 / 2.54, 9.81 / 0.0254, "inches"), (3.0 / CMU_SCALE, 9.81 / CMU_SCALE, "CMU units"),
+    (0.6 / CMU_SCALE, 9.81 / CMU_SCALE, "CMU units"), (1.7, 9.81, "metres"), (4.0, 9.81, "metres"),
+])
+def test_unit_detection_does_not_depend_on_size(stature, gravity, expected):
+    s, name, why, ambiguous = conventions.choose_unit(stature, gravity)
+    assert name == expected and not ambiguous and "flight gravity" in why
+
+
+def test_without_flight_the_unit_is_the_most_human_and_flagged():
+    s, name, why, ambiguous = conventions.choose_unit(150.0, None)
+    assert name == "centimetres" and ambiguous and "inches" in why and "--length-scale" in why
+    with pytest.raises(ValueError, match="length-scale"):
+        conventions.choose_unit(1e6, None)
+
+
+@pytest.mark.parametrize("family", rv.FAMILIES)
+def test_roles_of_every_naming_family(family):
+    b = read_bvh_oracle(clip("09_01"))
+    r = rv.renamed(b, family, rv.CMU_PARTS)
+    names = r.names
+    from froude.skeleton import Skeleton
+
+    sk = Skeleton(tuple(names), np.array(r.parents), np.asarray(r.offsets), tuple(tuple(c) for c in r.channels))
+    roles = find_roles(sk)
+    inverse = {v: k for k, v in rv.CMU_PARTS.items()}
+    for role, part in (("left_hip", "hip_L"), ("left_knee", "knee_L"), ("left_ankle", "ankle_L"),
+                       ("left_toe", "toe_L"), ("right_shoulder", "shoulder_R"), ("right_elbow", "elbow_R"),
+                       ("right_wrist", "wrist_R"), ("head", "head"), ("pelvis", "pelvis")):
+        assert b.names[roles[role]] == inverse[part], (family, role, names[roles[role]])
+
+
+# ---- froude's own outputs read back ------------------------------------------------------------------
+@pytest.mark.parametrize("height", [0.5, 0.9, 2.5, 4.0, 5.0])
+def test_outputs_read_back_at_their_true_height(height, tmp_path, run_cli):
+    out = tmp_path / f"h{height}.bvh"
+    code, _, err = run_cli("scale", clip("09_01"), "--height", height, "-o", out, "-q")
+    assert code == 0, err
+    report = json.loads(out.with_suffix(".report.json").read_text(),
+                        parse_constant=lambda c: pytest.fail(f"{c} in the report JSON"))
+    code, text, err = run_cli("info", out, "--json")
+    assert code == 0, err
+    info = json.loads(text)
+    assert info["skeleton"]["height_m"] == pytest.approx(height, rel=0.01)
+    assert info["mean_speed_m_s"] == pytest.approx(report["mean_speed_m_s"], rel=0.01)

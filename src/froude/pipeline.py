@@ -1252,9 +1252,11 @@ def _travel_direction(motion: Motion, result: Result) -> np.ndarray:
     return d / n if n > 0 else np.eye(3)[0]
 
 
-def write_result(result: Result, out_path, data=None, in_place: bool | None = None) -> tuple[Path, ...]:
+def write_result(result: Result, out_path, data=None, in_place: bool | None = None,
+                 **bvh_options) -> tuple[Path, ...]:
     """Write OUT (.bvh, .glb or .gltf: ``froude.api.save`` decides by suffix) and OUT.report.json, and
     the per-frame table to ``data`` (.csv/.parquet/.npz) when given; each atomically. Returns the paths.
+    bvh_options: ``save_bvh``'s (length_scale, up, rotations_only; default: the input's conventions).
 
     in_place: write the motion without root travel (``in_place_motion``); None: as the input was (an
     in-place take gives in-place outputs). The report is always that of the travelling motion (its speed,
@@ -1266,7 +1268,7 @@ def write_result(result: Result, out_path, data=None, in_place: bool | None = No
     rp = report_path(out_path)
     if in_place is None:
         in_place = bool(result.report.extras.get("input_in_place")) if result.report is not None else False
-    save(in_place_motion(result) if in_place else result.motion, out_path)
+    save(in_place_motion(result) if in_place else result.motion, out_path, **bvh_options)
     if result.report is not None:
         result.report.extras["written"] = "in place (root travel removed)" if in_place else "with root travel"
     write_report(result.report, rp)

@@ -103,8 +103,7 @@ def test_blender_imports_the_glb_with_froude_joint_positions(outputs, tmp_path):
     if py is None:
         pytest.skip("bpy (Blender as a Python module, ~370 MB wheel for Python 3.11) is not installed here; "
                     "set FROUDE_BPY_PYTHON to a Python that has it")
-    for name in ("cmu_child", "bandai"):
-        res = outputs[name]
+    for name, res in outputs.items():
         glb = res.save(tmp_path / f"{name}.glb", report=False)[0]
         out = tmp_path / f"{name}.json"
         run = subprocess.run([py, str(HERE / "blender_joints.py"), str(glb), str(res.motion.fps), str(out)],

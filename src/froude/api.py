@@ -75,14 +75,15 @@ def load(path: str | os.PathLike, *, length_scale: float | None = None, clean: b
     return load_bvh(path, length_scale=length_scale, clean=clean)
 
 
-def save(motion: Motion, path: str | os.PathLike, *, mesh: bool = True) -> Path:
+def save(motion: Motion, path: str | os.PathLike, *, mesh: bool = True, **bvh_options) -> Path:
     """Write a motion by suffix: ``.bvh``, or ``.glb``/``.gltf`` (skin, joints, animation, and a mannequin
-    mesh unless mesh=False); atomically. Returns the path. (The one place output formats are chosen.)"""
+    mesh unless mesh=False); atomically. Returns the path. (The one place output formats are chosen.)
+    bvh_options: ``io.bvh.save_bvh``'s (length_scale, up, rotations_only; default: the input's conventions)."""
     suffix = Path(path).suffix.lower()
     if suffix == ".bvh":
         from .io.bvh import save_bvh
 
-        save_bvh(motion, path)
+        save_bvh(motion, path, **bvh_options)
         return Path(path)
     if suffix in (".glb", ".gltf"):
         from .io.gltf import save_gltf

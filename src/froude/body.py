@@ -488,6 +488,10 @@ class BodyModel:
         return from_soa(*self.fk(motion))
 
 
+#: Ankle height above the toe joints per leg length, for rigs measured in a pose from the motion.
+ANKLE_HEIGHT_PER_LEG = 0.033
+
+
 def body_up(skeleton: Skeleton, rest: np.ndarray, mid_hip: np.ndarray, mid_shoulder: np.ndarray) -> np.ndarray:
     """(3,) unit "up" of the body in its reference pose: world +Y for an upright rest pose; the trunk line
     (mid-hip -> mid-shoulder) in a pose read from the motion, so that a forward lean while running does
@@ -502,26 +506,24 @@ def _stature(roles, rest, up, vertex, marker_local, R_ref, leg_length, trunk) ->
     """Standing height [m]: the limbs straightened (rest poses of mocap skeletons often splay the legs).
 
     Sum of: the ankle's height above the sole (the larger of the toe markers' drop below the ankle in the
-    reference pose; in a pose read from the motion, that of the lower foot, which stands flat), shank and
+    rest pose; ANKLE_HEIGHT_PER_LEG of the leg in a pose read from the motion), shank and
     thigh lengths, the hip joint centres' drop below the pelvis, and the extent from the pelvis up to the
     head vertex, all along the body's up (``body_up``). ``trunk`` [m], when given, replaces that last
     extent (the spine chain's length plus the head's, for a pose read from the motion).
     """
-    upright = trunk is None
-    heights = []
-    for side in SIDES:
-        a = rest[roles[side + "_ankle"]]
-        t = rest[roles[side + "_toe"]]
-        tip = t + R_ref[roles[side + "_toe"]] @ marker_local[0, 2]
-        heights.append((a[UP_AXIS], max(a @ up - t @ up, a @ up - tip @ up)))
-    if upright:
-        ankle_height = max(h for _, h in heights)
-    else:  # the stance foot of a mid-stance frame (the lower ankle), measured along world up
-        side = int(np.argmin([y for y, _ in heights]))
-        a = rest[roles[SIDES[side] + "_ankle"]]
-        t = rest[roles[SIDES[side] + "_toe"]]
-        tip = t + R_ref[roles[SIDES[side] + "_toe"]] @ marker_local[side, 2]
-        ankle_height = max(a[UP_AXIS] - t[UP_AXIS], a[UP_AXIS] - tip[UP_AXIS])
+    if trunk is None:  # the upright rest pose
+        ankle_height = 0.0
+        for side in SIDES:
+            a = rest[roles[side + "_ankle"]]
+            t = rest[roles[side + "_toe"]]
+            tip = t + R_ref[roles[side + "_toe"]] @ marker_local[0, 2]  # (the left toe tip offset: as before)
+            ankle_height = max(ankle_height, a @ up - t @ up, a @ up - tip @ up)
+    else:
+        # A pose from the motion: how far the ankle stands above the toes depends on the frame (and on an
+        # estimated toe tip), which would make the stature differ between a clip and froude's own output
+        # of it. The proportion of the upright CMU rest poses is used instead (their toe-joint drop below
+        # the ankle is 0.030-0.037 of the leg).
+        ankle_height = ANKLE_HEIGHT_PER_LEG * leg_length
     pelvis = rest[roles["pelvis"]]
     hip_drop = pelvis @ up - 0.5 * (rest[roles["left_hip"]] @ up + rest[roles["right_hip"]] @ up)
     if trunk is None:

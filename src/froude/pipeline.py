@@ -1109,16 +1109,17 @@ def report_path(out_path) -> Path:
     return p.with_name(p.stem + ".report.json")
 
 
-def write_result(result: Result, out_path, data=None) -> tuple[Path, ...]:
+def write_result(result: Result, out_path, data=None, **bvh_options) -> tuple[Path, ...]:
     """Write OUT (.bvh, .glb or .gltf: ``froude.api.save`` decides by suffix) and OUT.report.json, and
-    the per-frame table to ``data`` (.csv/.parquet/.npz) when given: all or none. Returns the paths."""
+    the per-frame table to ``data`` (.csv/.parquet/.npz) when given: all or none. Returns the paths.
+    bvh_options: ``save_bvh``'s (length_scale, up, rotations_only; default: the input's conventions)."""
     from .api import save
     from .io.atomic import atomic_group
 
     out_path = Path(out_path)
     rp = report_path(out_path)
     with atomic_group():  # every file of the result or none
-        save(result.motion, out_path)
+        save(result.motion, out_path, **bvh_options)
         write_report(result.report, rp)
         if data is None:
             return out_path, rp

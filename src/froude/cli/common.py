@@ -141,6 +141,24 @@ def add_load_options(p) -> None:
                    help="do not drop a synthetic T-pose frame or invalid leading/trailing rows")
 
 
+def add_output_options(p) -> None:
+    """How the output BVH is written; by default in the input's conventions (unit, up axis, names, channel
+    orders, frame rate)."""
+    g = p.add_argument_group("output file (default: the input's conventions)")
+    g.add_argument("--units", default=None, choices=("m", "cm", "mm", "in", "cmu"),
+                   help="length unit of the output BVH (default: the input's)")
+    g.add_argument("--rotations-only", action="store_true",
+                   help="no position channels below the root (some readers mishandle them)")
+
+
+def output_kwargs(args) -> dict:
+    """``save_bvh`` options from add_output_options."""
+    from ..conventions import unit_scale
+
+    return {"length_scale": unit_scale(args.units)[0] if args.units else None,
+            "rotations_only": args.rotations_only}
+
+
 def add_character_options(p) -> None:
     g = p.add_argument_group("character (default: the reference's own body)")
     g.add_argument("--character", default=None, metavar="PRESET|FILE",

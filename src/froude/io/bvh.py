@@ -1,8 +1,10 @@
 """BVH reading and writing.
 
 Reading accepts any channel order per joint, 3- or 6-channel (or any subset) joints, End Sites, tabs or
-spaces, CRLF, scientific notation and large files. Units are converted to metres at this boundary:
-``length_scale`` is given, or detected from the skeleton's standing height and reported. Cleaning (the
+spaces, CRLF, scientific notation and large files. Units are converted to metres and the up axis to +Y at
+this boundary: ``length_scale`` is given, or detected from the motion and reported; the rest of the rig's
+conventions (folded bind pose, translation channels) are read from the motion too (``froude.conventions``).
+Writing keeps the input's conventions (unit, up axis, names, channel orders) unless told otherwise. Cleaning (the
 synthetic T-pose first frame of the CMU conversions, invalid leading or trailing rows) is reported in
 ``motion.meta["cleaning"]``, never silent. Every problem raises ``BvhError`` naming file and line.
 
@@ -26,16 +28,6 @@ from .atomic import atomic_write_text
 from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 
 _VALID_CHANNELS = set(POSITION_CHANNELS) | set(ROTATION_CHANNELS)
-
-#: Known length units: (name, metres per file unit, plausible stature range in file units).
-LENGTH_UNITS = (
-    ("metres", 1.0, (0.4, 3.5)),
-    ("CMU units", 0.056444, (12.0, 44.0)),
-    ("inches", 0.0254, (44.0, 125.0)),
-    ("centimetres", 0.01, (125.0, 400.0)),
-    ("millimetres", 0.001, (400.0, 4000.0)),
-)
-
 
 @dataclass(frozen=True)
 class _Token:
@@ -267,17 +259,6 @@ def _read_rows(path: str, lines: list[str], first_line: int, n_frames: int, n_ch
     raise BvhError("could not parse frame rows", path, first_line)  # pragma: no cover
 
 
-def detect_length_scale(stature_file_units: float) -> tuple[float, str]:
-    """Metres per file unit and the unit's name, from the rest-pose stature in file units."""
-    for name, scale, (lo, hi) in LENGTH_UNITS:
-        if lo <= stature_file_units < hi:
-            return scale, name
-    raise BvhError(
-        f"cannot tell the length unit from a rest-pose stature of {stature_file_units:g} file units; "
-        "pass length_scale (metres per file unit)"
-    )
-
-
 def _pose_jump_deg(rot: np.ndarray) -> np.ndarray:
     """(F-1,) median over joints of the rotation change [deg] between consecutive frames (F, J, 4).
 
@@ -486,10 +467,42 @@ def _format_block(values: np.ndarray) -> str:
     return "\n".join(lines) + "\n"
 
 
-def bvh_text(motion: Motion, length_scale: float | None = None) -> str:
-    """The BVH file text of a motion. length_scale: metres per file unit (default: the source's, else 1)."""
+def file_convention(motion: Motion, *, length_scale: float | None = None, up: str | None = None,
+                    rotations_only: bool = False) -> tuple[Motion, float]:
+    """The motion as it will be written, and the length scale (metres per file unit).
+
+    By default the output keeps the input's conventions: its unit (meta["length_scale"]), its up axis
+    (``skeleton.file_up``: a Z-up file is written Z-up again), its joint names and channel orders.
+    rotations_only drops the position channels of every joint but the root (some readers mishandle
+    them); refused when such a joint moves.
+    """
+    from ..conventions import Z_UP_TO_Y_UP, change_basis
+
     if length_scale is None:
         length_scale = float(motion.meta.get("length_scale", 1.0))
+    if not (np.isfinite(length_scale) and length_scale > 0):
+        raise BvhError(f"length scale must be > 0 m per file unit, got {length_scale}")
+    skel = motion.skeleton
+    if rotations_only:
+        if motion.translations is not None and np.ptp(motion.translations[:, 1:], axis=0).max() > 1e-9:
+            moving = int(np.argmax(np.ptp(motion.translations[:, 1:], axis=0).max(axis=1))) + 1
+            raise BvhError(f"cannot write rotations only: joint '{skel.names[moving]}' moves along its position channels")
+        channels = tuple(c if j == 0 else tuple(x for x in c if x in ROTATION_CHANNELS)
+                         for j, c in enumerate(skel.channels))
+        motion = motion.with_(skeleton=skel.with_(channels=channels), translations=None)
+    up = (up or motion.skeleton.file_up).upper()
+    if up == "Z":
+        motion = change_basis(motion, Z_UP_TO_Y_UP.T)
+    elif up != "Y":
+        raise BvhError(f"up axis must be Y or Z, got '{up}'")
+    return motion, float(length_scale)
+
+
+def bvh_text(motion: Motion, length_scale: float | None = None, *, up: str | None = None,
+             rotations_only: bool = False) -> str:
+    """The BVH file text of a motion, in the input's conventions unless told otherwise
+    (``file_convention``). length_scale: metres per file unit (default: the source's, else 1)."""
+    motion, length_scale = file_convention(motion, length_scale=length_scale, up=up, rotations_only=rotations_only)
     skel = motion.skeleton
     children = [[] for _ in range(skel.n_joints)]
     for j in range(1, skel.n_joints):
@@ -521,15 +534,16 @@ def bvh_text(motion: Motion, length_scale: float | None = None) -> str:
     write(0, 0)
     out.append("MOTION")
     out.append(f"Frames: {motion.n_frames}")
-    out.append(f"Frame Time: {motion.frame_time:.7f}")
+    # ten significant digits: 1/120 s reads back as 120.000 Hz (seven decimals gave 120.0005)
+    out.append(f"Frame Time: {motion.frame_time:.10g}")
     header = "\n".join(out) + "\n"
     return header + _format_block(motion_to_channels(motion, length_scale))
 
 
-def save_bvh(motion: Motion, path: str | os.PathLike, *, length_scale: float | None = None) -> None:
-    """Write a motion as BVH, atomically. length_scale: metres per file unit (default: the source's)."""
+def save_bvh(motion: Motion, path: str | os.PathLike, *, length_scale: float | None = None, up: str | None = None,
+             rotations_only: bool = False) -> None:
+    """Write a motion as BVH, atomically, in the input's conventions unless told otherwise
+    (``file_convention``: length_scale in metres per file unit, up "Y"/"Z", rotations_only)."""
     if not np.all(np.isfinite(motion.root_positions)) or not np.all(np.isfinite(motion.rotations)):
         raise BvhError("refusing to write a motion with non-finite values", str(path))
-    atomic_write_text(path, bvh_text(motion, length_scale))
-
-
+    atomic_write_text(path, bvh_text(motion, length_scale, up=up, rotations_only=rotations_only))

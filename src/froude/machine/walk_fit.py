@@ -139,21 +139,43 @@ def force_landmarks(tau: np.ndarray, fy_bw: np.ndarray, tau_double: float) -> di
     """The two peaks and the trough of the vertical force over one stance.
 
     tau: (N,) stance phase 0 … 1; fy_bw: (N,) total vertical ground force [BW]; tau_double: the phase
-    length of one double support. The weight-acceptance peak is the largest force in the first
-    2·tau_double of the stance, the push-off peak the largest in the last 2·tau_double (each double
-    support and as long again into single support: where the gait literature places them, around the
-    other foot's liftoff and touchdown); the trough is the smallest force between them.
+    length of one double support. The weight-acceptance peak is the largest local maximum of the force
+    in the first 2·tau_double of the stance, the push-off peak the largest in the last 2·tau_double (each
+    double support and as long again into single support: where the gait literature places them, around
+    the other foot's liftoff and touchdown; the window's largest value if it holds no local maximum);
+    the trough is the smallest force between them. Extrema are refined to the parabola's vertex.
     Returns {peak1, trough, peak2 [BW], tau_peak1, tau_trough, tau_peak2 [-]}.
     """
     w = min(max(2.0 * tau_double, 0.15), 0.45)
+    # A peak is a local maximum: the force at the stance's very start or end is the tail of the other
+    # foot's peak (the profile of a periodic walk wraps around), not this stance's.
+    interior = np.zeros(tau.size, bool)
+    interior[1:-1] = (fy_bw[1:-1] >= fy_bw[:-2]) & (fy_bw[1:-1] >= fy_bw[2:])
     first = tau <= w
     last = tau >= 1.0 - w
+    first = first & interior if (first & interior).any() else first
+    last = last & interior if (last & interior).any() else last
     i1 = np.flatnonzero(first)[np.argmax(fy_bw[first])]
     i2 = np.flatnonzero(last)[np.argmax(fy_bw[last])]
     mid = np.arange(i1, i2 + 1)
     it = mid[np.argmin(fy_bw[mid])]
-    return {"peak1": float(fy_bw[i1]), "trough": float(fy_bw[it]), "peak2": float(fy_bw[i2]),
-            "tau_peak1": float(tau[i1]), "tau_trough": float(tau[it]), "tau_peak2": float(tau[i2])}
+    out = {}
+    for key, i in (("peak1", i1), ("trough", it), ("peak2", i2)):
+        out[key], out["tau_" + key] = _vertex(tau, fy_bw, int(i))
+    return out
+
+
+def _vertex(x, y, i):
+    """(y, x) at the vertex of the parabola through samples i − 1, i, i + 1 of an extremum (evenly spaced
+    x), so a landmark is not quantised to the sample grid; the sample itself at an end or when the vertex
+    would leave the three samples."""
+    if 0 < i < len(y) - 1:
+        den = y[i - 1] - 2.0 * y[i] + y[i + 1]
+        if den != 0.0:
+            d = 0.5 * (y[i - 1] - y[i + 1]) / den
+            if abs(d) <= 1.0:
+                return float(y[i] - 0.25 * (y[i - 1] - y[i + 1]) * d), float(x[i] + d * (x[i + 1] - x[i]))
+    return float(y[i]), float(x[i])
 
 
 @dataclass(frozen=True)

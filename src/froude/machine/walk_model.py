@@ -117,6 +117,42 @@ class WalkingMachine:
                 "step_frequency_hz": 1.0 / (self.t_step * T), "step_length_m": self.step_length * L,
                 "mean_speed_m_s": self.mean_speed * V, "double_support_fraction": self.double_support_fraction}
 
+    def path(self, times_s) -> dict:
+        """The periodic walk of this machine at times ``times_s`` (N,) [s] ≥ 0, in SI, sagittal.
+
+        Time 0 is a touchdown of foot 0 with its COM at forward position 0; foot 0 leads the even steps,
+        foot 1 the odd ones. Returns a dict of arrays:
+          p_com (N, 2) COM (forward, up) [m]; v_com (N, 2) [m/s]; force (N, 2) total ground force [N];
+          contact (N, 2) bool per foot; cop (N, 2) forward position of each foot's centre of pressure [m]
+          (NaN off the ground); step (N,) int, the step each time belongs to.
+        This is what synthesis needs of the machine: where the COM goes and which foot is down where.
+        """
+        from .walking import simulate_walk
+
+        T, L = self.time_unit, self.l0
+        t = np.asarray(times_s, float) / T
+        if t.ndim != 1 or not np.all(np.isfinite(t)) or (t.size and t.min() < 0):
+            raise FitError("path times must be a finite, non-negative 1-D array [s]")
+        k, ph = np.divmod(t, self.t_step)
+        k = k.astype(int)
+        tr = simulate_walk(self.state, self.theta0, self.control, ph, roll=self.roll, l_td=self.l_td)
+        shift = k * self.step_length
+        p = np.stack([tr.pos[:, 0] + shift, tr.pos[:, 1]], axis=1)
+        contact = np.zeros((t.size, 2), bool)
+        cop = np.full((t.size, 2), np.nan)
+        lead, trail = k % 2, (k + 1) % 2
+        rows = np.arange(t.size)
+        contact[rows, lead] = True
+        on_trail = ph <= tr.t_liftoff
+        contact[rows[on_trail], trail[on_trail]] = True
+        for leg, foot in ((1, lead), (0, trail)):
+            x = tr.contact_x[leg] + shift + self.roll * (ph - tr.t_touchdown[leg]) / self.T_c
+            sel = contact[rows, foot]
+            cop[rows[sel], foot[sel]] = x[sel]
+        mg = self.mass * self.g
+        return {"p_com": p * L, "v_com": tr.vel * self.speed_unit, "force": tr.total_force * mg,
+                "contact": contact, "cop": cop * L, "step": k}
+
     def scaled(self, L: float, M: float = 1.0) -> "WalkingMachine":
         """The dynamically similar machine for a character L times longer and M times heavier."""
         if not (L > 0 and M > 0):

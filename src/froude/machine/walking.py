@@ -154,11 +154,29 @@ class _Machine:
         return (x + h6 * (vx + 2 * vx2 + 2 * vx3 + vx4), y + h6 * (vy + 2 * vy2 + 2 * vy3 + vy4),
                 vx + h6 * (k1x + 2 * k2x + 2 * k3x + k4x), vy + h6 * (k1y + 2 * k2y + 2 * k3y + k4y))
 
+    def _crossing(self, s, t, h, legs, armed, fn, e0, e1):
+        """Partial step σ ∈ (0, h] where fn(state, time) falls from e0 > 0 to ≤ 0 (regula falsi, Illinois)."""
+        lo, hi, flo, fhi = 0.0, h, e0, e1
+        sig = h * e0 / (e0 - e1)
+        for _ in range(60):
+            em = fn(self.rk4(s, t, sig, legs, armed), t + sig)
+            if abs(em) <= 1e-14 or hi - lo <= 1e-15:
+                break
+            if em > 0.0:
+                lo, flo = sig, em
+                fhi *= 0.5
+            else:
+                hi, fhi = sig, em
+                flo *= 0.5
+            sig = lo + (hi - lo) * flo / (flo - fhi)
+        return sig
+
     def run_phase(self, s, t, legs, armed, event, t_max, nodes=None):
         """Integrate until event(state, t) crosses from > 0 to ≤ 0; returns (state, t, armed, reason).
 
-        armed: list of bools, updated when a leg's force first becomes positive. nodes: optional list
-        to which (t, x, y, vx, vy) of every node is appended (the event's exact point included).
+        armed: list of bools; a slack leg is armed at the exact time it starts to push (located like the
+        event, and the integration restarts there), so the step map has no kink from the force clamp.
+        nodes: optional list to which (t, x, y, vx, vy) of every node is appended (event points included).
         """
         armed = list(armed)
         e0 = event(s, t)
@@ -169,31 +187,28 @@ class _Machine:
             s1 = self.rk4(s, t, h, legs, armed)
             e1 = event(s1, t + h)
             if e0 > 0.0 and e1 <= 0.0:
-                # Secant (regula falsi, Illinois) on the partial step size σ ∈ (0, h].
-                lo, hi, flo, fhi = 0.0, h, e0, e1
-                sig = h * e0 / (e0 - e1)
-                for _ in range(60):
-                    sm = self.rk4(s, t, sig, legs, armed)
-                    em = event(sm, t + sig)
-                    if abs(em) <= 1e-14 or hi - lo <= 1e-15:
-                        break
-                    if em > 0.0:
-                        lo, flo = sig, em
-                        fhi *= 0.5
-                    else:
-                        hi, fhi = sig, em
-                        flo *= 0.5
-                    sig = lo + (hi - lo) * flo / (flo - fhi)
+                sig = self._crossing(s, t, h, legs, armed, event, e0, e1)
                 s_end = self.rk4(s, t, sig, legs, armed)
                 if nodes is not None:
                     nodes.append((t + sig, *s_end))
                 return s_end, t + sig, armed, OK
-            s, t, e0 = s1, t + h, e1
+            for i, (xc, t0) in enumerate(legs):
+                if not armed[i] and self.leg(s1[0], s1[1], t + h, xc, t0, True)[1] > 0.0:
+                    def slack(q, tq, xc=xc, t0=t0):
+                        return -self.leg(q[0], q[1], tq, xc, t0, True)[1]
+
+                    g0 = slack(s, t)
+                    sig = self._crossing(s, t, h, legs, armed, slack, g0, slack(s1, t + h)) if g0 > 0.0 else h
+                    s1 = self.rk4(s, t, sig, legs, armed)
+                    h_taken = sig
+                    armed[i] = True
+                    break
+            else:
+                h_taken = h
+            s, t = s1, t + h_taken
+            e0 = event(s, t)
             if nodes is not None:
                 nodes.append((t, *s))
-            for i, (xc, t0) in enumerate(legs):
-                if not armed[i] and self.leg(s[0], s[1], t, xc, t0, True)[1] > 0.0:
-                    armed[i] = True
             if s[1] <= MIN_COM_HEIGHT:
                 return s, t, armed, COLLAPSE
             if s[2] <= 0.0:

@@ -1262,7 +1262,7 @@ def _travel_direction(motion: Motion, result: Result) -> np.ndarray:
 def write_result(result: Result, out_path, data=None, in_place: bool | None = None,
                  **bvh_options) -> tuple[Path, ...]:
     """Write OUT (.bvh, .glb or .gltf: ``froude.api.save`` decides by suffix) and OUT.report.json, and
-    the per-frame table to ``data`` (.csv/.parquet/.npz) when given; each atomically. Returns the paths.
+    the per-frame table to ``data`` (.csv/.parquet/.npz) when given: all or none. Returns the paths.
     bvh_options: ``save_bvh``'s (length_scale, up, rotations_only; default: the input's conventions).
 
     in_place: write the motion without root travel (``in_place_motion``); None: as the input was (an
@@ -1270,20 +1270,22 @@ def write_result(result: Result, out_path, data=None, in_place: bool | None = No
     skate and gravity are physical there) and says which was written.
     """
     from .api import save
+    from .io.atomic import atomic_group
 
     out_path = Path(out_path)
     rp = report_path(out_path)
     if in_place is None:
         in_place = bool(result.report.extras.get("input_in_place")) if result.report is not None else False
-    save(in_place_motion(result) if in_place else result.motion, out_path, **bvh_options)
     if result.report is not None:
         result.report.extras["written"] = "in place (root travel removed)" if in_place else "with root travel"
-    write_report(result.report, rp)
-    if data is None:
-        return out_path, rp
-    from .io.framedata import frame_table, write_frame_data
+    with atomic_group():  # every file of the result or none
+        save(in_place_motion(result) if in_place else result.motion, out_path, **bvh_options)
+        write_report(result.report, rp)
+        if data is None:
+            return out_path, rp
+        from .io.framedata import frame_table, write_frame_data
 
-    table = frame_table(result.motion, result.retarget.body, machine_path=result.path)
-    return out_path, rp, write_frame_data(table, data)
+        table = frame_table(result.motion, result.retarget.body, machine_path=result.path)
+        return out_path, rp, write_frame_data(table, data)
 
 

@@ -411,3 +411,10 @@ def test_every_command_module_lists_its_help():
         lean_sub = next(a for a in lean._actions if a.dest == "command")
         assert set(lean_sub.choices) == set(sub.choices)
         assert lean_sub.choices[name].format_help() == sub.choices[name].format_help()
+
+
+def test_demo_that_fails_midway_leaves_no_folder(work, run_cli):
+    """A demo whose clip cannot be fitted (a walk) stops with one error line and creates nothing."""
+    shutil.copy(clip("02_01"), work / "walk.bvh")
+    refused(run_cli, work, "demo", "--clip", "walk.bvh", "--no-video", "-o", "d", needle="walking, not running",
+            after_load=True)

@@ -1118,19 +1118,21 @@ def report_path(out_path) -> Path:
 
 def write_result(result: Result, out_path, data=None, **bvh_options) -> tuple[Path, ...]:
     """Write OUT (.bvh, .glb or .gltf: ``froude.api.save`` decides by suffix) and OUT.report.json, and
-    the per-frame table to ``data`` (.csv/.parquet/.npz) when given; each atomically. Returns the paths.
+    the per-frame table to ``data`` (.csv/.parquet/.npz) when given: all or none. Returns the paths.
     bvh_options: ``save_bvh``'s (length_scale, up, rotations_only; default: the input's conventions)."""
     from .api import save
+    from .io.atomic import atomic_group
 
     out_path = Path(out_path)
     rp = report_path(out_path)
-    save(result.motion, out_path, **bvh_options)
-    write_report(result.report, rp)
-    if data is None:
-        return out_path, rp
-    from .io.framedata import frame_table, write_frame_data
+    with atomic_group():  # every file of the result or none
+        save(result.motion, out_path, **bvh_options)
+        write_report(result.report, rp)
+        if data is None:
+            return out_path, rp
+        from .io.framedata import frame_table, write_frame_data
 
-    table = frame_table(result.motion, result.retarget.body, machine_path=result.path)
-    return out_path, rp, write_frame_data(table, data)
+        table = frame_table(result.motion, result.retarget.body, machine_path=result.path)
+        return out_path, rp, write_frame_data(table, data)
 
 

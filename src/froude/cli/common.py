@@ -101,6 +101,15 @@ def add_keep(p) -> None:
                    "bars missed and the reachable speeds are said, and the exit status is 1)")
 
 
+def add_root_option(p) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--in-place", dest="in_place", action="store_const", const=True, default=None,
+                   help="write the output in place (root travel removed, the stance foot sliding back), as "
+                   "engines that move the character themselves want (default: as the input is)")
+    g.add_argument("--travel", dest="in_place", action="store_const", const=False,
+                   help="write the output with its root travel even when the input was in place")
+
+
 def add_range_option(p) -> None:
     p.add_argument("--range", type=time_range, default=None, metavar="T0:T1",
                    help="model only this part of the take, in seconds (e.g. 1.2:3.0, or 1.2: to the end): its "

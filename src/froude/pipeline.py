@@ -939,11 +939,11 @@ SPEED_SEARCH_TOL = 0.03
 
 
 def _speed_ok(prep: Prepared, character, s: float, numbers: dict) -> tuple[bool, str]:
-    """Whether a 2-stride output at speed factor s meets every physics bar, and why not."""
+    """Whether a 4-stride output (scale's default) at speed factor s meets every physics bar, and why not."""
     from .errors import FitError
 
     try:
-        rep = plan_scale(prep, character, speed=s, strides=2, **numbers).finish().report
+        rep = plan_scale(prep, character, speed=s, strides=4, **numbers).finish().report
     except FitError as e:
         return False, str(e)
     fails = rep.check_bars()
@@ -953,7 +953,7 @@ def _speed_ok(prep: Prepared, character, s: float, numbers: dict) -> tuple[bool,
 def reachable_speed_range(prep: Prepared, character=None, **character_numbers) -> SpeedRange:
     """The range of ``scale`` speed factors whose outputs meet every physics bar, for one character.
 
-    Bisection on real outputs (2 strides each, the same synthesis and IK as ``scale``) between 1 and the
+    Bisection on real outputs (4 strides each, the same synthesis and IK as ``scale``) between 1 and the
     ends of SPEED_SEARCH_RANGE, to SPEED_SEARCH_TOL; the ends returned were themselves produced and
     checked. About a dozen short outputs (a few seconds); remembered per character on ``prep``. Assumes the
     reachable speeds form one interval around x1 (true on the shared clips: faster outputs fail by a knee

@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import html
 import io
+import math
 import os
 import sys
 import tempfile
@@ -489,7 +490,7 @@ class Tab:
         self.gui_prev.on_click(lambda e: self._step(-1))
         self.gui_next.on_click(lambda e: self._step(+1))
         self.gui_time.on_update(self._on_time)
-        self.gui_rate.on_update(lambda e: setattr(self, "_rate", float(self.gui_rate.value)))
+        self.gui_rate.on_update(self._on_rate)
         for g in (self.gui_overlay, self.gui_show_ref, self.gui_machine, self.gui_onion, self.gui_camera):
             g.on_update(self._on_view)
         self.gui_frame.on_click(self._on_view)
@@ -606,10 +607,23 @@ class Tab:
         self._update_playheads()
         self.gui_state.content = self._state_md()
 
+    def _on_rate(self, event) -> None:
+        v = float(self.gui_rate.value)
+        if not (math.isfinite(v) and 0.1 <= v <= 2.0):  # a crafted value: the slider's own range only
+            self._show_error(f"Playback speed {v:g}× is outside 0.1× to 2×")
+            self.gui_rate.value = self._rate
+            return
+        self._rate = v
+
     def _on_time(self, event) -> None:
         if event.client is None:
             return
-        self._t = float(self.gui_time.value)
+        t = float(self.gui_time.value)
+        if not (math.isfinite(t) and 0.0 <= t <= self.result.track.duration + 0.01):
+            self._show_error(f"Time {t:g} s is outside 0 to {self.result.track.duration:.2f} s")
+            self.gui_time.value = round(min(self._t, self.gui_time.max), 2)
+            return
+        self._t = t
         self._draw()
         self._update_playheads()
         self.gui_state.content = self._state_md()
@@ -617,6 +631,9 @@ class Tab:
     def _on_view(self, event) -> None:
         if getattr(event, "client", 1) is None:
             return
+        if self.gui_camera.value not in CAMERAS:  # a crafted value: the dropdown's own options only
+            self._show_error(f"Camera must be one of {', '.join(CAMERAS)}")
+            self.gui_camera.value = "side"
         self._camera_dirty = True
         self._draw()
 

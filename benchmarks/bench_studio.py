@@ -1,8 +1,9 @@
 """Studio latency: from a control change to the new motion at the page (issue 7, bar: <= 50 ms median).
 
-Runs the studio as ``froude view`` does (worker and player threads running, the runner playing at 30 Hz) on
-the embedded sample, 4 strides at 120 Hz, with one live websocket client speaking viser's protocol and
-draining like a browser tab. Each change is posted with ``Studio.request`` — what every GUI handler calls —
+Runs the studio as ``froude view`` does (worker and player threads running, the runners playing at 30 Hz as
+solid limbs) on the embedded sample, 4 strides at 120 Hz, with one live websocket client speaking viser's
+protocol and draining like a browser tab (it gets its own session, as a tab does). Each change is posted
+with ``Tab.request`` — what every GUI handler calls —
 and the clock stops when a message carrying the new motion's hash (the page's state readout, sent in the
 same flush as the runner's new pose) reaches the client. The hash is known in advance from an identical
 session on a second copy of the clip, so nothing is cached for the studio. Speeds and heights are all
@@ -62,6 +63,13 @@ def _tab_process(url: str, version: str, conn) -> None:
             pass
 
     threading.Thread(target=drain, daemon=True).start()
+    import msgspec  # viser's own dependency
+
+    # what a page sends first: viser opens the tab's session at its first camera message
+    ws.send(msgspec.msgpack.encode({
+        "type": "ViewerCameraMessage", "wxyz": (1.0, 0.0, 0.0, 0.0), "position": (0.0, 1.0, 4.0), "fov": 0.9,
+        "near": 0.01, "far": 100.0, "image_height": 800, "image_width": 1280, "look_at": (0.0, 1.0, 0.0),
+        "up_direction": (0.0, 1.0, 0.0)}))
     conn.send("ready")
     while True:
         req = conn.recv()
@@ -123,9 +131,10 @@ def main() -> None:
     oracle = Session(pipeline.prepare(sample_path()))  # knows each change's hash; shares nothing with the studio
     studio = Studio(prep, port=_free_port()).start()
     tab = _Tab(f"ws://127.0.0.1:{studio.server.get_port()}", viser.__version__)
+    session = studio.wait_for_tabs(1)[0]  # the tab's own session (each browser tab has one)
     time.sleep(1.0)  # the initial scene
-    print(f"result: {studio.good.n_frames} frames at {prep.motion.fps:.0f} Hz (4 strides), "
-          f"{studio.good.track.n_bones} bones; player at 30 Hz")
+    print(f"result: {session.good.n_frames} frames at {prep.motion.fps:.0f} Hz (4 strides), "
+          f"{len(session.good.track.capsule_radii)} capsules; player at 30 Hz")
 
     # the speed slider's own grid (step 0.05), every value once, slower and faster than the clip in turn
     speeds = [1.05, 1.15, 1.0, 1.2, 0.95, 1.25, 0.9, 1.3, 0.85, 1.35, 0.8, 1.4, 0.75, 1.45, 1.1]
@@ -142,17 +151,17 @@ def main() -> None:
                 want = oracle.solve(params, report=False).hash.encode()
                 time.sleep(0.25)  # the previous change's report has gone out
                 t0 = time.perf_counter()
-                studio.request(params)
+                session.request(params)
                 t_first = tab.arrival_of(b" hash=", t0)
                 t_res = tab.arrival_of(b"hash=" + want, t0)
                 t_ok = tab.arrival_of(b"hash=" + want + b" status=ok", t0)  # done: its report is shown
-                assert np.isfinite(t_ok), f"the page never showed {params} ({studio.message})"
+                assert np.isfinite(t_ok), f"the page never showed {params} ({session.message})"
                 r = rows[name]
                 r["first motion at page"].append(t_first - t0)
                 r["IK result at page"].append(t_res - t0)
-                while not studio.timing.started_at >= t0:  # the worker files its timing after the last push
+                while not session.timing.started_at >= t0:  # the worker files its timing after the last push
                     time.sleep(0.001)
-                tm = studio.timing
+                tm = session.timing
                 r["worker wakes"].append(tm.started_at - t0)
                 r["result compute"].append(tm.result_compute)
                 r["result push"].append(tm.result_push)

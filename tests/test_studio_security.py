@@ -159,31 +159,32 @@ def _wait(cond, timeout=10.0) -> bool:
 def test_crafted_control_values_are_refused_and_the_result_stays(studio, tmp_path):
     secret = tmp_path / "secret.yaml"
     secret.write_text("api_token: SECRET-TOKEN-123\ndb_password: hunter2\n")
-    good = studio.good
     c = _Client(studio.server.get_port())
     try:
         c.hello()
         c.drain(1.0)
-        crafted = [(studio.gui_char, str(secret), "Character must be one of the presets"),
-                   (studio.gui_char, str(tmp_path / "missing.yaml"), "Character must be one of the presets"),
-                   (studio.gui_strides, 3000, "Strides 3000 is outside 1 to 12"),
-                   (studio.gui_steps, 100000, "Steps 100000 is outside 1 to 60"),
-                   (studio.gui_speed, 1e9, "Speed 1e+09× is outside")]
+        tab = max(studio.wait_for_tabs(1), key=lambda t: t.client.client_id)  # this connection's own session
+        good = tab.good
+        crafted = [(tab.gui_char, str(secret), "Character must be one of the presets"),
+                   (tab.gui_char, str(tmp_path / "missing.yaml"), "Character must be one of the presets"),
+                   (tab.gui_strides, 3000, "Strides 3000 is outside 1 to 12"),
+                   (tab.gui_steps, 100000, "Steps 100000 is outside 1 to 60"),
+                   (tab.gui_speed, 1e9, "Speed 1e+09× is outside")]
         for handle, value, words in crafted:
             t0 = time.perf_counter()
             c.send("GuiUpdateMessage", uuid=handle._impl.uuid, updates={"value": value})
-            assert _wait(lambda: words in studio.message), (value, studio.message)
+            assert _wait(lambda: words in tab.message), (value, tab.message)
             assert time.perf_counter() - t0 < 5.0  # refused at once, nothing computed
-            assert studio.good is good and studio.shown is good
+            assert tab.good is good and tab.shown is good
             c.drain(0.5)
             assert handle.value != value  # the control is put back to the last good value
         c.drain(1.0)
-        everything = b"".join(c.received) + studio.message.encode()
+        everything = b"".join(c.received) + tab.message.encode()
         assert b"SECRET-TOKEN" not in everything and b"api_token" not in everything and b"hunter2" not in everything
         assert b"Strides 3000 is outside 1 to 12" in everything  # the message reached the page
         # a legitimate change still works after all that
-        c.send("GuiUpdateMessage", uuid=studio.gui_speed._impl.uuid, updates={"value": 1.2})
-        assert _wait(lambda: studio.good is not good and studio.good.params.speed == 1.2, timeout=30)
+        c.send("GuiUpdateMessage", uuid=tab.gui_speed._impl.uuid, updates={"value": 1.2})
+        assert _wait(lambda: tab.good is not good and tab.good.params.speed == 1.2, timeout=30)
     finally:
         c.close()
 

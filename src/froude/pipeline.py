@@ -587,7 +587,9 @@ class Result:
     extras: dict = field(default_factory=dict)  # merged into report.extras (e.g. the speed plan)
 
     def summary_rows(self) -> list[tuple[str, str]]:
+        """(label, text) rows of the CLI's result table; a figure that cannot be measured reads "n/a"."""
         r = self.report
+        f = _shown
         rows = [
             ("character", f"{self.retarget.character.name} (L = {self.retarget.L:.3f}, M = {self.retarget.M:.3f})"),
             ("method", self.method),
@@ -595,17 +597,22 @@ class Result:
         if r.extras.get("modelled"):
             rows.append(("modelled", r.extras["modelled"]))
         rows += [
-            ("speed", f"{r.mean_speed_m_s:.3f} m/s (x{self.speed_factor:g})"),
-            ("Froude number U", f"{r.froude_U:.3f}"),
-            ("step frequency", f"{r.step_frequency_hz:.3f} Hz"),
-            ("stance / flight", f"{_mean(r.stance_times_s):.3f} s / {_mean(r.flight_times_s):.3f} s"),
-            ("flight gravity", f"{r.flight_gravity_m_s2:.2f} m/s^2"),
-            ("COM tracking", f"RMS {r.com_tracking_rms_mm:.2f} mm, max {r.com_tracking_max_mm:.2f} mm"),
-            ("foot skate / penetration", f"{r.foot_skate_mm:.2f} mm / {r.penetration_mm:.2f} mm "
-             f"(ball and tip near the floor: {r.foot_skate_floor_mm:.2f} mm)"),
-            ("joint jump", f"{r.max_joint_jump_deg:.1f} deg (reference {r.reference_max_joint_jump_deg:.1f})"),
+            ("speed", f"{f(r.mean_speed_m_s, '.3f')} m/s (x{self.speed_factor:g})"),
+            ("Froude number U", f"{f(r.froude_U, '.3f')}"),
+            ("step frequency", f"{f(r.step_frequency_hz, '.3f')} Hz"),
+            ("stance / flight", f"{f(_mean(r.stance_times_s), '.3f')} s / {f(_mean(r.flight_times_s), '.3f')} s"),
+            ("flight gravity", f"{f(r.flight_gravity_m_s2, '.2f')} m/s^2"),
+            ("COM tracking", f"RMS {f(r.com_tracking_rms_mm, '.2f')} mm, max {f(r.com_tracking_max_mm, '.2f')} mm"),
+            ("foot skate / penetration", f"{f(r.foot_skate_mm, '.2f')} mm / {f(r.penetration_mm, '.2f')} mm "
+             f"(ball and tip near the floor: {f(r.foot_skate_floor_mm, '.2f')} mm)"),
+            ("joint jump", f"{f(r.max_joint_jump_deg, '.1f')} deg (reference {f(r.reference_max_joint_jump_deg, '.1f')})"),
         ]
         return rows
+
+
+def _shown(v, spec: str) -> str:
+    """A figure for a table: formatted, or "n/a" when it could not be measured (None, NaN, infinite)."""
+    return "n/a" if v is None or not math.isfinite(v) else format(v, spec)
 
 
 def _mean(x) -> float:

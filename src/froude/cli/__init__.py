@@ -30,8 +30,16 @@ class _Parser(argparse.ArgumentParser):
         print(f"{self.prog}: error: {message} (see '{self.prog} --help')", file=sys.stderr)
         raise SystemExit(2)
 
+    def _get_values(self, action, arg_strings):
+        # argparse (3.11) drops a '--' value ("--fps=--") and hands the option an empty list, unchecked
+        if action.nargs is None and action.option_strings and arg_strings == ["--"]:
+            self.error(f"argument {'/'.join(action.option_strings)}: expected a value, got '--'")
+        return super()._get_values(action, arg_strings)
 
-def build_parser() -> argparse.ArgumentParser:
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The whole parser; with ``argv``, only the command it names is built in full (the others are listed
+    with their one-line help), so a command's start-up never pays for another's ``register``."""
     from .. import __version__
 
     parser = _Parser(
@@ -48,6 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"froude {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    chosen = _command_in(argv)
     for name in SUBCOMMANDS:
         try:
             module = importlib.import_module(f"{__name__}.{name}")
@@ -55,8 +64,19 @@ def build_parser() -> argparse.ArgumentParser:
             if e.name == f"{__name__}.{name}":
                 continue  # subcommand not built yet
             raise
-        module.register(sub)
+        if argv is None or name == chosen or not hasattr(module, "HELP"):
+            module.register(sub)  # (a module without HELP is always built in full)
+        else:
+            sub.add_parser(name, help=module.HELP)
     return parser
+
+
+def _command_in(argv: list[str] | None) -> str | None:
+    """The subcommand argv names (its first word that is not an option), or None."""
+    for word in argv or ():
+        if not word.startswith("-"):
+            return word if word in SUBCOMMANDS else None
+    return None
 
 
 def _on_sigterm(signum, frame):
@@ -70,7 +90,8 @@ def _describe_os_error(e: OSError) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_usage(sys.stderr)
@@ -99,6 +120,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"{name}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader went away ("froude info x.bvh | head"): stop quietly
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # so the interpreter's last flush finds nowhere to fail
+        return 141
     except OSError as e:
         print(f"{name}: error: {_describe_os_error(e)}", file=sys.stderr)
         return 2

@@ -5,8 +5,8 @@ import time
 
 from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
                      add_output_options, add_quiet, add_range_option, bound_work, character_input,
-                     character_kwargs, check_character, check_inputs, guard_outputs, load_clip, number,
-                     output_kwargs, print_rows, say, speed)
+                     character_kwargs, check_character, check_inputs, guard_outputs, number, output_kwargs,
+                     prepare_clip, print_rows, say, speed)
 from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Steps of a speed change, and of the steady parts around it, froude plans at most.
@@ -16,9 +16,13 @@ MAX_WITHIN_S = 300.0
 PLOT_SUFFIXES = (".png",)
 
 
+#: The one-line summary ``froude --help`` lists.
+HELP = "speed up or slow down a run over some steps (transition table, paper 5.3)"
+
+
 def register(sub) -> None:
     p = sub.add_parser(
-        "accelerate", help="speed up or slow down a run over some steps (transition table, paper 5.3)",
+        "accelerate", help=HELP,
         description="Plan touchdown angles step by step so that the simple machine reaches a target speed "
         "(a step is one stance and the flight after it), simulate it, time-warp the reference cycle onto "
         "the planned steps and correct the whole body with IK. Works for any character: the plan is "
@@ -77,16 +81,14 @@ def run(args) -> int:
     from .. import pipeline
 
     t0 = time.perf_counter()
-    say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    clip = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.quiet, args.joint_map, args.up)
-    prep = pipeline.prepare(clip, mass=args.mass, time_range=args.range)
+    prep = prepare_clip(args)
     rt = prep.retarget(args.character, **character_kwargs(args))
     m = prep.machine.scaled(rt.L, rt.M)
     step_s = m.step_time * m.time_unit
     n_steps = (steps if args.within is None else args.within / step_s) + args.lead_steps + args.hold_steps
-    bound_work(n_steps * step_s * (args.fps or prep.motion.fps), prep.motion.skeleton.n_joints, args.force,
-               "froude accelerate", args.quiet)
-    say(f"planning {n_steps:.0f} steps and synthesising ...", args.quiet)
+    if bound_work(n_steps * step_s * (args.fps or prep.motion.fps), prep.motion.skeleton.n_joints, args.force,
+                  "froude accelerate", args.quiet):
+        say(f"planning {n_steps:.0f} steps and synthesising ...", args.quiet)
     res = pipeline.accelerate(
         prep, args.character, to_speed=goal.m_s, to_factor=goal.factor, steps=None if args.within else steps,
         within=args.within, lead_steps=args.lead_steps, hold_steps=args.hold_steps, fps=args.fps,

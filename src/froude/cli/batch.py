@@ -9,11 +9,15 @@ from .common import add_quiet, number, say
 MAX_WORKERS = 256
 
 
+#: The one-line summary ``froude --help`` lists.
+HELP = "many clips x many characters, speeds and accelerations, on Dask"
+
+
 def register(sub) -> None:
     from ..batch import EXAMPLE_PLAN, INDEX_NAME
 
     p = sub.add_parser(
-        "batch", help="many clips x many characters, speeds and accelerations, on Dask",
+        "batch", help=HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Run every (clip, variation) of PLAN through the same pipeline as 'froude scale' and "
         "'froude accelerate': each clip is fitted once, its variations run as Dask tasks (a local cluster "

@@ -216,12 +216,31 @@ def load_clip(path: str, length_scale: float | None = None, keep_all: bool = Fal
 
     jm = load_joint_map(joint_map) if joint_map else None
     motion = load_bvh(path, length_scale=length_scale, clean=not keep_all, joint_map=jm, up=up)
+    say_loaded(motion, path, quiet)
+    return motion
+
+
+def say_loaded(motion, path: str, quiet: bool = False) -> None:
+    """The load's guesses said aloud: frames, rate, units, conventions, cleaning (commands that can still
+    fail on the clip say it after the fit, so a refusal stays one line)."""
     say(f"{path}: {motion.n_frames} frames at {motion.fps:.3f} Hz; units: {motion.meta['units']}", quiet)
     for note in motion.meta.get("conventions", ()):
         say(f"{path}: {note}", quiet)
     for note in motion.meta.get("cleaning", ()):
         say(f"{path}: cleaning: {note}", quiet)
-    return motion
+
+
+def prepare_clip(args):
+    """Load args.clip (with the load options) and fit it: ``pipeline.prepare``; then say the load's notes.
+
+    Nothing is printed before the fit succeeds, so a clip that cannot be used is one line."""
+    from .. import pipeline
+
+    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, True, getattr(args, "joint_map", None),
+                       getattr(args, "up", None))
+    prep = pipeline.prepare(motion, mass=args.mass, time_range=getattr(args, "range", None))
+    say_loaded(motion, args.clip, args.quiet)
+    return prep
 
 
 # ---- outputs and the size of the work ----------------------------------------------------------------
@@ -234,11 +253,12 @@ def guard_outputs(outputs, inputs=(), folders=()) -> None:
 
 
 def bound_work(frames: float, joints: int, force: bool, what: str, quiet: bool = False,
-               extra_bytes: float = 0.0) -> None:
+               extra_bytes: float = 0.0) -> bool:
     """Refuse work estimated beyond MAX_FRAMES output frames or MAX_MEMORY_BYTES unless ``force``.
 
     frames: estimated output frames; joints: joints per frame; extra_bytes: other memory the work needs
-    (images of a video). Says the estimate when the work is large (a tenth of a bound or more).
+    (images of a video). Says the estimate when the work is large (a tenth of a bound or more) and
+    returns True then (the caller shows progress); short work stays silent.
     """
     memory = frames * joints * BYTES_PER_FRAME_JOINT + extra_bytes
     if not math.isfinite(frames) or not math.isfinite(memory):
@@ -247,8 +267,10 @@ def bound_work(frames: float, joints: int, force: bool, what: str, quiet: bool =
     if (frames > MAX_FRAMES or memory > MAX_MEMORY_BYTES) and not force:
         raise FroudeError(f"{what}: {size} is beyond the {MAX_FRAMES:,}-frame / {MAX_MEMORY_BYTES >> 30} GiB bound; "
                           "ask for less, or add --force to run it anyway")
-    if frames > MAX_FRAMES / 10 or memory > MAX_MEMORY_BYTES / 10:
+    large = frames > MAX_FRAMES / 10 or memory > MAX_MEMORY_BYTES / 10
+    if large:
         say(f"{what}: {size}; this takes a while", quiet)
+    return large
 
 
 def print_rows(rows) -> None:

@@ -5,9 +5,13 @@ from .common import (MOTION_OUTPUTS, add_data_option, add_load_options, add_quie
                      guard_outputs, number, say)
 
 
+#: The one-line summary ``froude --help`` lists.
+HELP = "convert a motion between BVH and glTF/GLB (skin, joints, animation, mannequin)"
+
+
 def register(sub) -> None:
     p = sub.add_parser(
-        "convert", help="convert a motion between BVH and glTF/GLB (skin, joints, animation, mannequin)",
+        "convert", help=HELP,
         description="Read IN (.bvh, .glb or .gltf) and write OUT (.bvh, .glb or .gltf; the suffix decides). "
         "glTF/GLB files hold the skeleton as a skin of joint nodes (metres, +Y up), the motion as an "
         "animation (root translation, every joint's rotation) and, unless --no-mesh, a simple mannequin "

@@ -9,9 +9,13 @@ from .common import add_quiet, check_inputs, guard_outputs, number, say
 DEMO_STRIDES = (1, 20)
 
 
+#: The one-line summary ``froude --help`` lists.
+HELP = "reproduce the paper's Fig. 2 and Fig. 3 on the bundled clip (start here)"
+
+
 def register(sub) -> None:
     p = sub.add_parser(
-        "demo", help="reproduce the paper's Fig. 2 and Fig. 3 on the bundled clip (start here)",
+        "demo", help=HELP,
         description="Fit the simple machine to the bundled CMU running clip and write, into one folder: "
         "Figure 2 (the fit), the Figure 3 rows (original, 1.2x speed, deceleration to half speed, troll, "
         "child at 0.7x) as BVH files with physics reports, filmstrips, an MP4 and a Markdown report table. "

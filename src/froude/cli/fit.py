@@ -7,9 +7,13 @@ from pathlib import Path
 from .common import add_load_options, add_range_option, add_mass, add_quiet, check_inputs, guard_outputs, load_clip, say
 
 
+#: The one-line summary ``froude --help`` lists.
+HELP = "fit the simple machine (running: one spring leg; walking: two) to a running or walking clip"
+
+
 def register(sub) -> None:
     p = sub.add_parser(
-        "fit", help="fit the simple machine (running: one spring leg; walking: two) to a running or walking clip",
+        "fit", help=HELP,
         description="Fit Pollard's simple running machine (1999, section 4) to a running clip: ground force from "
         "the COM (eq. 1), per-stance leg geometry and control fits (eq. 2), and a periodic running cycle that "
         "matches the measured stance time, flight time and speed. A walk gets the walking machine instead (two "

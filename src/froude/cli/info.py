@@ -4,12 +4,17 @@ from __future__ import annotations
 import math
 import sys
 
-from .common import add_data_option, add_load_options, add_mass, check_inputs, data_output, guard_outputs, load_clip
+from .common import (add_data_option, add_load_options, add_mass, add_quiet, check_inputs, data_output,
+                     guard_outputs, load_clip)
+
+
+#: The one-line summary ``froude --help`` lists.
+HELP = "summarise a BVH clip: skeleton, units, speed, Froude number, steps, phases"
 
 
 def register(sub) -> None:
     p = sub.add_parser(
-        "info", help="summarise a BVH clip: skeleton, units, speed, Froude number, steps, phases",
+        "info", help=HELP,
         description="Summarise a BVH clip: skeleton (joints, DOF, leg length, height, units chosen), duration, "
         "frame rate, mean speed, Froude number U = u/sqrt(g L), foot contacts with stance and flight "
         "times, step frequency and length, COM vertical excursion, and what cleaning did.",
@@ -17,6 +22,7 @@ def register(sub) -> None:
     p.add_argument("clip", help="BVH file")
     p.add_argument("--json", action="store_true", help="print the summary as JSON instead of a table")
     add_mass(p, "body mass [kg] for the COM model")
+    add_quiet(p)
     add_data_option(p)
     add_load_options(p)
     p.set_defaults(func=run)
@@ -84,7 +90,8 @@ def run(args) -> int:
     from ..body import BodyModel
     from ..gait import detect_gait, summarize
 
-    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.json, args.joint_map, args.up)
+    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.json or args.quiet, args.joint_map,
+                       args.up)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers)

@@ -15,13 +15,19 @@ HEIGHT_RANGE_PX = (16, 8192)
 INTERVAL_RANGE_S = (0.001, 10.0)
 SPACING_RANGE_M = (0.0, 100.0)
 VIDEO_FPS_RANGE_HZ = (1.0, 240.0)
+#: A filmstrip snapshot narrower than this [px] is no picture: the interval or the width is refused.
+MIN_SNAPSHOT_PX = 8
 #: Pixels drawn at most without --force (frames x width x height; a 20 s 960x720 video at 30 Hz is 4e8).
 MAX_PIXELS = 4e9
 
 
+#: The one-line summary ``froude --help`` lists.
+HELP = "draw motions: filmstrip PNG (Fig. 3 style), still PNG, GIF or MP4 video"
+
+
 def register(sub) -> None:
     p = sub.add_parser(
-        "render", help="draw motions: filmstrip PNG (Fig. 3 style), still PNG, GIF or MP4 video",
+        "render", help=HELP,
         description="Draw one or more motions as capsule figures at one common scale (a child looks small "
         "next to a giant). --filmstrip: snapshots every --interval seconds side by side, one labelled row per "
         "motion (PNG). Otherwise a video (GIF/MP4) with one panel per motion at real time, the camera "
@@ -113,10 +119,12 @@ def run(args) -> int:
 def _bound(args, motions, ext: str, longest: float) -> None:
     """Refuse a render whose pixels (or, for a GIF, frames held in memory) are out of proportion."""
     if args.filmstrip:
-        snapshots = sum(int(m.duration / args.interval) + 1 for m in motions)
-        if snapshots > 2000 and not args.force:
-            raise FroudeError(f"--interval {args.interval:g} s gives {snapshots} snapshots; at most 2000 without "
-                              "--force (use a longer interval)")
+        width = args.width or 2400
+        per_row = max(int(m.duration / args.interval) + 1 for m in motions)
+        if per_row > width // MIN_SNAPSHOT_PX:
+            raise FroudeError(f"--interval {args.interval:g} s gives {per_row} snapshots in a row of {width} px; "
+                              f"at most {width // MIN_SNAPSHOT_PX} ({MIN_SNAPSHOT_PX} px each): use a longer "
+                              "--interval or a larger --width")
         return
     if ext == ".png":
         return

@@ -7,8 +7,8 @@ from pathlib import Path
 from ..presets import list_presets
 from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
                      add_output_options, add_quiet, add_range_option, bound_work, character_input,
-                     character_kwargs, check_character, check_inputs, guard_outputs, load_clip, number,
-                     output_kwargs, print_rows, say, speed)
+                     character_kwargs, check_character, check_inputs, guard_outputs, number, output_kwargs,
+                     prepare_clip, print_rows, say, speed)
 from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
@@ -16,9 +16,13 @@ MAX_STRIDES = 10_000
 MAX_DURATION_S = 3600.0
 
 
+#: The one-line summary ``froude --help`` lists.
+HELP = "retarget a run to a new character and/or speed, physically (paper 5.1, 5.2, 6)"
+
+
 def register(sub) -> None:
     p = sub.add_parser(
-        "scale", help="retarget a run to a new character and/or speed, physically (paper 5.1, 5.2, 6)",
+        "scale", help=HELP,
         description="Fit the simple machine to the clip, scale it to the character by dynamic similarity "
         "(times x sqrt(L), speeds x sqrt(L)), change its speed by horizontal stretching, synthesise any "
         "number of strides and correct the whole body with IK. Writes OUT.bvh or OUT.glb/.gltf (same joint names "
@@ -70,11 +74,9 @@ def run(args) -> int:
 
     from .. import pipeline
 
-    say(f"fitting the simple machine to {args.clip} ...", args.quiet)
-    clip = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.quiet, args.joint_map, args.up)
-    prep = pipeline.prepare(clip, mass=args.mass, time_range=args.range)
-    _bound(prep, args)
-    say(f"synthesising ({args.method}) ...", args.quiet)
+    prep = prepare_clip(args)
+    if _bound(prep, args):
+        say(f"synthesising ({args.method}) ...", args.quiet)
     from ..errors import FitError, FroudeError
 
     try:
@@ -105,9 +107,9 @@ def run(args) -> int:
     return 0
 
 
-def _bound(prep, args) -> None:
+def _bound(prep, args) -> bool:
     """Estimate the output's frames from the scaled machine's step time; refuse a runaway; note a
-    --duration shorter than the two steps froude makes at least."""
+    --duration shorter than the two steps froude makes at least. True for long work."""
     rt = prep.retarget(args.character, **character_kwargs(args))
     m = prep.machine.scaled(rt.L, rt.M)
     step_s = m.step_time * m.time_unit
@@ -116,4 +118,4 @@ def _bound(prep, args) -> None:
     if args.duration is not None and args.duration < 2 * step_s:
         say(f"note: --duration {args.duration:g} s is shorter than two steps; the output is two steps "
             f"(about {2 * step_s:.2f} s), the shortest froude makes", args.quiet)
-    bound_work(seconds * fps, prep.motion.skeleton.n_joints, args.force, "froude scale", args.quiet)
+    return bound_work(seconds * fps, prep.motion.skeleton.n_joints, args.force, "froude scale", args.quiet)

@@ -11,9 +11,13 @@ VIEW_SPEED_RANGE = (0.5, 2.0)
 VIEW_STRIDES = (1, 12)
 
 
+#: The one-line summary ``froude --help`` lists.
+HELP = "live studio in the browser: sliders for character, speed, acceleration"
+
+
 def register(sub) -> None:
     p = sub.add_parser(
-        "view", help="live studio in the browser: sliders for character, speed, acceleration",
+        "view", help=HELP,
         description="Open a local web studio (viser) on a running clip: the reference and the result play "
         "side by side (or overlaid) on a ground grid, with the simple machine (COM, spring leg, contacts, "
         "COM trail) drawn over the bodies. Controls for the character (presets, height, mass, leg scale), "

@@ -29,6 +29,12 @@ from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 
 _VALID_CHANNELS = set(POSITION_CHANNELS) | set(ROTATION_CHANNELS)
 
+#: Header values froude supports (checked while parsing, with the line): frame times [s] (10-1000 Hz) and
+#: OFFSET components [file units] (a 2 m body in micrometres is 2e6; beyond that a value is corrupt).
+FRAME_TIME_RANGE_S = (1e-3, 0.1)
+MAX_HEADER_OFFSET = 1e7
+
+
 @dataclass(frozen=True)
 class _Token:
     text: str
@@ -101,10 +107,15 @@ class _Parser:
         tok = self.next(what)
         try:
             value = float(tok.text)
+            if "_" in tok.text:  # Python reads "1_0" as 10; no BVH writer writes it (frame rows refuse it too)
+                raise ValueError
         except ValueError:
             raise self.error(f"expected a number for {what}, found '{_show(tok.text)}'", tok.line) from None
         if not np.isfinite(value):
             raise self.error(f"{what} is not finite ('{_show(tok.text)}')", tok.line)
+        if abs(value) > MAX_HEADER_OFFSET:
+            raise self.error(f"{what} {_show(tok.text)} is beyond the supported ±{MAX_HEADER_OFFSET:g} file units",
+                             tok.line)
         return value
 
     def parse_hierarchy(self):
@@ -208,10 +219,16 @@ class _Parser:
         ft_tok = self.next("frame time")
         try:
             frame_time = float(ft_tok.text)
+            if "_" in ft_tok.text:
+                raise ValueError
         except ValueError:
             raise self.error(f"expected a number for the frame time, found '{_show(ft_tok.text)}'", ft_tok.line) from None
+        lo, hi = FRAME_TIME_RANGE_S
         if not (np.isfinite(frame_time) and frame_time > 0):
             raise self.error(f"frame time must be > 0 s, found '{_show(ft_tok.text)}'", ft_tok.line)
+        if not lo * (1 - 1e-9) <= frame_time <= hi * (1 + 1e-9):
+            raise self.error(f"frame time {_show(ft_tok.text)} s is outside the supported {lo:g}-{hi:g} s "
+                             f"({1 / hi:g}-{1 / lo:g} Hz)", ft_tok.line)
         return n_frames, frame_time, ft_tok.line
 
 

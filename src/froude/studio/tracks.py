@@ -20,6 +20,12 @@ from ..motion import Motion
 
 #: Every n-th frame of the COM path goes into the drawn trail (a trail needs no 120 Hz detail).
 TRAIL_STRIDE = 3
+#: ... at most this far apart in time [s] (a 30 Hz clip keeps every frame: its trail stays smooth).
+TRAIL_STEP_S = 0.025
+
+
+def _trail_stride(frame_time: float) -> int:
+    return max(1, min(TRAIL_STRIDE, int(TRAIL_STEP_S / frame_time)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -49,6 +55,71 @@ class Track:
     force_bw: np.ndarray
     body_com: np.ndarray
     loop_shift: np.ndarray
+    body: object = None  # froude.body.BodyModel of the runner (its capsules); None: lines only
+
+    @functools.cached_property
+    def rig(self):
+        """The capsules of this skeleton (``froude render``'s): the same widths, head and sides."""
+        from ..viz.render import build_rig
+
+        return build_rig(self.body)
+
+    def borrow_rig(self, other: "Track") -> bool:
+        """Draw with ``other``'s capsules scaled to this body's stature until this body's own rig is built
+        (``exact_rig``): a new result reaches the page without the ~8 ms rig build. False when the
+        skeletons differ in topology (then the rig is built now)."""
+        a, b = self.motion.skeleton, other.motion.skeleton
+        same = a.n_joints == b.n_joints and np.array_equal(a.parents, b.parents)
+        if other.body is None or self.body is None or not same:
+            return False
+        from dataclasses import replace as _replace
+
+        k = float(self.body.stature) / float(other.body.stature)
+        r = other.rig
+        self.__dict__["rig"] = _replace(r, point_local=r.point_local * k, bone_width=r.bone_width * k,
+                                        head_radius=r.head_radius * k, stature=r.stature * k)
+        self.__dict__.pop("capsules", None)
+        return True
+
+    def exact_rig(self) -> None:
+        """Replace a borrowed rig by this body's own (and redo the capsules)."""
+        from ..viz.render import build_rig
+
+        self.__dict__["rig"] = build_rig(self.body)
+        self.__dict__.pop("capsules", None)
+        _ = self.capsules
+
+    @functools.cached_property
+    def capsules(self) -> np.ndarray:
+        """(F, B+1, 2, 3) float32 capsule end points [m] of every frame (the last one: the head)."""
+        return capsule_ends(self.motion, self.rig)
+
+    def capsules_at(self, i: int) -> np.ndarray:
+        """(B+1, 2, 3) capsule ends of frame i (one frame's FK until all frames are done)."""
+        done = self.__dict__.get("capsules")
+        return done[i] if done is not None else capsule_ends(self.motion[i:i + 1], self.rig)[0]
+
+    @property
+    def capsule_radii(self) -> np.ndarray:
+        """(B+1,) capsule radius [m] (the last: the head)."""
+        r = self.rig
+        return np.append(0.5 * np.asarray(r.bone_width, float), r.head_radius).astype(np.float32)
+
+    @functools.cached_property
+    def phases(self) -> np.ndarray:
+        """(F,) int8 0 flight, 1 left stance, 2 right stance, 3 both (from the drawn spring legs)."""
+        stance = np.linalg.norm(self.legs[:, :, 1] - self.legs[:, :, 0], axis=-1) > 1e-6  # (F, 2)
+        return (stance[:, 0] * 1 + stance[:, 1] * 2).astype(np.int8)
+
+    @functools.cached_property
+    def speed_m_s(self) -> np.ndarray:
+        """(F,) horizontal COM speed [m/s] (central differences of the drawn COM path)."""
+        com = np.asarray(self.com, float).copy()
+        com[:, UP_AXIS] = 0.0
+        if len(com) < 2:
+            return np.zeros(len(com))
+        v = np.gradient(com, self.frame_time, axis=0)
+        return np.linalg.norm(v, axis=1)
 
     @functools.cached_property
     def body_force_bw(self) -> np.ndarray:
@@ -106,6 +177,37 @@ def bone_segments(motion: Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.ascontiguousarray(seg.transpose(3, 0, 1, 2), dtype=np.float32), P, R
 
 
+def capsule_ends(motion: Motion, rig) -> np.ndarray:
+    """(F, B+1, 2, 3) float32 end points [m] of a rig's capsules per frame; the head is the last, a
+    zero-length capsule at the head centre."""
+    from ..kinematics import fk
+
+    p, R = fk(motion)
+    pts = rig.points(p, R)  # (F, P, 3)
+    ends = np.stack([pts[:, rig.bone_a], pts[:, rig.bone_b]], axis=2)  # (F, B, 2, 3)
+    head = np.repeat(pts[:, rig.head][:, None, None, :], 2, axis=2)
+    return np.concatenate([ends, head], axis=1).astype(np.float32)
+
+
+def capsule_instances(ends: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cylinder instances for capsule end points (N, 2, 3) [m] and radii (N,) [m]: positions (N, 3) (mid
+    points), wxyz (N, 4) (turning +z onto the bone) and per-axis scales (N, 3) (radius, radius, length) of
+    a unit cylinder along z centred at the origin. Zero-length capsules get length 0."""
+    a, b = ends[:, 0].astype(np.float64), ends[:, 1].astype(np.float64)
+    d = b - a
+    length = np.linalg.norm(d, axis=1)
+    u = d / np.maximum(length, 1e-9)[:, None]
+    u[length < 1e-9] = (0.0, 0.0, 1.0)
+    # the shortest rotation z -> u: q = (1 + u_z, -u_y, u_x, 0) normalised; u = -z is a half turn about x
+    w = 1.0 + u[:, 2]
+    q = np.stack([w, -u[:, 1], u[:, 0], np.zeros(len(u))], axis=1)
+    flip = w < 1e-9
+    q[flip] = (0.0, 1.0, 0.0, 0.0)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    scales = np.stack([radii, radii, length], axis=1)
+    return (0.5 * (a + b)).astype(np.float32), q.astype(np.float32), scales.astype(np.float32)
+
+
 def spring_legs(com: np.ndarray, stance_contact: np.ndarray) -> np.ndarray:
     """(F, 2, 2, 3) float32 leg segments: COM → contact point where stance_contact (F, 2, 3) is finite."""
     F = com.shape[0]
@@ -146,6 +248,23 @@ def body_force_bw(com: np.ndarray, frame_time: float) -> np.ndarray:
         return np.full(len(com), np.nan)
 
 
+def naive_track(res, prep) -> Track:
+    """An engine-style naive result (no machine path): its body COM, no spring legs, no contacts."""
+    motion, body = res.motion, res.retarget.body
+    seg, P, R = bone_segments(motion)
+    com = np.ascontiguousarray(body.com_soa(P, R).T)
+    F = motion.n_frames
+    track = Track(
+        frame_time=float(motion.frame_time), motion=motion, com=com,
+        legs=spring_legs(com, np.full((F, 2, 3), np.nan)), contacts=np.zeros((0, 3)),
+        contact_foot=np.zeros(0, int), trail=trail_segments(com, _trail_stride(motion.frame_time)),
+        force_t=np.zeros(0), force_bw=np.zeros(0),
+        body_com=com, loop_shift=np.zeros(3), body=body,
+    )
+    track.__dict__["segments"] = seg
+    return track
+
+
 def machine_track(motion: Motion, body, path, body_com: np.ndarray | None = None) -> Track:
     """A result (or preview) on its target skeleton with its machine path drawn over it.
 
@@ -163,8 +282,9 @@ def machine_track(motion: Motion, body, path, body_com: np.ndarray | None = None
         frame_time=float(motion.frame_time), motion=motion, com=com_path,
         legs=spring_legs(com_path, path_stance_contacts(path, F)),
         contacts=np.asarray(path.contacts, float), contact_foot=np.asarray(path.foot_of_step, int),
-        trail=trail_segments(com_path), force_t=np.asarray(path.times, float), force_bw=f_bw,
-        body_com=body_com, loop_shift=np.zeros(3),
+        trail=trail_segments(com_path, _trail_stride(motion.frame_time)),
+        force_t=np.asarray(path.times, float), force_bw=f_bw,
+        body_com=body_com, loop_shift=np.zeros(3), body=body,
     )
     if seg is not None:
         track.__dict__["segments"] = seg  # already computed: fill the cached property
@@ -188,10 +308,11 @@ def reference_track(prep) -> Track:
     track = Track(
         frame_time=float(motion.frame_time), motion=motion, com=com, legs=spring_legs(com, contact),
         contacts=np.array([s.contact_point for s in stances]).reshape(-1, 3),
-        contact_foot=np.array([s.foot for s in stances], int), trail=trail_segments(com),
-        force_t=np.zeros(0), force_bw=np.zeros(0), body_com=com, loop_shift=shift,
+        contact_foot=np.array([s.foot for s in stances], int),
+        trail=trail_segments(com, _trail_stride(motion.frame_time)),
+        force_t=np.zeros(0), force_bw=np.zeros(0), body_com=com, loop_shift=shift, body=prep.body,
     )
-    _ = track.segments  # played from start to end for the whole session: all frames now
+    _ = track.capsules  # played from start to end for the whole session: all frames now
     return track
 
 

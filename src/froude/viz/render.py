@@ -711,6 +711,67 @@ def render_frame(
     return image
 
 
+#: x264 constant rate factor of the MP4s (what imageio's quality 7 meant: visually clean, small files).
+MP4_CRF = 15
+
+
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
+    """Linux: have the kernel send SIGKILL to this child when its parent dies (even by SIGKILL)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, 9)  # PR_SET_PDEATHSIG, SIGKILL
+    except Exception:
+        pass
+
+
+def _ffmpeg_exe() -> str:
+    """Path of the ffmpeg binary imageio-ffmpeg ships (FroudeError with the install hint if missing)."""
+    try:
+        from imageio_ffmpeg import get_ffmpeg_exe
+    except ImportError:
+        raise FroudeError(f"MP4 output needs imageio-ffmpeg: {INSTALL_HINT}") from None
+    return get_ffmpeg_exe()
+
+
+def _encode_mp4(ffmpeg: str, tmp: str, frames, fps: float, width: int, height: int) -> None:
+    """Pipe RGB frames (height, width, 3) uint8 into an ffmpeg child that writes H.264 to ``tmp``.
+
+    The child ends with froude: in its own session (a Ctrl-C in the terminal reaches froude, which stops
+    it), killed and reaped on any interrupt or error here, and (Linux) killed by the kernel if froude
+    itself is killed. A failed encode is a FroudeError with ffmpeg's last message.
+    """
+    import subprocess
+    import sys
+
+    cmd = [ffmpeg, "-y", "-loglevel", "error", "-f", "rawvideo", "-vcodec", "rawvideo",
+           "-s", f"{width}x{height}", "-pix_fmt", "rgb24", "-r", f"{fps:.6g}", "-i", "-", "-an",
+           "-vcodec", "libx264", "-pix_fmt", "yuv420p", "-crf", str(MP4_CRF),
+           "-preset", "veryfast",  # encoding shares 2 cores with drawing
+           "-f", "mp4", tmp]
+    linux = sys.platform.startswith("linux")
+    proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            start_new_session=True, preexec_fn=_die_with_parent if linux else None)
+    try:
+        try:
+            for im in frames:
+                proc.stdin.write(np.ascontiguousarray(im, dtype=np.uint8).tobytes())
+        except BrokenPipeError:
+            pass  # ffmpeg stopped: its message is read below
+        proc.stdin.close()
+        err = proc.stderr.read().decode(errors="replace").strip()
+        code = proc.wait()
+    except BaseException:
+        proc.kill()
+        proc.wait()
+        raise
+    finally:
+        proc.stderr.close()
+    if code != 0:
+        last = err.splitlines()[-1] if err else f"exit status {code}"
+        raise FroudeError(f"ffmpeg could not encode the video: {last}")
+
+
 def render_video(
     motions: Sequence[Motion],
     path,
@@ -728,7 +789,9 @@ def render_video(
     progress(done, total) is called after every frame. Returns (frames, height, width).
     """
     path = _check_path(path, VIDEO_EXTENSIONS)
-    iio2, iio3 = _imageio()
+    mp4 = path.suffix.lower() == ".mp4"
+    ffmpeg = _ffmpeg_exe() if mp4 else None  # a missing extra is said before any drawing
+    iio3 = None if mp4 else _imageio()[1]
     actors = _actors(motions, labels, camera)
     times = video_times([a.motion for a in actors], fps)
     scene = _VideoScene(actors, width, height)
@@ -741,19 +804,8 @@ def render_video(
                 progress(k + 1, len(times))
 
     def write(tmp: str) -> None:
-        if path.suffix.lower() == ".mp4":
-            try:
-                import imageio_ffmpeg  # noqa: F401
-            except ImportError:
-                raise FroudeError(f"MP4 output needs imageio-ffmpeg: {INSTALL_HINT}") from None
-            w = iio2.get_writer(tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264", quality=7,
-                                macro_block_size=2, pixelformat="yuv420p", ffmpeg_log_level="error",
-                                output_params=["-preset", "veryfast"])  # encoding shares 2 cores with drawing
-            try:
-                for im in frames():
-                    w.append_data(im)
-            finally:
-                w.close()
+        if mp4:
+            _encode_mp4(ffmpeg, tmp, frames(), fps, scene.width, scene.height)
         else:
             # GIF delays are whole centiseconds; Pillow merges identical consecutive frames, so
             # frames are nudged apart only by their content (the clock text changes every frame)

@@ -103,8 +103,7 @@ def test_blender_imports_the_glb_with_froude_joint_positions(outputs, tmp_path):
     if py is None:
         pytest.skip("bpy (Blender as a Python module, ~370 MB wheel for Python 3.11) is not installed here; "
                     "set FROUDE_BPY_PYTHON to a Python that has it")
-    for name in ("cmu_child", "bandai"):
-        res = outputs[name]
+    for name, res in outputs.items():
         glb = res.save(tmp_path / f"{name}.glb", report=False)[0]
         out = tmp_path / f"{name}.json"
         run = subprocess.run([py, str(HERE / "blender_joints.py"), str(glb), str(res.motion.fps), str(out)],
@@ -271,3 +270,19 @@ def test_cli_convert_both_ways_and_info_data(tmp_path, run_cli):
     d = read_frame_data(tmp_path / "in.csv")
     fitted = froude.fit(clip("09_03"))
     np.testing.assert_allclose(d["com_force_y_N"], fitted.ground_force[:, 1], rtol=1e-6, atol=1e-3)
+
+
+def test_api_speed_syntax_and_all_or_none_saves(tmp_path):
+    fitted = froude.fit(clip("09_02"))
+    a = froude.scale(fitted, speed="0.9x", strides=1)
+    b = froude.scale(fitted, speed=0.9, strides=1)
+    np.testing.assert_array_equal(a.motion.root_positions, b.motion.root_positions)
+    c = froude.scale(fitted, speed="3.4m/s", strides=1)
+    assert c.report.mean_speed_m_s == pytest.approx(3.4, rel=0.03)
+    with pytest.raises(froude.FroudeError, match="speed: cannot read 'fast'"):
+        froude.scale(fitted, speed="fast")
+    # the report cannot be written (a folder holds its name): neither file stays (issue 18, point 6)
+    (tmp_path / "o.report.json").mkdir()
+    with pytest.raises(OSError):
+        a.save(tmp_path / "o.glb")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.report.json"]

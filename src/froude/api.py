@@ -153,14 +153,16 @@ class Result:
     def save(self, path: str | os.PathLike, *, mesh: bool = True, report: bool = True) -> list[Path]:
         """Write the motion (suffix decides: .bvh / .glb / .gltf) and, unless report=False, OUT.report.json
         beside it; atomically. Returns the paths written."""
+        from .io.atomic import atomic_group
         from .metrics import write_report
         from .pipeline import report_path
 
-        out = [save(self.motion, path, mesh=mesh)]
-        if report:
-            rp = report_path(path)
-            write_report(self.report, rp)
-            out.append(rp)
+        with atomic_group():  # both files or neither
+            out = [save(self.motion, path, mesh=mesh)]
+            if report:
+                rp = report_path(path)
+                write_report(self.report, rp)
+                out.append(rp)
         return out
 
     def save_data(self, path: str | os.PathLike) -> Path:
@@ -217,7 +219,7 @@ def scale(
     arm_scale: float | None = None,
     head_scale: float | None = None,
     trunk_scale: float | None = None,
-    speed: float = 1.0,
+    speed: float | str = 1.0,
     target_speed: float | None = None,
     strides: int = 4,
     duration: float | None = None,
@@ -231,13 +233,18 @@ def scale(
     clip: a path, a Motion or a ``fit`` result (its fit is reused); character: a preset name ("child",
     "giant", "small", "troll"), a character YAML or a target BVH skeleton (None: the reference's body);
     height [m], character_mass [kg], leg/arm/head/trunk_scale (factors on the reference's bones) on top;
-    speed: factor on the character's dynamically scaled speed; target_speed: an absolute speed [m/s]
-    instead; strides (two steps each) or duration [s]; fps: output frame rate [Hz] (default: the clip's);
+    speed: factor on the character's dynamically scaled speed, or froude's speed syntax as text ("0.8x",
+    "3.5m/s", as on the command line); target_speed: an absolute speed [m/s] instead; strides (two steps each) or duration [s]; fps: output frame rate [Hz] (default: the clip's);
     method: "physical" or "naive" (angles copied, root × L); reference_mass: the performer's mass [kg];
     length_scale: metres per BVH file unit of the clip (default: detected).
     """
     from . import pipeline
 
+    if isinstance(speed, str):
+        from .speed_goal import parse_speed
+
+        goal = parse_speed(speed, "speed")
+        speed, target_speed = (goal.factor, target_speed) if goal.factor is not None else (1.0, goal.m_s)
     prep = _prepared(clip, reference_mass, length_scale)
     res = pipeline.scale(prep, None if character is None else str(character), speed=speed,
                          target_speed=target_speed, strides=strides, duration=duration, fps=fps, method=method,

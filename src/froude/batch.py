@@ -310,20 +310,17 @@ def _spec_path(spec: str, presets, base_dir) -> str:
 
 
 def _speed(s, where, bad) -> tuple[str, tuple]:
-    """A speed entry → (id part, scale kwargs): 0.8 / '0.8x' a factor, '3.5m/s' an absolute speed."""
-    t = str(s).strip().lower()
+    """A speed entry → (id part, scale kwargs) in froude's one speed syntax (``froude.speed_goal``):
+    0.8 / '0.8x' a factor, '3.5m/s' an absolute speed."""
+    from .speed_goal import parse_speed
+
     try:
-        if t.endswith("m/s"):
-            v = float(t[:-3])
-            key, tag = "target_speed", f"v{v:g}ms"
-        else:
-            v = float(t[:-1] if t.endswith("x") else t)
-            key, tag = "speed", f"x{v:g}"
-    except ValueError:
-        bad(where, f"a factor (0.8 or 0.8x) or a speed (3.5m/s), got {s!r}")
-    if isinstance(s, bool) or not (math.isfinite(v) and v > 0):
-        bad(where, f"must be > 0, got {s!r}")
-    return tag, ((key, v),)
+        goal = parse_speed(s, where)
+    except FroudeError as e:
+        bad(where, str(e).removeprefix(f"{where}: "))
+    if goal.factor is not None:
+        return f"x{goal.factor:g}", (("speed", goal.factor),)
+    return f"v{goal.m_s:g}ms", (("target_speed", goal.m_s),)
 
 
 def _acceleration(a, where, bad) -> tuple[str, tuple]:
@@ -366,7 +363,8 @@ def find_clips(inputs, exclude=None) -> list[Clip]:
     """Files, folders (every .bvh below them) and globs → clips, sorted, each once. Raises BatchError.
 
     exclude: a folder (OUTDIR) whose files are never inputs: folders holding it and globs skip them; a
-    file or folder named explicitly inside it (or OUTDIR itself) is an error (a re-run would otherwise take the previous outputs for new clips).
+    file or folder named explicitly inside it (or OUTDIR itself) is an error (a re-run would otherwise
+    take the previous outputs for new clips).
     Clip ids are safe relative paths (``safe_name`` per part: nothing can escape OUTDIR) and unique
     ignoring case (``a.bvh`` and ``a.BVH`` would share one output folder: refused, naming both).
     """

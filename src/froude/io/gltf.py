@@ -233,7 +233,8 @@ def load_gltf(path: str | os.PathLike, *, fps: float | None = None) -> Motion:
 
     The skeleton's offsets are the joints' rest translations [m] (glTF's units); animated rotations (and the
     root's translation) become the motion. fps: sampling rate (default: the file's own for froude files,
-    else 30 Hz); channel orders come from froude's extras or default to ZYX rotations.
+    else 30 Hz); channel orders come from froude's extras or default to ZYX rotations. Transforms of
+    nodes above the skeleton's root (an exporter's armature node) are not applied.
     Raises FroudeError (one line) for files froude cannot read as a skeletal animation.
     """
     pyg = _require_pygltflib()
@@ -245,7 +246,8 @@ def load_gltf(path: str | os.PathLike, *, fps: float | None = None) -> Motion:
             warnings.simplefilter("ignore")
             gl = pyg.GLTF2().load(str(path))
     except Exception as e:  # noqa: BLE001 - pygltflib raises many kinds on a bad file
-        raise FroudeError(f"{path}: not a readable glTF file ({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''})") from None
+        first = (str(e).splitlines() or [""])[0]
+        raise FroudeError(f"{path}: not a readable glTF file ({type(e).__name__}: {first})") from None
     if gl is None or not gl.skins:
         raise FroudeError(f"{path}: no skin (skeleton) in this glTF file")
     joints = list(gl.skins[0].joints)

@@ -282,3 +282,46 @@ def test_bandai_one_stride_loop(run_cli, tmp_path):
     assert code == 0 and "looping take" in err
     code, out, err = run_cli("scale", path, "--character", "child", "-o", tmp_path / "c.bvh")
     assert code in (0, 1) and "looping take" in err
+
+
+# ---- classification (issue 13 acceptance 6) -------------------------------------------------------------
+from conftest import ALL_CLIPS, BANDAI_WALKS  # noqa: E402
+
+KINDS = {"02_01": "walking", "07_01": "walking", "02_04": "in place", "dataset-1_walk_normal_001": "walking"}
+
+
+@pytest.mark.parametrize("name", clip_params(list(ALL_CLIPS)) + clip_params(list(BANDAI_RUNS) + list(BANDAI_WALKS)))
+def test_classification_robust(name):
+    """Walks, the jump and runs are told apart at the clip's rate, at 30 and 60 Hz, and with one noisy
+    moment (the root thrown 8 cm up for 30 ms) anywhere in the clip."""
+    from dataclasses import replace
+
+    from froude.gait import flight_share
+
+    motion = load_bvh(clip(name))
+    body = BodyModel.from_skeleton(motion.skeleton)
+    want = KINDS.get(name, "running")
+    for fps in (None, 30, 60):
+        m = motion if fps is None else motion.resample(fps)
+        assert summarize(m, body).kind == want, (name, fps)
+        width = max(1, int(round(0.03 * m.fps)))
+        for k in np.linspace(2, m.n_frames - 2 - width, 10).astype(int):
+            rp = m.root_positions.copy()
+            rp[k:k + width, 1] += 0.08
+            assert summarize(replace(m, root_positions=rp), body).kind == want, (name, fps, k)
+    share = flight_share(detect_gait(motion, body))
+    assert (share >= 0.5) == (want == "running") or want == "in place"
+
+
+@pytest.mark.parametrize("name", clip_params(list(ALL_CLIPS)) + clip_params(list(BANDAI_RUNS) + list(BANDAI_WALKS)))
+def test_naive_on_any_clip(name, run_cli, tmp_path):
+    """Issue 13: --method naive works on any clip that loads (walks and the jump too: the clip as it is)."""
+    out = tmp_path / "naive.bvh"
+    code, stdout, err = run_cli("scale", clip(name), "--method", "naive", "--character", "child", "--speed", "0.8",
+                                "-o", out)
+    assert code == 0, err
+    assert out.exists() and "naive" in stdout
+    d = _strict(out.with_name("naive.report.json").read_text())
+    assert d["extras"]["method"] == "naive" and d["frame_rate_hz"] > 0
+    back = load_bvh(out)
+    assert np.all(np.isfinite(back.root_positions)) and back.n_frames > 10

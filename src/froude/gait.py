@@ -224,6 +224,21 @@ class GaitSummary:
     extras: dict = field(default_factory=dict)
 
 
+#: A motion runs when at least this share of its steps (stance to next stance) has a flight of at least
+#: MIN_FLIGHT_S: one noisy frame that lifts both feet of a walk once does not make it a run, and a tired
+#: jog with a few steps whose flight the contacts miss (6 of 10 on the Bandai jog) still runs.
+RUNNING_FLIGHT_SHARE = 0.5
+MIN_FLIGHT_S = 0.025
+
+
+def flight_share(gait: Gait) -> float:
+    """Share of the steps (consecutive contacts) of a gait that have a flight ≥ MIN_FLIGHT_S [0-1]."""
+    steps = len(gait.stances) - 1
+    if steps < 1:
+        return 0.0
+    return min(1.0, float((gait.flight_times() >= MIN_FLIGHT_S).sum()) / steps)
+
+
 def summarize(motion: Motion, body: BodyModel, com: np.ndarray | None = None, gait: Gait | None = None) -> GaitSummary:
     """The gait summary behind ``froude info``: speed, Froude number U = u/√(g L), steps, phases, kind."""
     if com is None or gait is None:
@@ -243,7 +258,7 @@ def summarize(motion: Motion, body: BodyModel, com: np.ndarray | None = None, ga
     step_freq = 1.0 / period if period > 0 else np.nan
     step_len = speed / step_freq if np.isfinite(step_freq) else np.nan
     flight_times = gait.flight_times()
-    has_flight = bool(flight_times.size and flight_times.max() >= 0.025)
+    has_flight = flight_share(gait) >= RUNNING_FLIGHT_SHARE
     excursion = float(com[:, UP_AXIS].max() - com[:, UP_AXIS].min())
     kind, reason = classify(gait, speed, dist, L, has_flight)
     return GaitSummary(
@@ -272,6 +287,27 @@ def stride_speeds(com: np.ndarray, gait: Gait, n_frames: int) -> tuple[np.ndarra
             speeds.append(float(np.linalg.norm(pb - pa) / ((b - a) * dt)))
     order = np.argsort(t_mid)
     return np.asarray(t_mid)[order], np.asarray(speeds)[order]
+
+
+def ground_velocity(markers: np.ndarray, leg_length: float, frame_time: float) -> np.ndarray:
+    """(3,) horizontal velocity of the balls of the feet while they rest on the ground [m/s] (a median).
+
+    markers: (F, 2, 3, 3) [m]. The ball (the foot's middle marker, the toe joint) counts as resting while
+    within 0.01 L of its own low level (5th percentile): it is the point a runner stands on from foot-flat
+    to toe-off (the ankle centre moves on as the foot rolls off the heel). For a take with root travel this
+    is ≈ 0; for an in-place take (treadmill-like, root travel removed) it is minus the running velocity: the
+    planted foot slides back at the running speed. Joint centres sit above the floor, so a rolling foot
+    still carries the ball's centre forward a little: on the CMU runs this reads 1-5 % below the speed.
+    """
+    if markers.shape[0] < 3:
+        return np.zeros(3)
+    ball = markers[:, :, 1]  # (F, 2, 3)
+    vel = np.gradient(ball, frame_time, axis=0)
+    h = ball[..., UP_AXIS]
+    rest = h <= np.percentile(h, 5, axis=0) + 0.01 * leg_length
+    v = np.median(vel[rest], axis=0) if rest.any() else np.zeros(3)
+    v[UP_AXIS] = 0.0
+    return v
 
 
 def classify(gait: Gait, speed: float, distance: float, leg_length: float, has_flight: bool) -> tuple[str, str]:

@@ -127,10 +127,10 @@ def test_character_yaml_errors_say_file_line_and_range(work, run_cli, text, need
 
 @pytest.mark.parametrize("cmd", [
     ("scale", "in.bvh", "-o"), ("accelerate", "in.bvh", "--to-speed", "1.1x", "-o"), ("fit", "in.bvh", "-o"),
-    ("render", "in.bvh", "-o"),
+    ("render", "in.bvh", "-o"), ("convert", "in.bvh"), ("info", "in.bvh", "--data"),
 ])
 def test_unwritable_outputs_are_one_line(work, run_cli, cmd):
-    suffix = {"fit": ".json", "render": ".png"}.get(cmd[0], ".bvh")
+    suffix = {"fit": ".json", "render": ".png", "convert": ".glb", "info": ".csv"}.get(cmd[0], ".bvh")
     (work / "adir").mkdir()
     refused(run_cli, work, *cmd, f"/proc/o{suffix}", needle="cannot write in folder '/proc'")
     refused(run_cli, work, *cmd, f"in.bvh/o{suffix}", needle="'in.bvh' is a file, not a folder")
@@ -411,3 +411,10 @@ def test_every_command_module_lists_its_help():
         lean_sub = next(a for a in lean._actions if a.dest == "command")
         assert set(lean_sub.choices) == set(sub.choices)
         assert lean_sub.choices[name].format_help() == sub.choices[name].format_help()
+
+
+def test_demo_that_fails_midway_leaves_no_folder(work, run_cli):
+    """A demo whose clip cannot be fitted (a walk) stops with one error line and creates nothing."""
+    shutil.copy(clip("02_01"), work / "walk.bvh")
+    refused(run_cli, work, "demo", "--clip", "walk.bvh", "--no-video", "-o", "d", needle="walking, not running",
+            after_load=True)

@@ -22,7 +22,7 @@ import tempfile
 from pathlib import Path
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from froude.cli import common
@@ -71,7 +71,7 @@ OPTIONS = {
     "info": {"--mass": ("number", 20, 300), "--json": ("flag",), **LOAD},
     "fit": {"--mass": ("number", 20, 300), "--plot": ("word", "f.png", "f.txt", "in.bvh", "o.json", "nodir/f.png"),
             **LOAD},
-    "scale": {"--speed": ("speed",), "--strides": ("number", 1, 6), "--duration": ("number", 0, 4),
+    "scale": {"--speed": ("speed",), "--data": ("word", "d.csv", "d.npz", "in.bvh", "o.bvh", "o.report.json"), "--strides": ("number", 1, 6), "--duration": ("number", 0, 4),
               "--fps": ("number", 20, 240), "--method": ("choice", "physical", "naive", "magic"),
               "--mass": ("number", 20, 300), **CHARACTER, **LOAD},
     "accelerate": {"--to-speed": ("speed",), "--steps": ("number", 1, 6), "--within": ("number", 0, 3),
@@ -85,6 +85,8 @@ OPTIONS = {
     "view": {"--port": ("number", 0, 65535), "--mass": ("number", 20, 300), "--speed": ("speed",),
              "--strides": ("number", 1, 12), "--character": ("word", "same", "child", "elf"), **LOAD},
     "demo": {"--strides": ("number", 1, 20)},
+    "convert": {"--fps": ("number", 1, 1000), "--no-mesh": ("flag",),
+                "--data": ("word", "d.csv", "d.npz", "d.txt", "in.bvh", "o.glb", "nodir/d.csv"), **LOAD},
     "batch": {"--workers": ("number", 1, 256), "--redo": ("flag",)},
 }
 #: Fixed arguments of each command (an output in the temporary folder).
@@ -97,6 +99,7 @@ BASE = {
     "view": ["view", "in.bvh"],
     "demo": ["demo", "--no-video", "-o", "d"],
     "batch": ["batch", "in.bvh", "--plan", "plan.yaml", "-o", "out", "--dry-run"],
+    "convert": ["convert", "in.bvh", "o.glb"],
 }
 
 
@@ -124,8 +127,9 @@ def invocation(draw, command: str):
     return args
 
 
-def _check(run_cli, args, folder: Path) -> None:
+def _check(run_cli, args, folder: Path) -> int:
     code, out, err = run_cli(*args)
+    event(f"exit {code}")
     assert "Traceback" not in err and "internal error" not in err, (args, err)
     assert code in (0, 1, 2), (args, code, err)
     if code == 2:
@@ -135,10 +139,11 @@ def _check(run_cli, args, folder: Path) -> None:
     assert not leftovers, (args, leftovers)
     if code == 0:
         texts = [out] + [p.read_text(errors="replace") for p in folder.rglob("*")
-                         if p.is_file() and p.suffix in (".bvh", ".json", ".md", ".csv") and p.name != "in.bvh"]
+                         if p.is_file() and p.suffix in (".bvh", ".json", ".md", ".csv", ".gltf") and p.name != "in.bvh"]
         for t in texts:
             m = NON_FINITE.search(t)
             assert m is None, (args, t[max(0, m.start() - 80):m.end() + 80])
+    return code
 
 
 def _folder() -> tempfile.TemporaryDirectory:
@@ -158,16 +163,23 @@ def small_work(monkeypatch):
     monkeypatch.setattr(froude.studio, "serve", lambda *a, **k: 0, raising=True)
 
 
-@pytest.mark.parametrize("command", ["info", "fit", "scale", "accelerate", "render", "view", "batch"])
-def test_fuzz_options(command, run_cli, small_work, monkeypatch):
+@pytest.mark.parametrize("command", ["info", "fit", "scale", "accelerate", "render", "view", "batch", "convert"])
+def test_fuzz_options(command, run_cli, small_work, monkeypatch, capsys):
+    codes = []
+
     @SETTINGS
     @given(args=invocation(command))
     def run(args):
         with _folder() as d:
             monkeypatch.chdir(d)
-            _check(run_cli, args, Path(d))
+            codes.append(_check(run_cli, args, Path(d)))
 
     run()
+    # the fuzz must reach both sides: refusals and real runs (else it tests nothing but the parser)
+    assert 2 in codes and ({0, 1} & set(codes)), codes
+    with capsys.disabled():
+        print(f"\n  {command}: {len(codes)} cases, exit status counts "
+              f"{ {c: codes.count(c) for c in sorted(set(codes))} }", end="")
 
 
 def test_fuzz_demo_options(run_cli, small_work, monkeypatch):

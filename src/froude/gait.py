@@ -274,6 +274,27 @@ def stride_speeds(com: np.ndarray, gait: Gait, n_frames: int) -> tuple[np.ndarra
     return np.asarray(t_mid)[order], np.asarray(speeds)[order]
 
 
+def ground_velocity(markers: np.ndarray, leg_length: float, frame_time: float) -> np.ndarray:
+    """(3,) horizontal velocity of the balls of the feet while they rest on the ground [m/s] (a median).
+
+    markers: (F, 2, 3, 3) [m]. The ball (the foot's middle marker, the toe joint) counts as resting while
+    within 0.01 L of its own low level (5th percentile): it is the point a runner stands on from foot-flat
+    to toe-off (the ankle centre moves on as the foot rolls off the heel). For a take with root travel this
+    is ≈ 0; for an in-place take (treadmill-like, root travel removed) it is minus the running velocity: the
+    planted foot slides back at the running speed. Joint centres sit above the floor, so a rolling foot
+    still carries the ball's centre forward a little: on the CMU runs this reads 1-5 % below the speed.
+    """
+    if markers.shape[0] < 3:
+        return np.zeros(3)
+    ball = markers[:, :, 1]  # (F, 2, 3)
+    vel = np.gradient(ball, frame_time, axis=0)
+    h = ball[..., UP_AXIS]
+    rest = h <= np.percentile(h, 5, axis=0) + 0.01 * leg_length
+    v = np.median(vel[rest], axis=0) if rest.any() else np.zeros(3)
+    v[UP_AXIS] = 0.0
+    return v
+
+
 def classify(gait: Gait, speed: float, distance: float, leg_length: float, has_flight: bool) -> tuple[str, str]:
     """('running' | 'walking' | 'in place' | 'unknown', reason)."""
     if distance < 1.0 * leg_length or speed < 0.15 * np.sqrt(GRAVITY * leg_length):

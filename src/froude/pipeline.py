@@ -165,8 +165,12 @@ def modelled_part(motion: Motion, summary: GaitSummary, com: np.ndarray, gait: G
     from .gait import stride_speeds
 
     t0, t1 = motion.meta.get("time_range_s", (0.0, motion.duration))
-    text = (f"{t0:.2f}-{t1:.2f} s of the take: {summary.mean_speed:.3f} m/s, "
-            f"{summary.step_frequency:.3f} steps/s")
+    loop = motion.meta.get("loop")
+    part = (f"a {loop['frames'] * motion.frame_time:.2f} s loop ({loop['frames']} frames, unrolled x{loop['copies']})"
+            if loop else f"{t0:.2f}-{t1:.2f} s of the take")
+    if motion.meta.get("in_place"):
+        part += ", in place (speed from the feet)"
+    text = f"{part}: {summary.mean_speed:.3f} m/s, {summary.step_frequency:.3f} steps/s"
     _, v = stride_speeds(com, gait, motion.n_frames)
     note = None
     if v.size >= 2 and v.max() / v.min() - 1.0 > SPEED_CHANGE_NOTE:
@@ -175,6 +179,117 @@ def modelled_part(motion: Motion, summary: GaitSummary, com: np.ndarray, gait: G
                 f"{summary.mean_speed:.2f} m/s, and speed factors refer to that; choose a part with "
                 "--range T0:T1 (time_range=)")
     return text, note
+
+
+#: A clip is a loop when its last pose is this close to its first (mean joint angle), relative to the
+#: median change between neighbouring frames: below LOOP_DUPLICATE the last frame repeats the first, below LOOP_CONTINUES the first
+#: frame follows the last.
+LOOP_DUPLICATE = 0.25
+LOOP_CONTINUES = 1.5
+#: A looping take is unrolled into at least this many copies and at least LOOP_MIN_S seconds.
+LOOP_MIN_COPIES = 3
+LOOP_MIN_S = 1.5
+#: An in-place take travels less than this × L, while its feet slide back faster than IN_PLACE_MIN_FROUDE
+#: √(g L) on the ground.
+IN_PLACE_MAX_TRAVEL_L = 0.5
+IN_PLACE_MIN_FROUDE = 0.3
+
+
+def unroll_loop(motion: Motion, body: BodyModel) -> tuple[Motion, str] | None:
+    """A looping take (one stride or a few that repeat) as several copies in a row, with its travel.
+
+    The take loops when its last pose returns to its first: either repeating it (the last frame is dropped
+    when tiling) or one frame before it (the first frame follows the last). Each copy is moved on by the
+    loop's horizontal COM travel, so a root-motion loop runs on and an in-place loop stays in place.
+    Returns (motion, note) or None when the take does not loop.
+    """
+    from . import quat
+
+    F = motion.n_frames
+    if F < 4:
+        return None
+    rot = quat.make_continuous(motion.rotations)
+    # mean over joints: one joint landing fast at the seam (or a glitch at a clip's edge) does not decide
+    step = quat.angle_between(rot[1:], rot[:-1]).mean(axis=1)
+    close = float(quat.angle_between(rot[-1], rot[0]).mean())
+    typical = float(np.median(step))
+    if not typical > 0:
+        return None
+    com = body.com(motion)
+    travel = com[-1] - com[0]
+    if close <= LOOP_DUPLICATE * typical:
+        n, per_loop = F - 1, travel
+    elif close <= LOOP_CONTINUES * typical:
+        n, per_loop = F, travel * F / (F - 1)
+    else:
+        return None
+    per_loop = per_loop.copy()
+    per_loop[UP_AXIS] = 0.0
+    copies = max(LOOP_MIN_COPIES, int(math.ceil(LOOP_MIN_S / (n * motion.frame_time))))
+    k = np.repeat(np.arange(copies), n)
+    idx = np.tile(np.arange(n), copies)
+    root = motion.root_positions[idx] + k[:, None] * per_loop[None, :]
+    tr = None if motion.translations is None else motion.translations[idx]
+    from dataclasses import replace as _replace
+
+    meta = dict(motion.meta)
+    meta["loop"] = {"frames": n, "copies": copies}
+    out = _replace(motion, root_positions=root, rotations=rot[idx], translations=tr, meta=meta)
+    note = (f"a looping take ({n} frames, {n * motion.frame_time:.2f} s, "
+            f"{'last frame repeats the first' if n == F - 1 else 'first frame follows the last'}): "
+            f"unrolled {copies} times")
+    return out, note
+
+
+def add_travel(motion: Motion, body: BodyModel, markers: np.ndarray | None = None) -> tuple[Motion, str] | None:
+    """An in-place take (root travel removed, the stance foot sliding back) with its travel put back.
+
+    The running velocity is minus the feet's velocity on the ground (``gait.ground_velocity``); the root
+    then moves at it. Returns (motion, note), or None when the take travels or its feet do not slide.
+    """
+    from .gait import ground_velocity
+
+    com = body.com(motion)
+    L = body.leg_length
+    travel = com[-1] - com[0]
+    travel[UP_AXIS] = 0.0
+    if np.linalg.norm(travel) >= IN_PLACE_MAX_TRAVEL_L * L:
+        return None
+    if markers is None:
+        markers = body.foot_markers(motion)
+    v = -ground_velocity(markers, L, motion.frame_time)
+    u = float(np.linalg.norm(v))
+    if u < IN_PLACE_MIN_FROUDE * math.sqrt(GRAVITY * L):
+        return None
+    t = np.arange(motion.n_frames) * motion.frame_time
+    from dataclasses import replace as _replace
+
+    meta = dict(motion.meta)
+    meta["in_place"] = {"speed_m_s": u, "velocity_m_s": v.tolist()}
+    out = _replace(motion, root_positions=motion.root_positions + t[:, None] * v[None, :], meta=meta)
+    return out, (f"an in-place take: running at {u:.2f} m/s, found from the feet sliding back on the ground; "
+                 "its travel is put back for the fit (outputs are written in place too unless --travel)")
+
+
+def running_take(motion: Motion, body: BodyModel) -> tuple[Motion, list[str]]:
+    """The take as froude analyses it: a loop unrolled, an in-place take given its travel back (notes say
+    what was done). Other takes are returned as they are."""
+    notes = []
+    moving = add_travel(motion, body)  # first: an in-place take's contacts are found once it travels
+    if moving is not None:
+        motion, note = moving
+        notes.append(note)
+    # only a take too short to fit is unrolled (fewer than two complete stances): a longer one that happens
+    # to end near its first pose is analysed as it is
+    loop = unroll_loop(motion, body) if _full_stances(motion, body) < 2 else None
+    if loop is not None and _full_stances(loop[0], body) >= 2:
+        motion, note = loop
+        notes.append(note)
+    return motion, notes
+
+
+def _full_stances(motion: Motion, body: BodyModel) -> int:
+    return len(detect_gait(motion, body).full_stances)
 
 
 def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, length_scale=None,
@@ -194,6 +309,7 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     if time_range is not None:
         motion = select_range(motion, time_range, Path(source).name)
     body = BodyModel.from_skeleton(motion.skeleton, mass=mass, sex=sex, joint_map=joint_map)
+    motion, take_notes = running_take(motion, body)
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers)
     summary = summarize(motion, body, com, gait)
@@ -203,7 +319,7 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     cycle = extract_cycle(motion, body, gait, com, markers, events=_fit_events(machine, motion))
     modelled, note = modelled_part(motion, summary, com, gait)
     return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source, fit,
-                    modelled=modelled, notes=(note,) if note else ())
+                    modelled=modelled, notes=tuple(take_notes) + ((note,) if note else ()))
 
 
 def _fit_events(machine, motion: Motion):
@@ -1042,6 +1158,7 @@ def add_report(prep: Prepared, res: Result) -> Result:
     report.extras.update({"character": res.retarget.character.name, "L": res.retarget.L, "M": res.retarget.M,
                           "speed_factor": res.speed_factor, "method": res.method, "notes": list(res.notes),
                           "machine_apex_speed_m_s": res.path.apex_speed.tolist(), "modelled": prep.modelled,
+                          "input_in_place": bool(prep.motion.meta.get("in_place")),
                           **res.extras})
     return _replace(res, report=report)
 
@@ -1106,7 +1223,8 @@ def _naive(prep: Prepared, retarget: Retarget, speed: float, n_steps: int, fps: 
     motion = Motion(retarget.skeleton, root, rot, 1.0 / fps, None, meta)
     report = physics_report(motion, retarget.body, reference_max_joint_jump_deg=prep.cycle.max_joint_jump_deg)
     report.extras.update({"character": retarget.character.name, "L": L, "M": retarget.M, "speed_factor": speed,
-                          "method": "naive", "notes": list(notes), "modelled": prep.modelled})
+                          "method": "naive", "notes": list(notes), "modelled": prep.modelled,
+                          "input_in_place": bool(prep.motion.meta.get("in_place"))})
     return Result(motion, report, None, None, retarget, "naive", speed, tuple(notes))
 
 
@@ -1116,17 +1234,52 @@ def report_path(out_path) -> Path:
     return p.with_name(p.stem + ".report.json")
 
 
-def write_result(result: Result, out_path, data=None, **bvh_options) -> tuple[Path, ...]:
+def in_place_motion(result: Result) -> Motion:
+    """The output with its root travel removed (a treadmill-like loop for engines that move the character
+    themselves): the root is moved back by the COM's forward progression, taken straight between the
+    machine's touchdowns (constant for a steady output, step by step for an acceleration), so the body
+    keeps its bob and sway within each step and the stance foot slides back at the running speed."""
+    motion = result.motion
+    t = np.arange(motion.n_frames) * motion.frame_time
+    fwd = result.path.frame[0] if result.path is not None else _travel_direction(motion, result)
+    x = result.path.com @ fwd if result.path is not None else result.retarget.body.com(motion) @ fwd
+    knots = t[[0, -1]] if result.path is None else np.concatenate(
+        [[t[0]], result.path.t_touchdown[(result.path.t_touchdown > t[0]) & (result.path.t_touchdown < t[-1])], [t[-1]]])
+    travel = np.interp(t, knots, np.interp(knots, t, x))
+    from dataclasses import replace as _replace
+
+    return _replace(motion, root_positions=motion.root_positions - np.outer(travel - travel[0], fwd))
+
+
+def _travel_direction(motion: Motion, result: Result) -> np.ndarray:
+    com = result.retarget.body.com(motion)
+    d = com[-1] - com[0]
+    d[UP_AXIS] = 0.0
+    n = np.linalg.norm(d)
+    return d / n if n > 0 else np.eye(3)[0]
+
+
+def write_result(result: Result, out_path, data=None, in_place: bool | None = None,
+                 **bvh_options) -> tuple[Path, ...]:
     """Write OUT (.bvh, .glb or .gltf: ``froude.api.save`` decides by suffix) and OUT.report.json, and
     the per-frame table to ``data`` (.csv/.parquet/.npz) when given: all or none. Returns the paths.
-    bvh_options: ``save_bvh``'s (length_scale, up, rotations_only; default: the input's conventions)."""
+    bvh_options: ``save_bvh``'s (length_scale, up, rotations_only; default: the input's conventions).
+
+    in_place: write the motion without root travel (``in_place_motion``); None: as the input was (an
+    in-place take gives in-place outputs). The report is always that of the travelling motion (its speed,
+    skate and gravity are physical there) and says which was written.
+    """
     from .api import save
     from .io.atomic import atomic_group
 
     out_path = Path(out_path)
     rp = report_path(out_path)
+    if in_place is None:
+        in_place = bool(result.report.extras.get("input_in_place")) if result.report is not None else False
+    if result.report is not None:
+        result.report.extras["written"] = "in place (root travel removed)" if in_place else "with root travel"
     with atomic_group():  # every file of the result or none
-        save(result.motion, out_path, **bvh_options)
+        save(in_place_motion(result) if in_place else result.motion, out_path, **bvh_options)
         write_report(result.report, rp)
         if data is None:
             return out_path, rp

@@ -4,9 +4,9 @@ from __future__ import annotations
 import time
 
 from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
-                     add_output_options, add_quiet, add_range_option, bound_work, character_input,
-                     character_kwargs, check_character, check_inputs, guard_outputs, number, output_kwargs,
-                     prepare_clip, print_rows, say, speed)
+                     add_output_options, add_quiet, add_range_option, add_root_option, bound_work,
+                     character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
+                     output_kwargs, prepare_clip, print_rows, say, speed)
 from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Steps of a speed change, and of the steady parts around it, froude plans at most.
@@ -61,6 +61,7 @@ def register(sub) -> None:
     add_output_options(p)
     add_range_option(p)
     add_keep(p)
+    add_root_option(p)
     p.set_defaults(func=run)
 
 
@@ -102,7 +103,8 @@ def run(args) -> int:
             "--keep writes it anyway")
         return 1
     with atomic_group():
-        bvh, rep, *data_written = pipeline.write_result(res, out, data, **output_kwargs(args))
+        bvh, rep, *data_written = pipeline.write_result(res, out, data, in_place=args.in_place,
+                                                        **output_kwargs(args))
         written = []
         if plot:
             from ..viz.plan_plot import plot_plan

@@ -25,9 +25,10 @@ LENGTH_SCALE_RANGE = (1e-6, 100.0)
 #: Without --force, a command refuses work estimated above either bound (frames of output, memory).
 MAX_FRAMES = 200_000
 MAX_MEMORY_BYTES = 2 << 30
-#: Memory estimate of the synthesis + IK per output frame and joint [bytes] (measured: about 300 B for
-#: a periodic 'scale' of CMU 09_01; accelerations are not tiled, so a margin).
-BYTES_PER_FRAME_JOINT = 1024
+#: Memory estimate of the synthesis + IK per output frame and joint [bytes], with a margin: measured on
+#: CMU 09_01 (31 joints) about 130 B for a 1-hour 'scale' (1.8 GB peak, bench_scale.py --hour), 300 B for
+#: 200 strides and 100 B for 'accelerate' over 100 steps (peak RSS, /usr/bin/time).
+BYTES_PER_FRAME_JOINT = 400
 
 
 def say(msg: str = "", quiet: bool = False) -> None:
@@ -98,6 +99,15 @@ def add_keep(p) -> None:
     p.add_argument("--keep", action="store_true",
                    help="write the output even if it misses a physics bar (otherwise it is not written, the "
                    "bars missed and the reachable speeds are said, and the exit status is 1)")
+
+
+def add_root_option(p) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--in-place", dest="in_place", action="store_const", const=True, default=None,
+                   help="write the output in place (root travel removed, the stance foot sliding back), as "
+                   "engines that move the character themselves want (default: as the input is)")
+    g.add_argument("--travel", dest="in_place", action="store_const", const=False,
+                   help="write the output with its root travel even when the input was in place")
 
 
 def add_range_option(p) -> None:

@@ -83,6 +83,11 @@ def run(args) -> int:
 
     if summarize(motion, body).kind == "walking":  # a walk gets the walking machine
         return _run_walk(args, motion, body, out, plot)
+    from ..pipeline import running_take
+
+    motion, notes = running_take(motion, body)  # a loop unrolled, an in-place take given its travel
+    for note in notes:
+        say(f"note: {note}", args.quiet)
     res = fit_machine_detailed(motion, body, source=Path(args.clip).name)
     with atomic_group():
         if plot:

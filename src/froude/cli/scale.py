@@ -6,9 +6,9 @@ from pathlib import Path
 
 from ..presets import list_presets
 from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
-                     add_output_options, add_quiet, add_range_option, bound_work, character_input,
-                     character_kwargs, check_character, check_inputs, guard_outputs, number, output_kwargs,
-                     prepare_clip, print_rows, say, speed)
+                     add_output_options, add_quiet, add_range_option, add_root_option, bound_work,
+                     character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
+                     output_kwargs, prepare_clip, print_rows, say, speed)
 from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
@@ -57,6 +57,7 @@ def register(sub) -> None:
     add_output_options(p)
     add_range_option(p)
     add_keep(p)
+    add_root_option(p)
     p.set_defaults(func=run)
 
 
@@ -99,7 +100,8 @@ def run(args) -> int:
             f"met this clip runs {rng.describe()}; --keep writes it anyway")
         return 1
     with atomic_group():
-        bvh, rep, *data_written = pipeline.write_result(res, out, data, **output_kwargs(args))
+        bvh, rep, *data_written = pipeline.write_result(res, out, data, in_place=args.in_place,
+                                                        **output_kwargs(args))
     print_rows(res.summary_rows())
     print(f"physics bars: {'all met' if not fails else 'NOT met (kept): ' + '; '.join(fails)}")
     also = "".join(f" and {d}" for d in data_written)

@@ -66,18 +66,23 @@ def _speed_text():
 CHARACTER = {"--character": ("word", "child", "troll", "giant", "small", "elf", "", "c.yaml", "in.bvh", "none.yaml"),
              "--height": ("number", 0.3, 10), "--char-mass": ("number", 1, 5000), "--leg-scale": ("number", 0.2, 5),
              "--arm-scale": ("number", 0.2, 5), "--head-scale": ("number", 0.2, 5), "--trunk-scale": ("number", 0.2, 5)}
-LOAD = {"--length-scale": ("number", 1e-6, 100), "--keep-all-frames": ("flag",)}
+LOAD = {"--length-scale": ("number", 1e-6, 100), "--keep-all-frames": ("flag",),
+        "--up": ("choice", "Y", "Z", "y", "X"), "--joint-map": ("word", "map.yaml", "c.yaml", "none.yaml")}
+RANGE = ("word", "0.2:2.5", "1:", ":2", "2:1", "nan:1", "1e400:", "-1:3", "1_0:2", ":", "0:0", "0.5:0.6")
+OUTPUT = {"--units": ("choice", "m", "cm", "mm", "in", "cmu", "km"), "--rotations-only": ("flag",),
+          "--in-place": ("flag",), "--travel": ("flag",), "--keep": ("flag",), "--range": RANGE,
+          "--data": ("word", "d.csv", "d.npz", "in.bvh", "o.bvh", "o.report.json", "d.txt")}
 OPTIONS = {
     "info": {"--mass": ("number", 20, 300), "--json": ("flag",), **LOAD},
     "fit": {"--mass": ("number", 20, 300), "--plot": ("word", "f.png", "f.txt", "in.bvh", "o.json", "nodir/f.png"),
-            **LOAD},
-    "scale": {"--speed": ("speed",), "--data": ("word", "d.csv", "d.npz", "in.bvh", "o.bvh", "o.report.json"), "--strides": ("number", 1, 6), "--duration": ("number", 0, 4),
+            "--range": RANGE, **LOAD},
+    "scale": {"--speed": ("speed",), **OUTPUT, "--strides": ("number", 1, 6), "--duration": ("number", 0, 4),
               "--fps": ("number", 20, 240), "--method": ("choice", "physical", "naive", "magic"),
               "--mass": ("number", 20, 300), **CHARACTER, **LOAD},
     "accelerate": {"--to-speed": ("speed",), "--steps": ("number", 1, 6), "--within": ("number", 0, 3),
                    "--lead-steps": ("number", 0, 3), "--hold-steps": ("number", 0, 3),
                    "--policy": ("choice", "ease", "even", "fast"), "--fps": ("number", 20, 240),
-                   "--mass": ("number", 20, 300), **CHARACTER, **LOAD},
+                   "--mass": ("number", 20, 300), **CHARACTER, **LOAD, **OUTPUT},
     "render": {"--interval": ("number", 0.001, 10), "--spacing": ("number", 0, 100), "--fps": ("number", 1, 240),
                "--width": ("number", 16, 400), "--height": ("number", 16, 300), "--at": ("number", 0, 3),
                "--camera": ("choice", "side", "front", "three-quarter", "top"), "--labels": ("word", "a", "a,b", ""),
@@ -150,6 +155,7 @@ def _folder() -> tempfile.TemporaryDirectory:
     d = tempfile.TemporaryDirectory(prefix="froude-fuzz-")
     shutil.copy(sample_path(), Path(d.name) / "in.bvh")
     (Path(d.name) / "c.yaml").write_text("name: c\nheight: 1.4\nmass: 40\n")
+    (Path(d.name) / "map.yaml").write_text("left_foot: LeftFoot\nright_foot: RightFoot\n")
     (Path(d.name) / "plan.yaml").write_text("characters: [child]\nspeeds: [1.0]\nstrides: [1]\n")
     return d
 

@@ -338,14 +338,11 @@ def test_bandai_clips_as_delivered_meet_the_bars(name, change, fps, request):
     assert fails == []
 
 
-def test_bandai_loop_and_walk_are_refused_in_one_line(run_cli, tmp_path):
+def test_bandai_loop_is_unrolled_and_walk_refused_in_one_line(run_cli, tmp_path):
+    # the one-stride loop is no longer refused: it is unrolled (issue 13; tests/test_take.py)
     code, out, err = run_cli("scale", clip("dataset-1_dash_normal_001"), "--character", "child", "-o",
                              tmp_path / "loop.bvh", "-q")
-    # the one-stride loop is fitted now or refused; either way one clear line, never a half-written file
-    if code != 0:
-        last = err.strip().splitlines()[-1]
-        assert code in (1, 2) and last.startswith("froude scale:") and ("stance" in last or "bar" in last)
-        assert not (tmp_path / "loop.bvh").exists()
+    assert code == 0 and (tmp_path / "loop.bvh").exists() and "loop" in out
     code, out, err = run_cli("scale", clip("dataset-1_walk_normal_001"), "--character", "child", "-o",
                              tmp_path / "walk.bvh", "-q")
     last = err.strip().splitlines()[-1]

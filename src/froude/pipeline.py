@@ -939,11 +939,11 @@ SPEED_SEARCH_TOL = 0.03
 
 
 def _speed_ok(prep: Prepared, character, s: float, numbers: dict) -> tuple[bool, str]:
-    """Whether a 2-stride output at speed factor s meets every physics bar, and why not."""
+    """Whether a 4-stride output (scale's default) at speed factor s meets every physics bar, and why not."""
     from .errors import FitError
 
     try:
-        rep = plan_scale(prep, character, speed=s, strides=2, **numbers).finish().report
+        rep = plan_scale(prep, character, speed=s, strides=4, **numbers).finish().report
     except FitError as e:
         return False, str(e)
     fails = rep.check_bars()
@@ -953,7 +953,7 @@ def _speed_ok(prep: Prepared, character, s: float, numbers: dict) -> tuple[bool,
 def reachable_speed_range(prep: Prepared, character=None, **character_numbers) -> SpeedRange:
     """The range of ``scale`` speed factors whose outputs meet every physics bar, for one character.
 
-    Bisection on real outputs (2 strides each, the same synthesis and IK as ``scale``) between 1 and the
+    Bisection on real outputs (4 strides each, the same synthesis and IK as ``scale``) between 1 and the
     ends of SPEED_SEARCH_RANGE, to SPEED_SEARCH_TOL; the ends returned were themselves produced and
     checked. About a dozen short outputs (a few seconds); remembered per character on ``prep``. Assumes the
     reachable speeds form one interval around x1 (true on the shared clips: faster outputs fail by a knee
@@ -1226,6 +1226,45 @@ def _naive(prep: Prepared, retarget: Retarget, speed: float, n_steps: int, fps: 
                           "method": "naive", "notes": list(notes), "modelled": prep.modelled,
                           "input_in_place": bool(prep.motion.meta.get("in_place"))})
     return Result(motion, report, None, None, retarget, "naive", speed, tuple(notes))
+
+
+def naive_clip(motion: Motion, character=None, *, speed: float = 1.0, target_speed: float | None = None,
+               fps: float | None = None, performer_mass: float = 70.0, **character_numbers) -> Result:
+    """The naive baseline for any clip that loads, running or not (no fit, no cycle): what engines do with
+    a clip as it is: joint angles copied, the root's motion × L about the first frame's point on the floor,
+    played s times faster (and as long as the clip). ``scale(..., method="naive")`` repeats a stride cycle
+    instead when the clip is a run; this is its fallback for walks, jumps and clips the fit refuses.
+    target_speed [m/s] is turned into a factor of the clip's own scaled mean speed; performer_mass [kg]:
+    the reference performer's (the character's own mass is a character number, ``mass=``).
+    """
+    from .metrics import max_joint_jump_deg
+
+    body = BodyModel.from_skeleton(motion.skeleton, mass=performer_mass)
+    retarget = apply_character(resolve_character(character, **character_numbers), body)
+    L = retarget.L
+    summary = summarize(motion, body)
+    if target_speed is not None:
+        base = summary.mean_speed * math.sqrt(L)
+        if not (base > 0 and np.isfinite(target_speed) and target_speed > 0):
+            raise FroudeError(f"cannot run this clip at {target_speed:g} m/s: it does not travel (give a factor)")
+        speed = target_speed / base
+    if not (np.isfinite(speed) and speed > 0):
+        raise FroudeError(f"speed factor must be > 0, got {speed}")
+    fps = motion.fps if fps is None else float(fps)
+    n = int(math.floor(motion.duration / speed * fps + 1e-9)) + 1
+    played = motion.sample(np.arange(n) / fps * speed)
+    origin = body.com(motion)[0].copy()
+    origin[UP_AXIS] = detect_gait(motion, body).ground
+    root = origin + L * (played.root_positions - origin)
+    meta = {"source": str(motion.meta.get("source", "motion")),
+            "length_scale": float(motion.meta.get("length_scale", 1.0))}
+    out = Motion(retarget.skeleton, root, played.rotations, 1.0 / fps, None, meta)
+    notes = [f"naive baseline of the clip as it is ({summary.kind}): the fit was not needed"]
+    report = physics_report(out, retarget.body, reference_max_joint_jump_deg=max_joint_jump_deg(motion))
+    report.extras.update({"character": retarget.character.name, "L": L, "M": retarget.M, "speed_factor": speed,
+                          "method": "naive", "notes": notes, "modelled": f"the whole clip ({summary.kind})",
+                          "input_in_place": False})
+    return Result(out, report, None, None, retarget, "naive", speed, tuple(notes))
 
 
 # ---- 5. write ----------------------------------------------------------------------------------------

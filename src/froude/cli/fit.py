@@ -4,7 +4,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from .common import add_load_options, add_range_option, add_mass, add_quiet, check_inputs, guard_outputs, load_clip, say
+from .common import (add_load_options, add_mass, add_quiet, add_range_option, check_inputs, guard_outputs, load_clip,
+                     say, say_loaded)
 
 
 #: The one-line summary ``froude --help`` lists.
@@ -73,7 +74,8 @@ def run(args) -> int:
     from ..body import BodyModel
     from ..machine.fit import fit_machine_detailed
 
-    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.quiet, args.joint_map, args.up)
+    # the load's notes are said once the fit succeeded: a clip that cannot be fitted is one error line
+    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, True, args.joint_map, args.up)
     if args.range:
         from ..pipeline import select_range
 
@@ -95,6 +97,7 @@ def run(args) -> int:
 
             plot_fit(res, plot, title=Path(args.clip).name)
         res.machine.save(out)
+    say_loaded(motion, args.clip, args.quiet)
     print(fit_table(res))
     if plot:
         say(f"wrote {plot}", args.quiet)
@@ -144,6 +147,7 @@ def _run_walk(args, motion, body, out, plot) -> int:
 
             plot_walk_fit(res, plot, title=Path(args.clip).name)
         res.machine.save(out)
+    say_loaded(motion, args.clip, args.quiet)
     print(walk_table(res))
     if plot:
         say(f"wrote {plot}", args.quiet)

@@ -9,6 +9,7 @@ from .common import (add_character_options, add_force, add_fps, add_keep, add_lo
                      add_output_options, add_quiet, add_range_option, add_root_option, bound_work,
                      character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
                      output_kwargs, prepare_clip, print_rows, say, speed)
+from .common import load_clip
 from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
@@ -75,10 +76,16 @@ def run(args) -> int:
 
     from .. import pipeline
 
-    prep = prepare_clip(args)
+    from ..errors import FitError, FroudeError, NotARunningMotion
+
+    try:
+        prep = prepare_clip(args)
+    except (FitError, NotARunningMotion) as e:
+        if args.method != "naive":
+            raise
+        return _naive_any_clip(args, out, data, goal, e, t0)
     if _bound(prep, args):
         say(f"synthesising ({args.method}) ...", args.quiet)
-    from ..errors import FitError, FroudeError
 
     try:
         res = pipeline.scale(prep, args.character, speed=goal.factor if goal and goal.factor else 1.0,
@@ -104,6 +111,23 @@ def run(args) -> int:
                                                         **output_kwargs(args))
     print_rows(res.summary_rows())
     print(f"physics bars: {'all met' if not fails else 'NOT met (kept): ' + '; '.join(fails)}")
+    also = "".join(f" and {d}" for d in data_written)
+    say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep}{also} in {time.perf_counter() - t0:.2f} s", args.quiet)
+    return 0
+
+
+def _naive_any_clip(args, out, data, goal, why, t0) -> int:
+    """--method naive on a clip the fit refuses (a walk, a jump, too short): the clip itself, naively."""
+    from .. import pipeline
+
+    motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, True, getattr(args, "joint_map", None),
+                       getattr(args, "up", None))
+    say(f"note: {why}; the naive baseline plays the clip as it is", args.quiet)
+    res = pipeline.naive_clip(motion, args.character, speed=goal.factor if goal and goal.factor else 1.0,
+                              target_speed=goal.m_s if goal else None, fps=args.fps, performer_mass=args.mass,
+                              **character_kwargs(args))
+    bvh, rep, *data_written = pipeline.write_result(res, out, data, in_place=args.in_place, **output_kwargs(args))
+    print_rows(res.summary_rows())
     also = "".join(f" and {d}" for d in data_written)
     say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep}{also} in {time.perf_counter() - t0:.2f} s", args.quiet)
     return 0

@@ -49,6 +49,11 @@ RESIDUAL_GUARD_FRAMES = 2
 #: Clips below ANALYSIS_MIN_FPS are analysed at ANALYSIS_FPS (see fit_machine_detailed) [Hz].
 ANALYSIS_MIN_FPS = 100.0
 ANALYSIS_FPS = 120.0
+#: How far the force-based stance may reach beyond the foot's marker contact [s] (see fit_machine_detailed).
+CONTACT_SLACK_S = 0.02
+#: Only a clip whose contacts last less than this [s] (median of the complete ones) is held to them: the smear of the COM filter (CUTOFF_HZ) matters
+#: against a 0.13-0.17 s dash stance, not against the 0.23-0.27 s stances of the CMU runs.
+SHORT_STANCE_S = 0.2
 #: Fewest samples of a stance the control fit takes: K and an offset, then a, b, c (two small least
 #: squares), so 4 samples determine it; a 30 Hz clip has 4-5 frames in a 0.15 s stance.
 MIN_STANCE_SAMPLES = 4
@@ -296,13 +301,26 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
 
     geo = []
     stances = []
+    contact_s = [(st.t_off - st.t_on) * dt for st in gait.stances if not st.partial]
+    short = bool(contact_s) and float(np.median(contact_s)) < SHORT_STANCE_S
     for st in gait.stances:
         td, lo, _, _ = refine_events(fy_bw, st.start, st.stop, dt, st.partial)
+        # The force-based stance never extends past the foot's marker contact: on a short stance (4 frames of
+        # a 30 Hz dash) the COM filter smears the force pulse wider than the contact, and a machine stance
+        # begun before the foot is down would push a body still in the air (the output's flight gravity
+        # then reads low).
+        # The control is still fitted over the whole force pulse (its samples), only the events move.
+        slack = CONTACT_SLACK_S / dt  # [frames]
+        td_c = max(td, st.t_on - slack) if short and st.start > 0 else td
+        lo_c = min(lo, st.t_off + slack) if short and st.stop < F else lo
         if st.partial and lo - td < 4:
             continue  # a sliver of a contact at the clip's edge: nothing to measure
         stances.append(st)
         t_mid = 0.5 * (td + lo) * dt
-        geo.append(stance_geometry(st, td, lo, p, f, markers, heading, lateral, dt, float(np.polyval(line, t_mid))))
+        sg = stance_geometry(st, td, lo, p, f, markers, heading, lateral, dt, float(np.polyval(line, t_mid)))
+        if lo_c > td_c and (td_c, lo_c) != (td, lo):
+            sg = replace(sg, t_touchdown=td_c * dt, t_liftoff=lo_c * dt)
+        geo.append(sg)
     full = [sg for sg in geo if not sg.partial]
 
     # Per-stance and pooled control fits (dimensionless).

@@ -162,6 +162,119 @@ def test_naive_comparison_and_clip_facts(session):
         studio.stop()
 
 
+def test_speed_control_bounded_to_what_is_reachable(session):
+    """The speed slider spans the factors whose outputs meet every physics bar (pipeline's
+    reachable_speed_range), and the server refuses a value beyond them whatever sent it."""
+    pytest.importorskip("viser")
+    from froude.studio.app import Studio
+
+    studio = Studio(session.prep, port=_free_port())
+    try:
+        tab = studio.open_tab()
+        tab._bound_speed("same")
+        rng = tab.session.speed_ranges["same"]
+        assert not rng.empty and rng.hi < 2.0  # the sample cannot run at x2 with every bar met
+        assert tab.gui_speed.max == round(rng.hi, 2) and tab.gui_speed.min == 0.5
+        assert "speed reachable with every bar met" in tab._status_md()
+        good = tab.good
+        tab.gui_speed.value = 1.9
+        with pytest.raises(FroudeError, match=r"Speed ×1.9 is beyond what same can run on this clip"):
+            tab.params_from_gui()
+        tab._on_change(type("E", (), {"client": object()})())  # what a page's edit calls
+        assert tab.good is good and tab.gui_speed.value == good.params.speed and "beyond" in tab.message
+    finally:
+        studio.stop()
+
+
+class _Catch:
+    """A stand-in for a page's client that keeps what the studio sends as downloads."""
+
+    def __init__(self):
+        self.files = {}
+        self.client = self
+
+    def send_file_download(self, name, data, save_immediately=True):
+        self.files[name] = data
+
+
+def test_bvh_export_options(session, tmp_path):
+    pytest.importorskip("viser")
+    from froude.io.bvh import load_bvh
+    from froude.studio.app import Studio
+
+    studio = Studio(session.prep, port=_free_port())
+    try:
+        tab = studio.open_tab()
+        res = tab.good.result.motion
+        got = {}
+        for units, rate, root in (("the clip's", "the clip's", "root motion"), ("centimetres", "30 Hz", "in place")):
+            tab.gui_bvh_units.value, tab.gui_bvh_fps.value, tab.gui_bvh_root.value = units, rate, root
+            ev = _Catch()
+            tab._on_download_bvh(ev)
+            (name, data), = ev.files.items()
+            path = tmp_path / f"{len(got)}_{name}"
+            path.write_bytes(data)
+            got[(units, rate, root)] = (load_bvh(path), data.decode())
+        same, _ = got[("the clip's", "the clip's", "root motion")]
+        assert same.n_frames == res.n_frames and abs(same.fps - res.fps) < 1e-3
+        travel = np.ptp(same.root_positions[:, [0, 2]], axis=0).max()
+        assert travel > 2.0  # 4 strides of running
+        cm, text = got[("centimetres", "30 Hz", "in place")]
+        assert abs(cm.fps - 30.0) < 1e-3 and abs(cm.n_frames - res.duration * 30) <= 1
+        assert np.ptp(cm.root_positions[:, [0, 2]], axis=0).max() < 0.3  # in place: no travel
+        assert cm.skeleton.standing_height() == pytest.approx(same.skeleton.standing_height(), rel=0.02)
+
+        def offsets(t):
+            return max(abs(float(v)) for line in t.splitlines() if line.strip().startswith("OFFSET")
+                       for v in line.split()[1:])
+
+        ls = float(res.meta.get("length_scale", 1.0))  # metres per unit of the clip's own file
+        assert offsets(text) / offsets(got[("the clip's", "the clip's", "root motion")][1]) == pytest.approx(
+            ls / 0.01, rel=1e-3)
+        tab.gui_bvh_units.value = "/etc/passwd"  # a crafted value is refused
+        ev = _Catch()
+        tab._on_download_bvh(ev)
+        assert not ev.files and "chosen from their lists" in tab.message
+    finally:
+        studio.stop()
+
+
+def test_open_clip_from_the_page_is_checked(session, monkeypatch):
+    """Opening a clip: size and kind checked before any work, a bad clip refused in one line naming the
+    file (not the server's temporary copy), a good one becomes the tab's reference."""
+    pytest.importorskip("viser")
+    from types import SimpleNamespace
+
+    from conftest import clip
+    from viser import UploadedFile
+
+    from froude.studio import app
+    from froude.studio.app import Studio
+
+    studio = Studio(session.prep, port=_free_port())
+    try:
+        tab = studio.open_tab()
+        posted = []
+        monkeypatch.setattr(tab, "_post", lambda job: posted.append(job))
+        monkeypatch.setattr(app, "MAX_CLIP_BYTES", 1000)
+        monkeypatch.setattr(tab, "gui_open", SimpleNamespace(value=UploadedFile("big.bvh", b"x" * 1001)))
+        tab._on_upload(None)
+        assert "big.bvh: 0.0 MB is larger than the studio's" in tab.message and not posted
+        tab.gui_open.value = UploadedFile("notes.txt", b"hello")  # (the stand-in's value)
+        tab._on_upload(None)
+        assert tab.message == "error: notes.txt: not a .bvh file; open a BVH motion clip" and not posted
+        walk = clip("02_01")
+        assert not tab.open_clip("02_01.bvh", walk.read_bytes())
+        assert tab.message.startswith("error: 02_01.bvh") and "walking" in tab.message and "/tmp" not in tab.message
+        assert tab.clip_name == "09_01.bvh"
+        run = clip("09_02")
+        assert tab.open_clip("09_02.bvh", run.read_bytes())
+        assert tab.clip_name == "09_02.bvh" and "clip=09_02.bvh" in tab.gui_state.content
+        assert tab.reference.track.motion is tab.session.prep.motion and "09_02.bvh" in tab._facts_md()
+    finally:
+        studio.stop()
+
+
 def test_two_tabs_hold_two_sessions(session):
     """Each tab its own parameters, result and scene (acceptance 15.4, without a browser)."""
     pytest.importorskip("viser")
@@ -194,3 +307,13 @@ def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def test_unreachable_speed_says_so_in_metres_per_second():
+    """A speed with no running cycle (a Bandai tired run at x1.3) is refused in m/s with the fix, not in the
+    cycle solver's terms."""
+    from conftest import clip
+
+    s = Session(pipeline.prepare(clip("dataset-1_run_tired_001")))
+    with pytest.raises(FroudeError, match=r"^same cannot run at ×1.3 \(\d\.\d\d m/s\) on this clip: .* nearer ×1$"):
+        s.solve(Params(speed=1.3))

@@ -179,3 +179,11 @@ def test_machine_path_tiles_a_periodic_walk(name, walk_fits):
     np.testing.assert_array_equal(pg["contact"], c)
     with pytest.raises(FitError, match="path times"):
         m.path([-0.1, 0.0])
+
+
+def test_fit_refuses_a_walk_without_a_complete_step():
+    from froude.errors import NotARunningMotion
+
+    m = load_bvh(clip("02_01")).cut(0, 100)  # 0.83 s: two touchdowns, no complete step
+    with pytest.raises(NotARunningMotion, match="no complete walking step"):
+        fit_walking_detailed(m, source="02_01[:100]")

@@ -8,8 +8,7 @@ from ..presets import list_presets
 from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
                      add_output_options, add_quiet, add_range_option, add_root_option, bound_work,
                      character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
-                     output_kwargs, prepare_clip, print_rows, say, speed)
-from .common import load_clip
+                     load_clip, output_kwargs, prepare_clip, print_rows, say, speed)
 from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
@@ -126,7 +125,10 @@ def _naive_any_clip(args, out, data, goal, why, t0) -> int:
     res = pipeline.naive_clip(motion, args.character, speed=goal.factor if goal and goal.factor else 1.0,
                               target_speed=goal.m_s if goal else None, fps=args.fps, performer_mass=args.mass,
                               **character_kwargs(args))
-    bvh, rep, *data_written = pipeline.write_result(res, out, data, in_place=args.in_place, **output_kwargs(args))
+    from ..io.atomic import atomic_group
+
+    with atomic_group():  # the whole result or none
+        bvh, rep, *data_written = pipeline.write_result(res, out, data, in_place=args.in_place, **output_kwargs(args))
     print_rows(res.summary_rows())
     also = "".join(f" and {d}" for d in data_written)
     say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep}{also} in {time.perf_counter() - t0:.2f} s", args.quiet)

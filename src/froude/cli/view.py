@@ -18,13 +18,16 @@ HELP = "live studio in the browser: sliders for character, speed, acceleration"
 def register(sub) -> None:
     p = sub.add_parser(
         "view", help=HELP,
-        description="Open a local web studio (viser) on a running clip: the reference and the result play "
-        "side by side (or overlaid) on a ground grid, with the simple machine (COM, spring leg, contacts, "
-        "COM trail) drawn over the bodies. Controls for the character (presets, height, mass, leg scale), "
-        "the speed factor and strides, or an acceleration goal and its number of steps recompute through "
-        "the same pipeline as 'froude scale' / 'froude accelerate'; live numbers (speed, Froude number, "
-        "step frequency, physics-report errors), a leg-force plot, and downloads of the result as BVH and "
-        "its report. Bad edits show their message in the page and keep the last good result. "
+        description="Open a local web studio (viser) on a running clip; each browser tab is its own session. "
+        "Open another clip from the page (button or drag and drop). The reference, the physical result and the "
+        "engine-style naive retarget are drawn as solid limbs with the simple machine (COM, spring leg, "
+        "contacts, COM trail) and a legend; side (true relative size), front and three-quarter cameras; Space "
+        "plays/pauses, arrow keys step frames, onion skin, phase strip, force and speed plots with a playhead. "
+        "Controls for the character (presets, height, mass, leg scale), the speed factor (bounded to what "
+        "meets every physics bar) and strides, or an acceleration goal and its steps, recompute through the "
+        "same pipeline as 'froude scale' / 'froude accelerate'; a table compares reference, physical and "
+        "naive. Downloads: BVH (units, rate, in place), the report, per-frame CSV and an MP4. Bad edits "
+        "show their message in the page and keep the last good result. "
         "Needs the optional extra: pip install 'froude[studio]'.",
         epilog="The studio binds to 127.0.0.1 (this machine only) unless --host says otherwise (then it warns "
         "and prints the real addresses); open the printed address in a browser. It accepts websocket "

@@ -46,7 +46,7 @@ from ..motion import Motion
 from .dynamics import Control
 from .forces import CUTOFF_HZ, ground_force, sagittal_frame, smooth_com
 from .walk_model import WalkingMachine
-from .walking import N_PER_STANCE, REASONS, WalkState, simulate_walk, walk_step
+from .walking import N_PER_STANCE, REASONS, WalkState, record_step, simulate_walk, walk_step
 
 __all__ = ["WalkFitResult", "fit_walking_detailed", "CYCLE_SCALES", "force_landmarks", "PROFILE_SAMPLES"]
 
@@ -269,26 +269,26 @@ def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40):
     return z, w, it, nrm
 
 
-def stance_force_profile(state, theta0, ctl, w, tau, roll=0.0, l_td=1.0, n_per_stance=N_PER_STANCE, *,
-                         frame_time=None, cutoff_hz=CUTOFF_HZ, time_unit=1.0):
+def stance_force_profile(rec, tau, *, frame_time=None, cutoff_hz=CUTOFF_HZ, time_unit=1.0):
     """Total vertical force [m g] of the periodic machine over one leg's stance at phases tau (N,).
 
-    The leg lands at the start of a step and lifts off t_stance later; the total force of both legs
-    repeats every step, so the stance profile is the step's force at (τ t_stance) mod t_step.
-    w: the WalkStep of (state, theta0, ctl). With ``frame_time`` [s] (and ``time_unit`` √(l0/g) [s]) the
-    force is *measured like the clip's*: the machine's COM is sampled at the clip's frame rate over
-    several steps and goes through the same zero-lag filter and double differentiation (eq. 1,
-    :func:`froude.machine.forces.smooth_com`), so both forces are seen through the same instrument.
+    rec: the RecordedStep (:func:`froude.machine.walking.record_step`) of the periodic cycle. The leg
+    lands at the start of a step and lifts off t_stance later; the total force of both legs repeats every
+    step, so the stance profile is the step's force at (τ t_stance) mod t_step. With ``frame_time`` [s]
+    (and ``time_unit`` √(l0/g) [s]) the force is *measured like the clip's*: the machine's COM is sampled
+    at the clip's frame rate over several steps and goes through the same zero-lag filter and double
+    differentiation (eq. 1, :func:`froude.machine.forces.smooth_com`), so both forces are seen through the
+    same instrument.
     """
+    w = rec.step
     t_m = (np.asarray(tau, float) * w.t_stance) % w.t_step
     if frame_time is None:
-        tr = simulate_walk(state, theta0, ctl, t_m, roll=roll, l_td=l_td, n_per_stance=n_per_stance)
-        return tr.total_force[:, 1]
+        return rec.sample(t_m).total_force[:, 1]
     dt = frame_time / time_unit
     n_steps = 8
     t = np.arange(int(n_steps * w.t_step / dt)) * dt
     k, ph = np.divmod(t, w.t_step)
-    tr = simulate_walk(state, theta0, ctl, ph, roll=roll, l_td=l_td, n_per_stance=n_per_stance)
+    tr = rec.sample(ph)
     pos = np.zeros((t.size, 3))
     pos[:, 2] = tr.pos[:, 0] + k * w.step_length
     pos[:, UP_AXIS] = tr.pos[:, 1]
@@ -348,13 +348,12 @@ def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_un
     def resid(z):
         ctl = Control(K=z[5], a=z[6], b=z[7], c=z[8], T_c=T_c)
         st = WalkState(*z[:4])
-        w = walk_step(st, z[4], ctl, roll=roll, l_td=z[9], n_per_stance=n_per_stance)
+        rec = record_step(st, z[4], ctl, roll=roll, l_td=z[9], n_per_stance=n_per_stance)
+        w = rec.step
         if not w.valid:
             return np.full(n_res, 10.0)
-        prof = stance_force_profile(st, z[4], ctl, w, tau, roll, z[9], n_per_stance, frame_time=frame_time,
-                                    time_unit=time_unit)
-        h = simulate_walk(st, z[4], ctl, step_phase_times(w.t_double, w.t_step), roll=roll, l_td=z[9],
-                          n_per_stance=n_per_stance).pos[:, 1]
+        prof = stance_force_profile(rec, tau, frame_time=frame_time, time_unit=time_unit)
+        h = rec.sample(step_phase_times(w.t_double, w.t_step)).pos[:, 1]
         nx = w.next
         per = np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3]]) * wp
         tg = np.array([(w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
@@ -489,8 +488,9 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     l_td = float(z[9])
     nx = w.next
     periodicity = float(max(abs(nx.u - state.u), abs(nx.v - state.v), abs(nx.d - state.d), abs(nx.s - state.s)))
-    prof_model = stance_force_profile(state, th, ctl, w, tau, roll, l_td, n_per_stance, frame_time=dt, time_unit=T)
-    prof_raw = stance_force_profile(state, th, ctl, w, tau, roll, l_td, n_per_stance)
+    rec = record_step(state, th, ctl, roll=roll, l_td=l_td, n_per_stance=n_per_stance)
+    prof_model = stance_force_profile(rec, tau, frame_time=dt, time_unit=T)
+    prof_raw = stance_force_profile(rec, tau)
     lm_ref = force_landmarks(tau, prof_ref, double_time / stance_time)
     lm_mod = force_landmarks(tau, prof_model, w.t_double / w.t_stance)
     lm_raw = force_landmarks(tau, prof_raw, w.t_double / w.t_stance)
@@ -501,7 +501,7 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     for a, b, c in zip(t_td, t_lo, t_nx):
         tt = times[(times >= a) & (times <= c)]
         tm = np.interp(tt, [a, b, c], [0.0, w.t_double, w.t_step])
-        trj = simulate_walk(state, th, ctl, tm, roll=roll, l_td=l_td, n_per_stance=n_per_stance)
+        trj = rec.sample(tm)
         t_ref.append(tt)
         h_ref.append(height(tt))
         h_mod.append(trj.pos[:, 1] * l0)

@@ -39,7 +39,8 @@ import numpy as np
 from ..errors import PlanError
 from .dynamics import Control
 
-__all__ = ["WalkState", "WalkStep", "WalkTrajectory", "walk_step", "simulate_walk", "N_PER_STANCE",
+__all__ = ["WalkState", "WalkStep", "WalkTrajectory", "RecordedStep", "walk_step", "record_step", "simulate_walk",
+           "N_PER_STANCE",
            "REASONS", "OK"]
 
 #: RK4 steps per nominal stance T_c.
@@ -311,6 +312,63 @@ class WalkTrajectory:
         return self.force.sum(axis=1)
 
 
+class RecordedStep:
+    """One step integrated once, sampled at any times after (:func:`record_step`).
+
+    step: the WalkStep (``valid`` False: :meth:`sample` raises PlanError naming the reason).
+    """
+
+    def __init__(self, state, theta0, control, n_per_stance, roll, l_td):
+        self.step, nodes, self._t_lo, self._legs = _one_step(state, float(theta0), control, n_per_stance, True,
+                                                             roll, l_td)
+        self._why = (f"walking step invalid: {REASONS[self.step.reason]} (u={state.u:.4g}, v={state.v:.4g}, "
+                     f"d={state.d:.4g}, s={state.s:.4g}, theta0={theta0:.4g})")
+        if not self.step.valid:
+            return
+        self._mc = mc = _Machine(control, n_per_stance, roll)
+        arr = np.array(nodes)  # (M, 5): t, x, y, vx, vy
+        # drop duplicate times (an event node can coincide with the next regular node)
+        self._nodes = arr = arr[np.concatenate([[True], np.diff(arr[:, 0]) > 1e-12])]
+        # accelerations at the nodes (Hermite velocities); a leg's force is never a pull (clamped)
+        acc = np.empty((arr.shape[0], 2))
+        for k, (tk, x, y, _, _) in enumerate(arr):
+            act = self._legs if tk <= self._t_lo else self._legs[1:]
+            acc[k] = mc.accel(x, y, tk, act, [False] * len(act))
+        self._acc = acc
+
+    def sample(self, times) -> WalkTrajectory:
+        """Dense samples at ``times`` (S,) in [0, t_step] [√(l0/g)] (clipped): cubic Hermite positions and
+        velocities between the RK4 nodes, leg forces from the model (eq. 2) at those positions."""
+        if not self.step.valid:
+            raise PlanError(self._why)
+        arr, acc, mc, legs, t_lo = self._nodes, self._acc, self._mc, self._legs, self._t_lo
+        t = np.clip(np.asarray(times, float), 0.0, self.step.t_step)
+        k = np.clip(np.searchsorted(arr[:, 0], t, side="right") - 1, 0, arr.shape[0] - 2)
+        n0, n1 = arr[k], arr[k + 1]
+        pos = np.empty((t.size, 2))
+        vel = np.empty((t.size, 2))
+        for d in range(2):
+            pos[:, d] = _hermite(n0[:, 0], n1[:, 0], n0[:, 1 + d], n0[:, 3 + d], n1[:, 1 + d], n1[:, 3 + d], t)
+            vel[:, d] = _hermite(n0[:, 0], n1[:, 0], n0[:, 3 + d], acc[k, d], n1[:, 3 + d], acc[k + 1, d], t)
+        force = np.zeros((t.size, 2, 2))
+        for i, (xc, t0) in enumerate(legs):
+            on = t <= t_lo if i == 0 else np.ones(t.size, bool)
+            tau = (t - t0) / mc.Tc
+            rel = pos - np.stack([xc + mc.roll * tau, np.zeros_like(tau)], axis=1)
+            l = np.linalg.norm(rel, axis=1)
+            f = mc.K * np.maximum(_ld(tau, mc.a1, mc.b, mc.c) - l, 0.0)
+            force[:, i] = np.where(on[:, None], (f / l)[:, None] * rel, 0.0)
+        return WalkTrajectory(t=t, pos=pos, vel=vel, force=force, contact_x=np.array([legs[0][0], legs[1][0]]),
+                              t_touchdown=np.array([legs[0][1], legs[1][1]]), t_liftoff=float(t_lo),
+                              t_step=float(self.step.t_step))
+
+
+def record_step(state: WalkState, theta0: float, control: Control, *, roll: float = 0.0, l_td: float = 1.0,
+                n_per_stance: int = N_PER_STANCE) -> RecordedStep:
+    """Integrate one step once (like :func:`walk_step`) and keep its nodes for :meth:`RecordedStep.sample`."""
+    return RecordedStep(state, theta0, control, n_per_stance, roll, l_td)
+
+
 def simulate_walk(state: WalkState, theta0: float, control: Control, times, *, roll: float = 0.0,
                   l_td: float = 1.0, n_per_stance: int = N_PER_STANCE) -> WalkTrajectory:
     """Dense samples of one step at ``times`` (S,) in [0, t_step] [√(l0/g)] (clipped).
@@ -319,39 +377,7 @@ def simulate_walk(state: WalkState, theta0: float, control: Control, times, *, r
     evaluated from the model (eq. 2) at the interpolated positions. Raises PlanError if the step is
     invalid.
     """
-    ws, nodes, t_lo, legs = _one_step(state, float(theta0), control, n_per_stance, True, roll, l_td)
-    if not ws.valid:
-        raise PlanError(f"walking step invalid: {REASONS[ws.reason]} (u={state.u:.4g}, v={state.v:.4g}, "
-                        f"d={state.d:.4g}, s={state.s:.4g}, theta0={theta0:.4g})")
-    mc = _Machine(control, n_per_stance, roll)
-    arr = np.array(nodes)  # (M, 5): t, x, y, vx, vy
-    # drop duplicate times (an event node can coincide with the next regular node)
-    keep = np.concatenate([[True], np.diff(arr[:, 0]) > 1e-12])
-    arr = arr[keep]
-    t = np.clip(np.asarray(times, float), 0.0, ws.t_step)
-    # accelerations at nodes (for Hermite velocities): phase-dependent active legs
-    acc = np.empty((arr.shape[0], 2))
-    for k, (tk, x, y, _, _) in enumerate(arr):
-        act = legs if tk <= t_lo else [legs[1]]
-        acc[k] = mc.accel(x, y, tk, act, [True] * len(act))
-    k = np.clip(np.searchsorted(arr[:, 0], t, side="right") - 1, 0, arr.shape[0] - 2)
-    n0, n1 = arr[k], arr[k + 1]
-    pos = np.empty((t.size, 2))
-    vel = np.empty((t.size, 2))
-    for d in range(2):
-        pos[:, d] = _hermite(n0[:, 0], n1[:, 0], n0[:, 1 + d], n0[:, 3 + d], n1[:, 1 + d], n1[:, 3 + d], t)
-        vel[:, d] = _hermite(n0[:, 0], n1[:, 0], n0[:, 3 + d], acc[k, d], n1[:, 3 + d], acc[k + 1, d], t)
-    force = np.zeros((t.size, 2, 2))
-    for i, (xc, t0) in enumerate(legs):
-        on = t <= t_lo if i == 0 else np.ones(t.size, bool)
-        tau = (t - t0) / mc.Tc
-        rel = pos - np.stack([xc + roll * tau, np.zeros_like(tau)], axis=1)
-        l = np.linalg.norm(rel, axis=1)
-        f = mc.K * np.maximum(_ld(tau, mc.a1, mc.b, mc.c) - l, 0.0)
-        force[:, i] = np.where(on[:, None], (f / l)[:, None] * rel, 0.0)
-    return WalkTrajectory(t=t, pos=pos, vel=vel, force=force, contact_x=np.array([legs[0][0], legs[1][0]]),
-                          t_touchdown=np.array([legs[0][1], legs[1][1]]), t_liftoff=float(t_lo),
-                          t_step=float(ws.t_step))
+    return record_step(state, theta0, control, roll=roll, l_td=l_td, n_per_stance=n_per_stance).sample(times)
 
 
 def _hermite(t0, t1, y0, d0, y1, d1, t):

@@ -52,6 +52,11 @@ CAMERAS = ("side", "front", "three-quarter")
 PANEL_PX = 400
 _CAMERA_FOV_DEG = {"side": 8.0, "front": 8.0, "three-quarter": 30.0}
 
+#: Export choices for the BVH download.
+BVH_UNITS = ("the clip's", "metres", "centimetres")
+BVH_RATES = ("the clip's", "24 Hz", "30 Hz", "60 Hz", "120 Hz")
+BVH_ROOT = ("root motion", "in place")
+
 COLOR_RESULT = (40, 90, 210)
 COLOR_PREVIEW = (140, 150, 165)
 COLOR_REFERENCE = (230, 130, 30)
@@ -289,11 +294,13 @@ class Tab:
         self._result_s = {self.good.params.mode: (self.good.seconds, self.good.params.strides)}
         self._defaults = self.session.character_defaults(self.params.character)
         self._camera_dirty = True
+        self._range_note = ""
         self._build_scene()
         self._build_gui()
         self._publish(self.good)
         self._worker = threading.Thread(target=self._work_loop, name="froude-studio-tab", daemon=True)
         self._worker.start()
+        self._post(("range",))  # bound the speed slider to what this character can reach (~0.5 s)
 
     # ---- lifecycle
     def close(self) -> None:
@@ -468,7 +475,10 @@ class Tab:
         with gui.add_folder("Legend", order=6):
             self.gui_legend = gui.add_html("".join(_swatch(c, t, h) for c, t, h in LEGEND))
         with gui.add_folder("Export", order=7):
-            self.gui_dl_bvh = gui.add_button("Download BVH", hint="the result in the clip's units and rate")
+            self.gui_bvh_units = gui.add_dropdown("BVH units", options=BVH_UNITS, initial_value=BVH_UNITS[0])
+            self.gui_bvh_fps = gui.add_dropdown("BVH rate", options=BVH_RATES, initial_value=BVH_RATES[0])
+            self.gui_bvh_root = gui.add_dropdown("BVH root", options=BVH_ROOT, initial_value=BVH_ROOT[0])
+            self.gui_dl_bvh = gui.add_button("Download BVH", hint="the result, with the units, rate and root above")
             self.gui_dl_report = gui.add_button("Download report", hint="the physics report (JSON)")
             self.gui_dl_csv = gui.add_button("Download CSV", hint="per frame: time, COM, ground force, contacts")
             self.gui_dl_mp4 = gui.add_button("Download MP4", hint="a render of the reference and the result")
@@ -534,12 +544,49 @@ class Tab:
             v = float(v)
             return None if abs(v - v0) <= tol else v
 
-        return Params(
+        p = Params(
             mode=str(self.gui_mode.value), character=str(self.gui_char.value),
             height=override(self.gui_height.value, h0, 6e-3), mass=override(self.gui_mass.value, m0, 0.06),
             leg_scale=override(self.gui_legs.value, l0, 6e-3), speed=float(self.gui_speed.value),
             strides=self.gui_strides.value, to_factor=float(self.gui_to.value), steps=self.gui_steps.value,
         ).check(self.session.presets)
+        rng = self._known_speed_range(p.character)
+        if p.mode == "scale" and rng is not None and not rng.empty and not (
+                rng.lo - 1e-9 <= p.speed <= rng.hi + 1e-9):
+            raise FroudeError(f"Speed ×{p.speed:g} is beyond what {p.character} can run on this clip with every "
+                              f"physics bar met: pick ×{rng.lo:.2f} to ×{rng.hi:.2f} "
+                              f"({rng.lo_m_s:.2f} to {rng.hi_m_s:.2f} m/s)")
+        return p
+
+    def _known_speed_range(self, character: str):
+        """The reachable speed factors of a preset on this clip if already worked out (else None).
+
+        Per preset, whatever its number overrides: speed factors are relative to the dynamically scaled
+        speed, so a uniformly scaled body reaches the same factors."""
+        return self.session.speed_ranges.get(character)
+
+    def _bound_speed(self, character: str) -> None:
+        """Work out (once per preset, ~0.5 s) the speed factors whose outputs meet every physics bar and
+        bound the speed slider to them (within its own limits)."""
+        from .. import pipeline
+
+        rng = self.session.speed_ranges.get(character)
+        if rng is None:
+            rng = pipeline.reachable_speed_range(self.session.prep, None if character == "same" else character)
+            self.session.speed_ranges[character] = rng
+        lim = LIMITS["speed"]
+        if rng.empty:
+            lo, hi = lim.lo, lim.hi
+            self._range_note = (f"no speed factor meets every physics bar for {character} on this clip "
+                                f"(×1 = {rng.base_m_s:.2f} m/s already misses one): the slider is not narrowed")
+        else:
+            lo, hi = max(lim.lo, rng.lo), min(lim.hi, rng.hi)
+            self._range_note = (f"speed reachable with every bar met: ×{rng.lo:.2f} to ×{rng.hi:.2f} "
+                                f"({rng.lo_m_s:.2f} to {rng.hi_m_s:.2f} m/s)")
+        if (self.gui_speed.min, self.gui_speed.max) != (round(lo, 2), round(hi, 2)):
+            self.gui_speed.min, self.gui_speed.max = round(lo, 2), round(hi, 2)
+        self.gui_status.content = self._status_md()
+        self._flush()
 
     # handlers (viser's pool); programmatic value changes come with event.client None and are ignored
     def _on_play(self, event) -> None:
@@ -650,9 +697,24 @@ class Tab:
             client.send_file_download(name, data, save_immediately=True)
 
     def _on_download_bvh(self, event) -> None:
+        """The result as BVH: in the clip's units or metres/centimetres, at the clip's rate or another, with
+        its root motion or in place (the horizontal travel of the COM taken off the root)."""
         from ..io.bvh import bvh_text
 
-        self._send(event, self._file_stem() + ".bvh", bvh_text(self.good.result.motion).encode())
+        units, rate, root = str(self.gui_bvh_units.value), str(self.gui_bvh_fps.value), str(self.gui_bvh_root.value)
+        if units not in BVH_UNITS or rate not in BVH_RATES or root not in BVH_ROOT:  # crafted values
+            self._show_error("BVH export options must be chosen from their lists")
+            return
+        motion = self.good.result.motion
+        if rate != BVH_RATES[0]:
+            motion = motion.resample(float(rate.split()[0]))
+        if root == "in place":
+            com = self.good.result.retarget.body.com(motion)
+            travel = com - com[:1]
+            travel[:, UP_AXIS] = 0.0
+            motion = motion.with_(root_positions=motion.root_positions - travel)
+        scale = {"metres": 1.0, "centimetres": 0.01}.get(units)
+        self._send(event, self._file_stem() + ".bvh", bvh_text(motion, scale).encode())
 
     def _on_download_report(self, event) -> None:
         res = with_report(self.session.prep, self.good).result
@@ -710,7 +772,7 @@ class Tab:
 
     def _post(self, job: tuple) -> None:
         with self._wake:
-            if job[0] == "naive" and self._pending is not None:
+            if job[0] in ("naive", "range") and self._pending is not None:
                 return  # a newer change computes its naive twin anyway
             self._pending = (*job, time.perf_counter())
             self._wake.notify_all()
@@ -738,6 +800,8 @@ class Tab:
                     self.open_clip(job[1], job[2])
                 elif job[0] == "naive":
                     self._solve_naive()
+                elif job[0] == "range" and self.good.params.mode == "scale":
+                    self._bound_speed(self.good.params.character)
             except Exception as e:  # never let a bug in one job kill the tab; say it and carry on
                 traceback.print_exc(file=sys.stderr)
                 self._show_error(f"internal error: {type(e).__name__}: {e}")
@@ -792,6 +856,8 @@ class Tab:
             self._publish(res)
             if self.gui_show_naive.value:
                 self._solve_naive()
+            if res.params.mode == "scale" and not self._newer_pending():
+                self._bound_speed(res.params.character)
         except FroudeError as e:
             self._show_error(e)
         finally:
@@ -869,6 +935,8 @@ class Tab:
             self._publish(first)
         if self.gui_show_naive.value:
             self._solve_naive()
+        if params.mode == "scale":
+            self._bound_speed(params.character)
         return True
 
     def expected_seconds(self, params: Params) -> float:
@@ -987,6 +1055,8 @@ class Tab:
             return self.message if self.message.startswith("*") else f"*{self.message}*"
         res = self.good.result
         notes = list(res.notes) + [f"bar: {b}" for b in res.report.check_bars()]
+        if self._range_note and self.good.params.mode == "scale":
+            notes.append(self._range_note)
         head = f"**{self.good.params.label()}**: solved in {self.good.seconds:.2f} s"
         return head + ("".join(f"  \n- {n}" for n in notes) if notes else "  \nall physics bars pass")
 

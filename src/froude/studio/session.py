@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import pipeline
 from ..characters import apply_character, list_presets
-from ..errors import FroudeError
+from ..errors import FitError, FroudeError
 from .tracks import Track, machine_track, motion_hash, reference_track
 
 MODES = ("scale", "accelerate")
@@ -133,6 +133,8 @@ class Session:
         self.prep = prep
         self.reference = reference_track(prep)
         self.presets = [SAME, *list_presets()]
+        #: pipeline.reachable_speed_range per preset on this clip, filled by the studio as presets are used
+        self.speed_ranges: dict = {}
 
     def character_defaults(self, name: str) -> tuple[float, float, float]:
         """(height [m], mass [kg], leg scale) of a preset (or the reference itself) on this clip."""
@@ -171,8 +173,11 @@ class Session:
         params = params.check(self.presets)
         spec, nums = params.character_args()
         if params.mode == "scale":
-            res = pipeline.scale(self.prep, spec, speed=params.speed, strides=int(params.strides), report=report,
-                                 **nums)
+            try:
+                res = pipeline.scale(self.prep, spec, speed=params.speed, strides=int(params.strides),
+                                     report=report, **nums)
+            except FitError as e:  # no running cycle at that speed: say it in m/s with the fix
+                raise FroudeError(self._scale_message(params, e)) from None
         else:
             try:
                 res = pipeline.accelerate(self.prep, spec, to_factor=params.to_factor, steps=int(params.steps),
@@ -191,6 +196,15 @@ class Session:
         rt = self.prep.retarget(spec, **nums)
         m = self.prep.machine.scaled(rt.L, rt.M)
         return float(m.U * m.speed_unit)
+
+    def _scale_message(self, params: Params, err: FroudeError) -> str:
+        """The machine's refusal of a speed in the user's terms (m/s, ×) with the fix."""
+        spec, nums = params.character_args()
+        rt = self.prep.retarget(spec, **nums)
+        m = self.prep.machine.scaled(rt.L, rt.M)
+        v = params.speed * m.mean_speed * m.speed_unit
+        return (f"{params.character} cannot run at ×{params.speed:g} ({v:.2f} m/s) on this clip: the simple "
+                f"machine has no running cycle there; pick a speed nearer ×1")
 
     def _accelerate_message(self, params: Params, err: FroudeError) -> str:
         """The planner's refusal in the user's terms (m/s, ×, steps) with the fix."""

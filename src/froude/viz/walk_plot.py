@@ -58,7 +58,7 @@ def plot_walk_fit(res, path, title: str = "") -> None:
             a2.plot(lm["tau_" + key] * stance_s * 1e3, lm[key], style, ms=6, mfc="none")
     a2.set_xlabel("time since touchdown [ms]")
     a2.set_ylabel("total vertical ground force [body weights]")
-    a2.set_title("vertical force over one stance (marks: two peaks, trough)")
+    a2.set_title("vertical force over a stance (marks: peaks, trough)")
     a2.legend(fontsize=8)
     fig.suptitle(f"{title or m.source}: walking machine fit  (K = {m.K:.1f}, θ0 = {np.degrees(m.theta0):.1f}°, "
                  f"{m.mean_speed * m.speed_unit:.2f} m/s, double support {100 * m.double_support_fraction:.0f}%)")

@@ -220,3 +220,31 @@ def bvh_text(b: OracleBvh) -> str:
     out += ["MOTION", f"Frames: {len(b.values)}", f"Frame Time: {b.frame_time:.10g}"]
     out += [" ".join(f"{x:.8g}" for x in row) for row in b.values]
     return "\n".join(out) + "\n"
+
+
+def with_helpers(b: OracleBvh, parents_of_helpers: dict) -> OracleBvh:
+    """Helper bones (twist, "share" bones) added as static children: {joint name: [helper names]}.
+
+    Each helper sits halfway along its parent's first child bone, with three rotation channels at zero:
+    it moves nothing, as in rigs where twist bones carry only skinning.
+    """
+    names, parents, offsets, channels = list(b.names), list(b.parents), [np.asarray(o) for o in b.offsets], \
+        [list(c) for c in b.channels]
+    values = b.values
+    ends = list(b.end_sites)
+    for parent_name, helpers in parents_of_helpers.items():
+        for h in helpers:
+            p = names.index(parent_name)
+            kids = [k for k, q in enumerate(parents) if q == p]
+            off = 0.5 * offsets[kids[0]] if kids else np.zeros(3)
+            at = p + 1  # right after its parent: depth-first order still holds (it has no children)
+            col = sum(len(c) for c in channels[:at])
+            names.insert(at, h)
+            parents = [q + (q >= at) for q in parents]
+            parents.insert(at, p)
+            offsets.insert(at, off)
+            channels.insert(at, ["Zrotation", "Xrotation", "Yrotation"])
+            values = np.concatenate([values[:, :col], np.zeros((len(values), 3)), values[:, col:]], axis=1)
+            ends = [(j + (j >= at), o) for j, o in ends]
+    return replace(b, names=names, parents=parents, offsets=np.array(offsets), channels=channels,
+                   end_sites=ends, values=values)

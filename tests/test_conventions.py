@@ -43,6 +43,12 @@ def _variants(name):
         if not (fam == "bandai" and kind == "bandai"):
             out[fam] = functools.partial(rv.renamed, family=fam, parts=parts)
     out["extra_root"] = rv.extra_root
+    # Character Creator names with its twist and "share" helper bones, under its static root
+    cc = functools.partial(rv.renamed, family="cc", parts=parts)
+    helpers = {f"CC_Base_{s}_{n}": [f"CC_Base_{s}_{n}Twist01", f"CC_Base_{s}_{n}Twist02"]
+               for s in "LR" for n in ("Thigh", "Calf", "Upperarm", "Forearm")}
+    helpers.update({f"CC_Base_{s}_Calf": [f"CC_Base_{s}_KneeShareBone"] for s in "LR"})
+    out["cc_helpers"] = lambda b: rv.extra_root(rv.with_helpers(cc(b), helpers), "CC_Base_BoneRoot")
     out["six_channels"] = rv.six_channels
     if kind == "cmu":  # 120 Hz clips; the Bandai clips are 30 Hz already
         out["60Hz"] = functools.partial(rv.every, n=2)

@@ -299,10 +299,6 @@ class BodyModel:
                 return rest[kids[0]] if np.linalg.norm(skeleton.offsets[kids[0]]) > 0 else rest[j]
             # estimate: continue the parent bone by half its length
             direction = rest[j] - pos(fallback_from)
-            if role.endswith("_toe") and skeleton.reference_pose is not None:
-                # in a mid-stance pose the foot is flat: the toes continue forward along the floor, not
-                # down the ankle -> toe line (which would put the tip below the sole)
-                direction = direction - (direction @ np.eye(3)[UP_AXIS]) * np.eye(3)[UP_AXIS]
             if f"no end point for '{skeleton.names[j]}': estimated" not in notes:
                 notes.append(f"no end point for '{skeleton.names[j]}': estimated")
             return rest[j] + 0.5 * direction

@@ -286,7 +286,9 @@ def _pose_jump_deg(rot: np.ndarray) -> np.ndarray:
     jumps = np.empty((rot.shape[0] - 1, rot.shape[1]))
     for j in range(rot.shape[1]):
         jumps[:, j] = quat.angle_between(rot[1:, j], rot[:-1, j])
-    return np.degrees(np.median(jumps, axis=1))
+    # joints that never turn (helper, twist or reference bones) would hide the pose frame in the median
+    moving = jumps.max(axis=0) > 1e-9
+    return np.degrees(np.median(jumps[:, moving] if moving.any() else jumps, axis=1))
 
 
 def load_bvh(path: str | os.PathLike, *, length_scale: float | None = None, clean: bool = True,

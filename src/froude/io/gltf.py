@@ -45,8 +45,9 @@ def _require_pygltflib():
 class _Blob:
     """One binary buffer built view by view (each view 4-byte aligned, as glTF requires)."""
 
-    def __init__(self, gl):
+    def __init__(self, gl, pyg):
         self.gl = gl
+        self._pyg = pyg  # the pygltflib module (imported by the caller, inside the function)
         self.data = bytearray()
 
     def add(self, array: np.ndarray, component: int, kind: str, target=None, minmax: bool = False) -> int:
@@ -118,8 +119,7 @@ def gltf_document(motion: Motion, *, mesh: bool = True):
         if not np.all(np.isfinite(arr)):
             raise FroudeError(f"the motion's {name} hold non-finite values: nothing written")
     gl = pyg.GLTF2(asset=pyg.Asset(version="2.0", generator="froude"))
-    blob = _Blob(gl)
-    blob._pyg = pyg
+    blob = _Blob(gl, pyg)
     gl.buffers.append(pyg.Buffer(byteLength=0))
 
     # joint nodes (node j = joint j), the hierarchy

@@ -310,10 +310,10 @@ def _free_port() -> int:
 
 
 def test_unreachable_speed_says_so_in_metres_per_second():
-    """A speed with no running cycle (a Bandai tired run at x1.3) is refused in m/s with the fix, not in the
-    cycle solver's terms."""
+    """A speed with no running cycle (a Bandai tired run at x2, the slider's end) is refused in m/s with the
+    fix, not in the cycle solver's terms."""
     from conftest import clip
 
     s = Session(pipeline.prepare(clip("dataset-1_run_tired_001")))
-    with pytest.raises(FroudeError, match=r"^same cannot run at ×1.3 \(\d\.\d\d m/s\) on this clip: .* nearer ×1$"):
-        s.solve(Params(speed=1.3))
+    with pytest.raises(FroudeError, match=r"^same cannot run at ×2 \(\d\.\d\d m/s\) on this clip: .* nearer ×1$"):
+        s.solve(Params(speed=2.0))

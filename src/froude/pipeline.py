@@ -91,13 +91,16 @@ class Prepared:
     faster_machines: dict = field(default_factory=dict, repr=False)
 
     def faster_machine(self, speed: float):
-        """``machine.speed.faster_machine(self.machine, speed)``, remembered per speed factor."""
+        """``machine.speed.faster_machine(self.machine, speed)`` (a walk: ``walking_machine_at_speed``),
+        remembered per speed factor."""
         from .machine.speed import faster_machine
+        from .machine.walk_speed import walking_machine_at_speed
 
         key = float(speed)
         hit = self.faster_machines.get(key)
         if hit is None:
-            hit = self.faster_machines[key] = faster_machine(self.machine, key)
+            solve = walking_machine_at_speed if is_walking(self.machine) else faster_machine
+            hit = self.faster_machines[key] = solve(self.machine, key)
         return hit
 
     def retarget(self, character=None, **character_numbers) -> Retarget:
@@ -113,6 +116,11 @@ class Prepared:
         if key is not None:
             self.retargets[key] = rt
         return rt
+
+
+def is_walking(machine) -> bool:
+    """Whether a fitted machine is the walking one (``froude.walking/1``) rather than the running one."""
+    return getattr(machine, "kind", "running") == "walking"
 
 
 @functools.cache
@@ -313,6 +321,10 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers)
     summary = summarize(motion, body, com, gait)
+    if summary.kind == "walking":  # a motion's kind chooses its machine
+        from .walk_synthesis import prepare_walk
+
+        return prepare_walk(motion, body, com, markers, gait, summary, source, mass, take_notes)
     require_running(summary, source)
     fit = fit_machine_detailed(motion, body, mass=mass, source=Path(source).name)
     machine = fit.machine
@@ -396,6 +408,10 @@ def machine_path(
     start_state: apex (U, H) to start from (default: the periodic cycle's).
     machine: the (unscaled) SimpleMachine to run (default: the fitted one).
     """
+    if is_walking(prep.machine):
+        from .walk_synthesis import walk_machine_path
+
+        return walk_machine_path(prep, retarget, n_steps=n_steps, fps=fps, machine=machine, speed=speed)
     m = (prep.machine if machine is None else machine).scaled(retarget.L, retarget.M)
     T_unit = m.time_unit
     dt = 1.0 / fps / T_unit
@@ -554,6 +570,10 @@ def build_targets(prep: Prepared, path: MachinePath, retarget: Retarget) -> Targ
     initial = Motion(retarget.skeleton, root, rot, float(path.frame_time), None, meta)
     weight = _marker_weights(path, markers, retarget.body.leg_length) * _reach_factor(initial, retarget.body, markers)
     weight = np.maximum(weight, SWING_MARKER_WEIGHT)
+    if is_walking(prep.machine):
+        from .walk_synthesis import soften_swing_weights
+
+        weight = soften_swing_weights(path, weight, SWING_MARKER_WEIGHT)
     # Weights are per (leg length)^2, so the trade-off between a position error and a joint angle is the
     # same for a child and a giant (errors in metres grow with size, joint angles do not).
     per_size = (prep.body.leg_length / retarget.body.leg_length) ** 2
@@ -723,6 +743,10 @@ class Result:
              f"(ball and tip near the floor: {f(r.foot_skate_floor_mm, '.2f')} mm)"),
             ("joint jump", f"{f(r.max_joint_jump_deg, '.1f')} deg (reference {f(r.reference_max_joint_jump_deg, '.1f')})"),
         ]
+        if r.extras.get("machine") == "walking":
+            from .walk_synthesis import walking_rows
+
+            rows += walking_rows(r)
         return rows
 
 
@@ -1047,7 +1071,14 @@ def plan_scale(
         raise FroudeError(f"unknown method '{method}' (physical or naive)")
     if speed_model not in ("auto", "stretch", "resolve"):
         raise FroudeError(f"unknown speed model '{speed_model}' (auto, stretch or resolve)")
-    if speed_model == "resolve" or (speed_model == "auto" and speed > 1.0 + 1e-9):
+    if is_walking(prep.machine):  # a walk changes speed by re-solving its cycle, never stretching
+        from .machine.walk_speed import check_walking_speed
+
+        check_walking_speed(m_scaled, speed)
+        machine = prep.faster_machine(speed) if abs(speed - 1.0) > 1e-9 else prep.machine
+        stretch = 1.0
+        method = "physical (walking cycle re-solved at the new speed)" if machine is not prep.machine else "physical"
+    elif speed_model == "resolve" or (speed_model == "auto" and speed > 1.0 + 1e-9):
         machine = prep.faster_machine(speed)
         stretch = 1.0
         method = "physical (cycle re-solved at the new speed)"
@@ -1160,6 +1191,10 @@ def add_report(prep: Prepared, res: Result) -> Result:
                           "machine_apex_speed_m_s": res.path.apex_speed.tolist(), "modelled": prep.modelled,
                           "input_in_place": bool(prep.motion.meta.get("in_place")),
                           **res.extras})
+    if is_walking(prep.machine):
+        from .walk_synthesis import walking_extras
+
+        report.extras.update(walking_extras(prep, res, report))
     return _replace(res, report=report)
 
 
@@ -1224,6 +1259,7 @@ def _naive(prep: Prepared, retarget: Retarget, speed: float, n_steps: int, fps: 
     report = physics_report(motion, retarget.body, reference_max_joint_jump_deg=prep.cycle.max_joint_jump_deg)
     report.extras.update({"character": retarget.character.name, "L": L, "M": retarget.M, "speed_factor": speed,
                           "method": "naive", "notes": list(notes), "modelled": prep.modelled,
+                          "machine": getattr(prep.machine, "kind", "running"),
                           "input_in_place": bool(prep.motion.meta.get("in_place"))})
     return Result(motion, report, None, None, retarget, "naive", speed, tuple(notes))
 

@@ -70,11 +70,14 @@ class ReferenceCycle:
     """One seamless stride of the reference, sampled at K = CYCLE_SAMPLES stride phases φ = k / K.
 
     first_foot: foot A (0 left, 1 right) whose touchdown is φ = 0; foot B = 1 − A.
-    phase_events: (4,) φ of [touchdown A, liftoff A, touchdown B, liftoff B] = [0, φ1, φ2, φ3] (the
-        machine's force-based events).
+    phase_events: (4,) φ of [touchdown A, liftoff A, touchdown B, liftoff B] (the machine's force-based
+        events; touchdown A = 0; in a walk B lifts after A lands, so 0 < liftoff B < touchdown B < liftoff A).
     contact_phase: (2, 2) stride phases [on, off] of each foot's ground contact as the markers see it
         (left, right); slightly wider than the force-based stance, unwrapped so that on < off.
-    durations: (4,) reference durations [s] of stance A, flight after A, stance B, flight after B.
+    durations: (4,) reference durations [s] between the stride's events in ``order``: running stance A,
+        flight after A, stance B, flight after B; walking double support, single support on A, double
+        support, single support on B.
+    order: "running" or "walking" (``EVENT_ORDERS``).
     frame: (3, 3) heading frame rows (forward, up, lateral) in world coordinates.
     rotations: (K, J, 4) local joint rotations (root orientation in world).
     root_from_com: (K, 3) root − COM [m], heading frame.
@@ -108,16 +111,44 @@ class ReferenceCycle:
     leg_length: float
     ground: float
     max_joint_jump_deg: float
+    order: str = "running"
 
     @property
     def n_samples(self) -> int:
         return self.rotations.shape[0]
 
 
-def _phase_of_events(events: list[FootEvent], first_foot: int, fractions: np.ndarray) -> np.ndarray:
+#: The order of the four foot events in one stride, as (foot, kind) with foot 0 = A (the first to touch
+#: down), 1 = B. Running: A lands, A lifts, B lands, B lifts (a flight between the stances). Walking: A
+#: lands, B lifts, B lands, A lifts (two double supports, each foot's stance overlapping the other's).
+EVENT_ORDERS = {
+    "running": ((0, "td"), (0, "lo"), (1, "td"), (1, "lo")),
+    "walking": ((0, "td"), (1, "lo"), (1, "td"), (0, "lo")),
+}
+
+
+def _order_of(order: str):
+    if order not in EVENT_ORDERS:
+        raise FitError(f"unknown event order {order!r} (running or walking)")
+    return EVENT_ORDERS[order]
+
+
+def event_phases(order: str, fractions: np.ndarray) -> np.ndarray:
+    """(4,) stride phases of [touchdown A, liftoff A, touchdown B, liftoff B] from the phases (3,) of the
+    second, third and fourth events of the stride in ``order`` (the first, A's touchdown, is 0)."""
+    out = np.zeros(4)
+    slot = {(0, "td"): 0, (0, "lo"): 1, (1, "td"): 2, (1, "lo"): 3}
+    for (foot, kind), ph in zip(_order_of(order)[1:], fractions):
+        out[slot[(foot, kind)]] = ph
+    return out
+
+
+def _phase_of_events(events: list[FootEvent], first_foot: int, fractions: np.ndarray,
+                     order: str = "running") -> np.ndarray:
     """Unwrapped stride phase ψ of each event (ψ increases by 1 per stride; first A touchdown = 0)."""
-    base = {(first_foot, "td"): 0.0, (first_foot, "lo"): fractions[0],
-            (1 - first_foot, "td"): fractions[1], (1 - first_foot, "lo"): fractions[2]}
+    pe = event_phases(order, fractions)
+    base = {(first_foot, "td"): 0.0, (first_foot, "lo"): pe[1],
+            (1 - first_foot, "td"): pe[2], (1 - first_foot, "lo"): pe[3]}
     psi = []
     for e in events:
         p = base[(e.foot, e.kind)]
@@ -130,15 +161,17 @@ def _phase_of_events(events: list[FootEvent], first_foot: int, fractions: np.nda
     return psi - np.floor(psi[first_a_td] + 1e-9)
 
 
-def _durations(events: list[FootEvent], first_foot: int, frame_time: float) -> np.ndarray:
-    """Mean reference durations [s] of (stance A, flight after A, stance B, flight after B)."""
+def _durations(events: list[FootEvent], first_foot: int, frame_time: float, order: str = "running") -> np.ndarray:
+    """Mean reference durations [s] between consecutive events of the stride in ``order`` (running: stance
+    A, flight after A, stance B, flight after B; walking: double support after A lands, single support on
+    A, double support after B lands, single support on B)."""
+    seq = [((first_foot if f == 0 else 1 - first_foot), k) for f, k in _order_of(order)]
     sums = {k: [] for k in range(4)}
     for e0, e1 in zip(events[:-1], events[1:]):
         dt = (e1.frame - e0.frame) * frame_time
-        if e0.kind == "td" and e1.kind == "lo" and e0.foot == e1.foot:
-            sums[0 if e0.foot == first_foot else 2].append(dt)
-        elif e0.kind == "lo" and e1.kind == "td" and e0.foot != e1.foot:
-            sums[1 if e0.foot == first_foot else 3].append(dt)
+        i = seq.index((e0.foot, e0.kind))
+        if seq[(i + 1) % 4] == (e1.foot, e1.kind):
+            sums[i].append(dt)
     out = np.full(4, np.nan)
     for k, v in sums.items():
         if v:
@@ -148,7 +181,7 @@ def _durations(events: list[FootEvent], first_foot: int, frame_time: float) -> n
         if np.isnan(out[k]):
             out[k] = out[twin]
     if np.any(np.isnan(out)) or np.any(out <= 0):
-        raise FitError("cannot find a stance and a flight phase to build a stride cycle from")
+        raise FitError(f"cannot find the four phases of a {order} stride to build a stride cycle from")
     return out
 
 
@@ -160,11 +193,13 @@ def extract_cycle(
     markers: np.ndarray,
     events: list[FootEvent] | None = None,
     n_samples: int = CYCLE_SAMPLES,
+    order: str = "running",
 ) -> ReferenceCycle:
-    """Build the seamless reference stride cycle of a running clip.
+    """Build the seamless reference stride cycle of a running or walking clip.
 
     com: (F, 3) [m]; markers: (F, 2, 3, 3) [m]; events: foot events (default: from the gait; the fit's
-    force-refined events are more precise).
+    force-refined events are more precise); order: "running" or "walking", the order of the foot events
+    in a stride (``EVENT_ORDERS``).
     """
     F = motion.n_frames
     dt = motion.frame_time
@@ -174,12 +209,12 @@ def extract_cycle(
     if len(tds) < 2 or len({e.foot for e in tds}) < 2:
         raise FitError("a stride cycle needs touchdowns of both feet in the clip")
     first_foot = tds[0].foot
-    dur = _durations(events, first_foot, dt)
+    dur = _durations(events, first_foot, dt, order)
     T = float(dur.sum())
-    fr = np.cumsum(dur)[:3] / T  # phases of liftoff A, touchdown B, liftoff B
-    phase_events = np.concatenate([[0.0], fr])
+    fr = np.cumsum(dur)[:3] / T  # phases of the stride's second, third and fourth events
+    phase_events = event_phases(order, fr)
     ev_frames = np.array([e.frame for e in events])
-    ev_psi = _phase_of_events(events, first_foot, fr)
+    ev_psi = _phase_of_events(events, first_foot, fr, order)
 
     # Phase of every frame: linear between events, extrapolated at the nominal rate beyond them
     # (never past the neighbouring event's phase).
@@ -273,7 +308,9 @@ def extract_cycle(
     # 0.03 L: a little above the 0.02 L (and its hysteresis band) at which the physics report calls a
     # marker loaded, so everything the report checks is held
     contact_tol = 0.03 * body.leg_length
-    contact_phase = _contact_phases(marker_rel, phase_events, first_foot, contact_tol)
+    # A walk's events are the markers' own contact events already (no force threshold to widen them by)
+    contact_phase = _contact_phases(marker_rel, phase_events, first_foot, contact_tol,
+                                    max_extension=0.0 if order == "walking" else 0.15)
     stance_mask = _contact_mask(np.arange(K) / K, contact_phase)
     # band 0.03 L: wider than the 0.02 L within which the physics report watches a marker slide, so a tip
     # that lifts to just under 0.02 L and comes down again is held all the while
@@ -288,7 +325,7 @@ def extract_cycle(
         com_lateral=com_lateral, marker_rel=marker_rel, marker_from_com=marker_from_com,
         contact_lateral=contact_lat, speed=speed,
         stride_time=T, leg_length=body.leg_length, ground=float(np.nanmedian(stance_ground)),
-        max_joint_jump_deg=max_joint_jump_deg(motion),
+        max_joint_jump_deg=max_joint_jump_deg(motion), order=order,
     )
 
 
@@ -327,7 +364,9 @@ def _contact_phases(marker_rel: np.ndarray, phase_events: np.ndarray, first_foot
     K = marker_rel.shape[0]
     low = marker_rel[..., 1].min(axis=2) <= contact_tol  # (K, 2)
     td = {first_foot: 0.0, 1 - first_foot: phase_events[2]}
-    lo = {first_foot: phase_events[1], 1 - first_foot: phase_events[3]}
+    # a walk's B stance wraps around φ = 0 (B lifts after A lands): unwrap it so that on < off
+    lo_b = phase_events[3] if phase_events[3] > phase_events[2] else phase_events[3] + 1.0
+    lo = {first_foot: phase_events[1], 1 - first_foot: lo_b}
     cap = int(max_extension * K)
     out = np.zeros((2, 2))
     for foot in range(2):

@@ -104,6 +104,11 @@ class WalkingMachine:
         return WalkState(self.u, self.v, self.d, self.s)
 
     @property
+    def step_time(self) -> float:
+        """Touchdown → next touchdown [√(l0/g)] (the running machine's name for it)."""
+        return self.t_step
+
+    @property
     def double_support_fraction(self) -> float:
         """Share of the gait cycle with both feet down: 2 t_double / (2 t_step)."""
         return self.t_double / self.t_step

@@ -1,0 +1,83 @@
+"""Walking at another speed: the walking machine's periodic cycle re-solved (issue 17, acceptance 3).
+
+§5.2's horizontal stretch keeps the timing, which is right for running's flight but wrong for walking:
+people walk faster with longer *and* quicker steps. Here the fitted walking machine's cycle is re-solved
+(the fit's own minimum-norm cycle search, started from the fitted cycle) for s × its speed with
+
+* the step time × s^(−1/2), so the step length grows × s^(1/2) (the usual empirical shape of human
+  walking, step length rising about with the square root of speed, cadence the other half: Grieve &
+  Gear 1966, an approximation over 0.8-1.6 m/s);
+* the share of the step spent in double support kept (the reference's own; it shrinks a little with
+  speed in people, which the machine may then show through its own dynamics);
+* the leg control's stance time T_c scaled like the step time, the touchdown geometry, control and roll
+  free to move as the search needs.
+
+Past a Froude number U ≈ 0.7 (Fr = U² ≈ 0.5) people break into a run (Alexander & Jayes 1983): a walk
+is not asked to go there; the message says the fastest walking speed in m/s.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from ..errors import FitError
+from .walk_model import WalkingMachine
+
+__all__ = ["WALK_RUN_U", "STEP_TIME_EXPONENT", "walking_machine_at_speed", "check_walking_speed"]
+
+#: The dimensionless speed U = u/√(g l0) at which people change from walking to running (Fr = U² ≈ 0.5).
+WALK_RUN_U = 0.7
+#: Step time ∝ speed^STEP_TIME_EXPONENT at a speed change (step length ∝ speed^(1 + exponent)).
+STEP_TIME_EXPONENT = -0.5
+
+
+def check_walking_speed(machine: WalkingMachine, s: float, what: str = "walk") -> None:
+    """Raise FitError (one line, in m/s) when s × the machine's speed is past the walk-run transition.
+
+    machine: the (scaled) walking machine whose speed unit √(g l0) gives m/s; s: speed factor [-].
+    """
+    if not (math.isfinite(s) and s > 0):
+        raise FitError(f"speed factor must be > 0, got {s}")
+    U = s * machine.mean_speed
+    if U > WALK_RUN_U:
+        v = U * machine.speed_unit
+        v_max = WALK_RUN_U * machine.speed_unit
+        raise FitError(
+            f"a {what} at {v:.2f} m/s (x{s:g}) is past the walk-run transition for this character "
+            f"(Froude number U = {U:.2f} > {WALK_RUN_U}, Fr = U^2 = {U * U:.2f} > 0.5, leg {machine.l0:.2f} m): "
+            f"people run there; ask at most {v_max:.2f} m/s (x{WALK_RUN_U / machine.mean_speed:.2f}) or use a running clip")
+
+
+def walking_machine_at_speed(machine: WalkingMachine, s: float) -> WalkingMachine:
+    """The walking machine's periodic cycle at s × its mean speed (see module doc).
+
+    Dimensionless fields change; SI fields (l0, mass, reference measurements) are those of ``machine``.
+    Raises FitError past the walk-run transition or when no such cycle exists (the message says why).
+    """
+    from .walk_fit import _cycle_search
+    from .walking import N_PER_STANCE
+
+    check_walking_speed(machine, s)
+    if s == 1.0:
+        return machine
+    k = s ** STEP_TIME_EXPONENT
+    t_step, t_double = machine.t_step * k, machine.t_double * k
+    T_c = machine.T_c * k
+    targets = (t_step, t_double, s * machine.mean_speed)
+    z0 = np.array([machine.u * s, machine.v, machine.d, machine.s * k, machine.theta0, machine.K, machine.a,
+                   machine.b, machine.c, machine.l_td])
+    try:
+        z, w, it, _ = _cycle_search(z0, T_c, machine.roll, targets, N_PER_STANCE)
+    except FitError as e:
+        raise FitError(f"no walking cycle at x{s:g} speed ({s * machine.mean_speed * machine.speed_unit:.2f} m/s): "
+                       f"{e}") from None
+    nx = w.next
+    per = float(max(abs(nx.u - z[0]), abs(nx.v - z[1]), abs(nx.d - z[2]), abs(nx.s - z[3])))
+    return replace(
+        machine, u=float(z[0]), v=float(z[1]), d=float(z[2]), s=float(z[3]), theta0=float(z[4]), K=float(z[5]),
+        a=float(z[6]), b=float(z[7]), c=float(z[8]), l_td=float(z[9]), T_c=T_c, t_stance=w.t_stance,
+        t_double=w.t_double, t_step=w.t_step, step_length=w.step_length, mean_speed=w.step_length / w.t_step,
+        periodicity=per, iterations=int(it), source=machine.source + f" (re-solved at x{s:g} speed)",
+    )

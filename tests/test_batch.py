@@ -245,9 +245,9 @@ def test_prepared_pickles_and_done_marker_guards_reruns(tmp_path):
     out.write_text(out.read_text()[:-10])
     assert batch.read_done(tmp_path, task, plan) is None
     # a failing clip fails its task with the reason, one line
-    bad = batch.prepare_clip(str(clip("02_01")), 70.0, "male", None)
-    row = batch.run_task(bad, batch.Task(batch.Clip("02_01", str(clip("02_01"))), task.variation), plan, str(tmp_path))
-    assert row["status"] == "failed" and "walking" in row["reason"] and "\n" not in row["reason"]
+    bad = batch.prepare_clip(str(clip("02_04")), 70.0, "male", None)  # jumps in place: no machine for it
+    row = batch.run_task(bad, batch.Task(batch.Clip("02_04", str(clip("02_04"))), task.variation), plan, str(tmp_path))
+    assert row["status"] == "failed" and "locomotion" in row["reason"] and "\n" not in row["reason"]
 
 
 # ---- acceptance runs on a local Dask cluster -----------------------------------------------------------------
@@ -258,7 +258,9 @@ def _bars_failures(rows) -> str:
 
 @pytest.mark.slow
 def test_acceptance_132_tasks(tmp_path, run_cli):
-    """11 clips (9 running, 2 walking) x 4 characters x 3 speeds = 132 rows; the walking 24 fail with the reason."""
+    """11 clips (9 running, 2 walking) x 4 characters x 3 speeds = 132 rows over runs and walks (issue 17):
+    every running row and every walking row at the clip's speed is produced; a walk the machine cannot
+    take fails alone, with a one-line reason."""
     if MOCAP is None:
         pytest.skip("real clips not found")
     plan = write(tmp_path / "plan.yaml", "characters: [child, troll, giant, small]\nspeeds: [0.8, 1.0, 1.2]\nstrides: 2\n")
@@ -267,17 +269,19 @@ def test_acceptance_132_tasks(tmp_path, run_cli):
     t0 = time.perf_counter()
     code, stdout, err = run_cli("batch", *inputs, "--plan", plan, "-o", out, "--workers", 2)
     elapsed = time.perf_counter() - t0
-    assert code == 1, err  # some tasks (the walking clips) failed
     rows = read_index(out)
     assert len(rows) == 132
     assert {(r["clip"], r["variation"]) for r in rows} == {
         (c, f"{ch}_x{s}_2str") for c in RUNNING + WALKING for ch in ("child", "troll", "giant", "small") for s in ("0.8", "1", "1.2")}
     walking = [r for r in rows if r["clip"] in WALKING]
     running = [r for r in rows if r["clip"] in RUNNING]
-    assert len(walking) == 24 and all(r["status"] == "failed" for r in walking)
-    assert all("walking, not running" in r["reason"] for r in walking)
+    failed = [r for r in rows if r["status"] == "failed"]
+    assert code == (1 if failed else 0), err
+    assert all(r["reason"] and "\n" not in r["reason"] for r in failed)
     assert [f"{r['clip']}/{r['variation']}: {r['reason']}" for r in running if r["status"] != "ok"] == []
-    assert "132 tasks: 108 succeeded, 24 failed, 0 skipped" in stdout
+    assert [f"{r['clip']}/{r['variation']}: {r['reason']}" for r in walking
+            if r["variation"].endswith("_x1_2str") and r["status"] != "ok"] == []
+    assert f"132 tasks: {132 - len(failed)} succeeded, {len(failed)} failed, 0 skipped" in stdout
     # the index agrees with the files: every output loads, its report holds the index's figures
     for r in running[::9]:
         m = load_bvh(out / r["output"])

@@ -338,16 +338,15 @@ def test_bandai_clips_as_delivered_meet_the_bars(name, change, fps, request):
     assert fails == []
 
 
-def test_bandai_loop_is_unrolled_and_walk_refused_in_one_line(run_cli, tmp_path):
+def test_bandai_loop_is_unrolled_and_walk_scaled(run_cli, tmp_path):
     # the one-stride loop is no longer refused: it is unrolled (issue 13; tests/test_take.py)
     code, out, err = run_cli("scale", clip("dataset-1_dash_normal_001"), "--character", "child", "-o",
                              tmp_path / "loop.bvh", "-q")
     assert code == 0 and (tmp_path / "loop.bvh").exists() and "loop" in out
-    code, out, err = run_cli("scale", clip("dataset-1_walk_normal_001"), "--character", "child", "-o",
+    # the walk is no longer refused either: it gets the walking machine (issue 17)
+    code, out, err = run_cli("scale", clip("dataset-1_walk_normal_001"), "--character", "giant", "-o",
                              tmp_path / "walk.bvh", "-q")
-    last = err.strip().splitlines()[-1]
-    assert code == 2 and "walking, not running" in last
-    assert not (tmp_path / "walk.bvh").exists()
+    assert code == 0 and (tmp_path / "walk.bvh").exists() and "double support" in out, err
 
 
 @pytest.mark.parametrize("name", clip_params(BANDAI_RUNS))

@@ -55,7 +55,7 @@ def run_demo(outdir: str | Path, clip: str | Path | None = None, *, strides: int
     files: dict[str, Path] = {}
 
     say(f"[1/5] fitting the simple machine to {clip.name} (paper section 4) ...")
-    prep = pipeline.prepare(clip)
+    prep = pipeline.prepare(clip, running_only=True)  # the paper's figures are of running
     m = prep.machine
     files["machine"] = out / "machine.json"
     m.save(files["machine"])

@@ -301,11 +301,12 @@ def _full_stances(motion: Motion, body: BodyModel) -> int:
 
 
 def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, length_scale=None,
-            time_range=None) -> Prepared:
-    """Load (if given a path), model, check it is running, fit the simple machine and build the cycle.
+            time_range=None, running_only: bool = False) -> Prepared:
+    """Load (if given a path), model, find its kind (running or walking), fit its simple machine and build
+    the cycle.
 
     time_range: (T0, T1) [s] (either None): model only that part of the take (its speed, cadence and
-    strides); the whole take by default.
+    strides); the whole take by default. running_only: refuse a walk (NotARunningMotion) before fitting.
     """
     from .io.bvh import load_bvh
     from .machine.fit import fit_machine_detailed
@@ -321,7 +322,7 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers)
     summary = summarize(motion, body, com, gait)
-    if summary.kind == "walking":  # a motion's kind chooses its machine
+    if summary.kind == "walking" and not running_only:  # a motion's kind chooses its machine
         from .walk_synthesis import prepare_walk
 
         return prepare_walk(motion, body, com, markers, gait, summary, source, mass, take_notes)
@@ -1075,9 +1076,11 @@ def plan_scale(
         from .machine.walk_speed import check_walking_speed
 
         check_walking_speed(m_scaled, speed)
-        machine = prep.faster_machine(speed) if abs(speed - 1.0) > 1e-9 else prep.machine
-        stretch = 1.0
-        method = "physical (walking cycle re-solved at the new speed)" if machine is not prep.machine else "physical"
+        if speed > 1.0 + 1e-9:  # longer and quicker steps: the walking cycle re-solved
+            machine, stretch = prep.faster_machine(speed), 1.0
+            method = "physical (walking cycle re-solved at the new speed)"
+        else:  # slower: §5.2's horizontal stretch (the re-solved cycle does not exist below the clip's speed)
+            machine, stretch, method = prep.machine, speed, "physical"
     elif speed_model == "resolve" or (speed_model == "auto" and speed > 1.0 + 1e-9):
         machine = prep.faster_machine(speed)
         stretch = 1.0
@@ -1113,6 +1116,12 @@ def accelerate(
     """
     from .machine.planner import plan_speed_change
 
+    if is_walking(prep.machine):  # a motion's kind chooses its machine
+        from .walk_synthesis import accelerate_walk
+
+        return accelerate_walk(prep, character, to_speed=to_speed, to_factor=to_factor, steps=steps, within=within,
+                               lead_steps=lead_steps, hold_steps=hold_steps, fps=fps, report=report,
+                               **character_numbers)
     retarget = prep.retarget(character, **character_numbers)
     m = prep.machine.scaled(retarget.L, retarget.M)
     v_unit = m.speed_unit

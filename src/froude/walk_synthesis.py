@@ -14,13 +14,14 @@ reference's is of its COM (× L), so the time-warped reference pose reaches its 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from .constants import UP_AXIS
-from .synthesis import FootEvent, sample_cycle
+from .synthesis import FootEvent, min_jerk, sample_cycle
 
-__all__ = ["prepare_walk", "walking_events", "contact_from_com", "walk_machine_path", "walking_report"]
+__all__ = ["accelerate_walk", "steps_path", "StepPlan", "prepare_walk", "walking_events", "contact_from_com", "walk_machine_path", "walking_report"]
 
 
 def walking_events(gait, frame_time: float, n_frames: int) -> list[FootEvent]:
@@ -66,44 +67,109 @@ def prepare_walk(motion, body, com, markers, gait, summary, source: str, mass: f
                     modelled=modelled, notes=tuple(notes) + ((note,) if note else ()))
 
 
-def _knots(n_steps: int, t_step: float, t_double: float, pe: np.ndarray, A_first: bool = True):
-    """Time warp knots (times [s], phases ψ) at every touchdown and the other foot's liftoff, one step
-    before and one after the output as well. Step i (foot A for even i) lands at i·t_step."""
+def _knots(t_td: np.ndarray, t_double: np.ndarray, pe: np.ndarray):
+    """Time warp knots (times [s], phases ψ) at every touchdown and the other foot's liftoff, two steps
+    before and after the output as well (at the first and last steps' durations). Step i (foot A for even
+    i) lands at t_td[i] and the other foot lifts t_double[i] later; pe: the cycle's phase_events."""
+    n = len(t_td)
+    first = t_td[1] - t_td[0] if n > 1 else 1.0
+    last = t_td[-1] - t_td[-2] if n > 1 else first
     times, psis = [], []
-    for i in range(-2, n_steps + 2):
+    for i in range(-2, n + 2):
+        j = min(max(i, 0), n - 1)
+        td_t = t_td[0] + i * first if i < 0 else (t_td[-1] + (i - n + 1) * last if i >= n else t_td[i])
         k = i // 2
         if i % 2 == 0:   # A lands, then B lifts
             td, lo = k + 0.0, k + pe[3]
         else:            # B lands, then A lifts
             td, lo = k + pe[2], k + pe[1]
-        times += [i * t_step, i * t_step + t_double]
+        times += [td_t, td_t + t_double[j]]
         psis += [td, lo]
     return np.array(times), np.array(psis)
+
+
+@dataclass(frozen=True)
+class StepPlan:
+    """A walk step by step: step i is walked by machines[i] (scaled, SI view) stretched horizontally by
+    stretch[i] (§5.2; 1 for a re-solved cycle)."""
+
+    machines: tuple
+    stretch: np.ndarray
+
+
+def _stitch(plan: StepPlan, fps: float):
+    """Machine steps one after another (each from its own touchdown; COM forward positions continued).
+
+    Returns t (N,) [s], p (N, 2) COM forward/up [m] (x from 0), force (N, 2) [N], lead/trail (N,) bool
+    (the step's leading and trailing machine legs on the ground), step index (N,), t_td (n,), t_double
+    (n,), t_stance (n,) [s], x_td (n,) COM forward position at each touchdown [m], and x_at(times) the
+    COM forward position at any times ≥ 0 [m] (past the end: the last machine's periodic walk).
+    """
+    ms, sig = plan.machines, plan.stretch
+    n = len(ms)
+    dur = np.array([m.t_step * m.time_unit for m in ms])
+    t_td = np.concatenate([[0.0], np.cumsum(dur)[:-1]])
+    x_td = np.concatenate([[0.0], np.cumsum([s * m.step_length * m.l0 for m, s in zip(ms, sig)])[:-1]])
+    N = int(math.floor(dur.sum() * fps + 1e-9)) + 1
+    t = np.arange(N) / fps
+    k = np.clip(np.searchsorted(t_td, t, side="right") - 1, 0, n - 1)
+    p = np.empty((N, 2))
+    force = np.empty((N, 2))
+    lead = np.empty(N, bool)
+    trail = np.empty(N, bool)
+    # touchdown COM heights differ between machines of different speeds (their θ0 and l_td): each step
+    # starts where the last ended and eases into its own cycle (min-jerk over the step)
+    y_td = np.array([m.l_td * math.cos(m.theta0) * m.l0 for m in ms])
+    dy = np.concatenate([[0.0], y_td[:-1] - y_td[1:]])
+    for i in np.unique(k):
+        sel = k == i
+        local = t[sel] - t_td[i]
+        mp = ms[i].path(local)  # the machine's step 0: its foot 0 leads, foot 1 trails
+        p[sel, 0] = x_td[i] + sig[i] * mp["p_com"][:, 0]
+        p[sel, 1] = mp["p_com"][:, 1] + dy[i] * (1.0 - min_jerk(local / dur[i]))
+        force[sel] = mp["force"] * np.array([sig[i], 1.0])
+        lead[sel], trail[sel] = mp["contact"][:, 0], mp["contact"][:, 1]
+
+    def x_at(times):
+        times = np.asarray(times, float)
+        j = np.clip(np.searchsorted(t_td, times, side="right") - 1, 0, n - 1)
+        out = np.empty(times.shape)
+        for i in np.unique(j):
+            sel = j == i
+            out[sel] = x_td[i] + sig[i] * ms[i].path(times[sel] - t_td[i])["p_com"][:, 0]
+        return out
+
+    t_double = np.array([m.t_double * m.time_unit for m in ms])
+    t_stance = np.array([m.t_stance * m.time_unit for m in ms])
+    return t, p, force, lead, trail, k, t_td, t_double, t_stance, x_td, x_at
 
 
 def walk_machine_path(prep, retarget, *, n_steps: int, fps: float, machine=None, speed: float = 1.0):
     """The scaled walking machine for n_steps steps in the world (a ``pipeline.MachinePath``).
 
     prep: a prepared walk (``pipeline.prepare``); retarget: the character (L, M); fps: output frame rate
-    [Hz]; machine: the (unscaled) WalkingMachine to walk (default: the fitted one); speed must be 1 (a
-    walk changes speed by re-solving its cycle, ``machine.walk_speed``, never by stretching).
+    [Hz]; machine: the (unscaled) WalkingMachine to walk (default: the fitted one); speed: §5.2's horizontal
+    stretch factor (slower walks: the COM and the contacts × speed along the heading, timing kept; faster
+    walks re-solve the cycle instead, ``machine.walk_speed``).
     """
+    m = (prep.machine if machine is None else machine).scaled(retarget.L, retarget.M)
+    return steps_path(prep, retarget, StepPlan((m,) * n_steps, np.full(n_steps, float(speed))), fps)
+
+
+def steps_path(prep, retarget, plan: StepPlan, fps: float):
+    """A walk of ``plan``'s steps in the world (a ``pipeline.MachinePath``), time-warped and placed like
+    ``walk_machine_path`` (which is this with one machine for every step)."""
     from .pipeline import MachinePath
 
-    if speed != 1.0:
-        raise ValueError("a walking path is never stretched: re-solve the cycle at the new speed instead")
-    m = (prep.machine if machine is None else machine).scaled(retarget.L, retarget.M)
     cyc = prep.cycle
-    T = m.time_unit
-    t_step, t_double, t_stance = m.t_step * T, m.t_double * T, m.t_stance * T
-    n_frames = int(math.floor(n_steps * t_step * fps + 1e-9)) + 1
-    t = np.arange(n_frames) / fps
-    mp = m.path(t)
+    n_steps = len(plan.machines)
+    t, p, f_sag, lead, trail, k, t_td, t_double, t_stance, x_td, x_at = _stitch(plan, fps)
+    n_frames = t.size
     A = cyc.first_foot
     feet = np.where(np.arange(n_steps) % 2 == 0, A, 1 - A)
-    t_td = np.arange(n_steps) * t_step
-    t_lo = t_td + t_stance
-    kt, kp = _knots(n_steps, t_step, t_double, cyc.phase_events)
+    # a foot lifts at the end of the next step's double support (the last step's: its own stance)
+    t_lo = np.concatenate([t_td[1:] + t_double[1:], [t_td[-1] + t_stance[-1]]])
+    kt, kp = _knots(t_td, t_double, cyc.phase_events)
     psi = np.interp(t, kt, kp)
     pe = cyc.phase_events
     # each step's foot: its touchdown and liftoff phases, then its marker contact (a little wider)
@@ -118,32 +184,33 @@ def walk_machine_path(prep, retarget, *, n_steps: int, fps: float, machine=None,
 
     fwd, up, lat = cyc.frame
     L = retarget.L
-    l0 = m.l0
-    phi = np.mod(psi, 1.0)
-    _, data = sample_cycle(cyc, phi, rotations=False)
+    _, data = sample_cycle(cyc, np.mod(psi, 1.0), rotations=False)
     origin = prep.com[0].copy()
     origin[UP_AXIS] = 0.0
-    p = mp["p_com"]
     com = origin + np.outer(p[:, 0], fwd) + np.outer(p[:, 1], up) + np.outer(L * data["com_lateral"], lat)
     # Each foot stands where the reference's stands relative to the COM at mid-stance (× L): the pose and
     # the foot then agree. The machine's own touchdown point (l_td sin θ0 ahead of the COM, the centre of
     # pressure's heel end) differs from it by the fit's geometry error; the IK follows the reference's.
-    t_mid = 0.5 * (t_td + t_lo)
-    x_mid = m.path(t_mid)["p_com"][:, 0]
+    x_mid = x_at(0.5 * (t_td + t_lo))
     ahead = contact_from_com(prep.gait, prep.com, fwd, prep.motion.frame_time)
     contacts = origin + np.outer(x_mid + L * ahead[feet], fwd) + np.outer(L * cyc.contact_lateral[feet], lat)
-    force = np.outer(mp["force"][:, 0], fwd) + np.outer(mp["force"][:, 1], up)
-    # the machine's feet (0 leads the even steps) are the reference's A and B
-    stance = mp["contact"][:, [0, 1] if A == 0 else [1, 0]]
+    force = np.outer(f_sag[:, 0], fwd) + np.outer(f_sag[:, 1], up)
+    # the machine's legs (leading, trailing in each step) are the reference's feet
+    stance = np.zeros((n_frames, 2), bool)
+    rows = np.arange(n_frames)
+    stance[rows, feet[k]] = lead
+    stance[rows, 1 - feet[k]] |= trail
     contact = np.zeros((n_frames, 2), bool)
     for i, f in enumerate(feet):
         contact[(t >= contact_on[i]) & (t < contact_off[i]), f] = True
-    v = m.mean_speed * m.speed_unit
+    U = np.array([s * m.mean_speed for m, s in zip(plan.machines, plan.stretch)])
+    v = np.array([s * m.mean_speed * m.speed_unit for m, s in zip(plan.machines, plan.stretch)])
+    m0 = plan.machines[0]
     return MachinePath(
         times=t, com=com, force=force, psi=psi, stance=stance, contact=contact, foot_of_step=feet,
         t_touchdown=t_td, t_liftoff=t_lo, contact_on=contact_on, contact_off=contact_off, contacts=contacts,
-        apex_speed=np.full(n_steps + 1, v), U=np.full(n_steps + 1, m.mean_speed), frame=cyc.frame, l0=l0,
-        mass=m.mass,
+        apex_speed=np.concatenate([v, v[-1:]]), U=np.concatenate([U, U[-1:]]), frame=cyc.frame, l0=m0.l0,
+        mass=m0.mass,
     )
 
 
@@ -188,8 +255,16 @@ def soften_swing_weights(path, weight: np.ndarray, swing_weight: float) -> np.nd
     Tw = SWING_GUIDE_SHARE * step
     ratio = math.log(SWING_GUIDE_WEIGHT / swing_weight)
     out = weight.copy()
-    for i, f in enumerate(path.foot_of_step):
-        a, b = path.contact_on[i], path.contact_off[i]
+    on, off, feet = path.contact_on, path.contact_off, path.foot_of_step
+    # virtual contacts a stride before the first and after the last of each foot: the swing at an end of
+    # the output is guided toward the contact it would make
+    for f in (0, 1):
+        k = np.flatnonzero(feet == f)
+        if k.size:
+            on = np.concatenate([on, [on[k[0]] - 2 * step, on[k[-1]] + 2 * step]])
+            off = np.concatenate([off, [off[k[0]] - 2 * step, off[k[-1]] + 2 * step]])
+            feet = np.concatenate([feet, [f, f]])
+    for a, b, f in zip(on, off, feet):
         u = np.where((t >= a) & (t <= b), 1.0, np.minimum(np.clip((t - (a - Tw)) / Tw, 0, 1),
                                                             np.clip(((b + Tw) - t) / Tw, 0, 1)))
         g = swing_weight * np.exp(ratio * min_jerk(u))
@@ -237,12 +312,12 @@ def walking_extras(prep, res, report) -> dict:
     """The walking part of an output's report (``Report.extras``): the walking figures of the output and
     of the clip, and the cadence the naive retarget would have next to the physical one.
 
-    "cadence": clip [Hz] (measured), output [Hz] (measured), expected = clip × L^-1/2 × s^1/2 (dynamic
+    "cadence": clip [Hz] (measured over its complete steps), output [Hz] (measured), expected = clip × L^-1/2 × s^1/2 (dynamic
     similarity and the walking speed law, ``machine.walk_speed``), naive = clip × s (engines keep the
     clip's timing, played s times faster) and its error against the expected one.
     """
     from .gait import detect_gait
-    from .machine.walk_speed import STEP_TIME_EXPONENT
+    from .machine.walk_speed import step_frequency_factor
     from .metrics import _with_ground
 
     body = res.retarget.body
@@ -251,9 +326,11 @@ def walking_extras(prep, res, report) -> dict:
     out = walking_report(com, gait, res.motion.frame_time)
     clip = walking_report(prep.com, prep.gait, prep.motion.frame_time)
     L, s = float(res.retarget.L), float(res.speed_factor)
-    f_clip = float(prep.summary.step_frequency)
+    # the clip's cadence over its complete steps (what the machine models; the gait summary's counts the
+    # take's first and last touchdowns too, 2 % slower on CMU 07_01, which starts and stops)
+    f_clip = 1.0 / float(prep.machine.reference["step_time_s"])
     f_out = float(report.step_frequency_hz)
-    expected = f_clip * L ** -0.5 * s ** (-STEP_TIME_EXPONENT)
+    expected = f_clip * L ** -0.5 * step_frequency_factor(s)
     naive = f_clip * s
     return {"machine": "walking", "walking": {**out, "clip": clip},
             "cadence": {"clip_step_frequency_hz": f_clip, "step_frequency_hz": f_out,
@@ -274,3 +351,52 @@ def walking_rows(report) -> list[tuple[str, str]]:
         ("cadence", f"{c['step_frequency_hz']:.3f} Hz (expected {c['expected_step_frequency_hz']:.3f}); the naive "
                     f"retarget steps at {c['naive_step_frequency_hz']:.3f} Hz ({100 * c['naive_error']:+.0f} %)"),
     ]
+
+
+def accelerate_walk(prep, character=None, *, to_speed=None, to_factor=None, steps=8, within=None, lead_steps=2,
+                    hold_steps=4, fps=None, report=True, **character_numbers):
+    """``pipeline.accelerate`` for a walk: the speed changes step by step along a min-jerk profile.
+
+    Each step is walked by the periodic walking cycle of its speed (re-solved above the clip's speed by
+    continuation, ``machine.walk_speed``; §5.2's horizontal stretch below it), the steps joined touchdown
+    to touchdown (COM forward position continued, its touchdown height eased over the next step), so the
+    speed profile is monotonic by construction. lead_steps at the start speed, then ``steps`` (or as many
+    as fit in ``within`` seconds) changing, then hold_steps at the goal.
+    """
+    from .errors import FroudeError
+    from .machine.walk_speed import check_walking_speed, walking_machines_at_speeds
+    from .pipeline import finish
+
+    retarget = prep.retarget(character, **character_numbers)
+    m = prep.machine.scaled(retarget.L, retarget.M)
+    start = m.mean_speed * m.speed_unit
+    if (to_speed is None) == (to_factor is None):
+        raise FroudeError("give exactly one goal: a target speed [m/s] or a factor of the start speed")
+    target = to_speed if to_speed is not None else to_factor * start
+    if not (np.isfinite(target) and target > 0):
+        raise FroudeError(f"target speed must be > 0 m/s, got {target:g} (to stop, end the motion instead)")
+    s_goal = target / start
+    check_walking_speed(m, s_goal, "walk accelerating")
+    if within is not None:
+        if not (np.isfinite(within) and within > 0):
+            raise FroudeError(f"--within must be > 0 s, got {within}")
+        steps = max(1, int(round(within / (m.t_step * m.time_unit))))
+    if not (isinstance(steps, (int, np.integer)) and steps >= 1):
+        raise FroudeError(f"steps must be a whole number >= 1, got {steps}")
+    change = 1.0 + (s_goal - 1.0) * min_jerk(np.arange(1, steps + 1) / steps)
+    factors = np.concatenate([np.ones(lead_steps), change, np.full(hold_steps, s_goal)])
+    solved = walking_machines_at_speeds(prep.machine, factors[factors > 1.0 + 1e-9], prep.faster_machines)
+    machines = tuple((solved[float(f)] if f > 1.0 + 1e-9 else prep.machine).scaled(retarget.L, retarget.M)
+                     for f in factors)
+    stretch = np.where(factors > 1.0 + 1e-9, 1.0, factors)
+    fps = prep.motion.fps if fps is None else float(fps)
+    path = steps_path(prep, retarget, StepPlan(machines, stretch), fps)
+    speeds = [float(s * mm.mean_speed * mm.speed_unit) for mm, s in zip(machines, stretch)]
+    phase = ["lead"] * lead_steps + ["change"] * steps + ["hold"] * hold_steps
+    extras = {"plan": {
+        "start_speed_m_s": start, "target_speed_m_s": target, "apex_speed_m_s": speeds,
+        "apex_U": [float(s * mm.mean_speed) for mm, s in zip(machines, stretch)],
+        "apex_time_s": path.t_touchdown.tolist(), "theta0_deg": [math.degrees(mm.theta0) for mm in machines],
+        "phase": phase, "mode": "walking (a periodic cycle per step)", "policy": "ease"}}
+    notes = list(prep.notes)
+    return finish(prep, path, retarget, 1.0, notes, "physical", plan=None, report=report, extras=extras)

@@ -1,4 +1,8 @@
-"""Walking at another speed: the walking machine's periodic cycle re-solved (issue 17, acceptance 3).
+"""Walking faster: the walking machine's periodic cycle re-solved (issue 17, acceptance 3).
+
+Slower walks use §5.2's horizontal stretch (``pipeline.plan_scale``): below the clip's speed the cycle
+search finds no periodic cycle with the step time law below (measured on CMU 02_01: it stalls at ×0.85
+with the double-support share kept, held constant in seconds, or growing).
 
 §5.2's horizontal stretch keeps the timing, which is right for running's flight but wrong for walking:
 people walk faster with longer *and* quicker steps. Here the fitted walking machine's cycle is re-solved
@@ -25,12 +29,19 @@ import numpy as np
 from ..errors import FitError
 from .walk_model import WalkingMachine
 
-__all__ = ["WALK_RUN_U", "STEP_TIME_EXPONENT", "walking_machine_at_speed", "check_walking_speed"]
+__all__ = ["WALK_RUN_U", "STEP_TIME_EXPONENT", "step_frequency_factor", "walking_machine_at_speed", "walking_machines_at_speeds",
+           "check_walking_speed"]
 
 #: The dimensionless speed U = u/√(g l0) at which people change from walking to running (Fr = U² ≈ 0.5).
 WALK_RUN_U = 0.7
 #: Step time ∝ speed^STEP_TIME_EXPONENT at a speed change (step length ∝ speed^(1 + exponent)).
 STEP_TIME_EXPONENT = -0.5
+
+
+def step_frequency_factor(s: float) -> float:
+    """Step frequency of a walk at speed factor s / the clip's: s^(1/2) faster (the re-solved cycle, step
+    time × s^STEP_TIME_EXPONENT), 1 slower (§5.2's horizontal stretch keeps the timing)."""
+    return s ** -STEP_TIME_EXPONENT if s > 1.0 else 1.0
 
 
 def check_walking_speed(machine: WalkingMachine, s: float, what: str = "walk") -> None:
@@ -50,34 +61,70 @@ def check_walking_speed(machine: WalkingMachine, s: float, what: str = "walk") -
             f"people run there; ask at most {v_max:.2f} m/s (x{WALK_RUN_U / machine.mean_speed:.2f}) or use a running clip")
 
 
+#: Largest change of the speed factor per cycle search: farther targets are reached by continuation.
+CONTINUATION_STEP = 0.05
+
+
 def walking_machine_at_speed(machine: WalkingMachine, s: float) -> WalkingMachine:
     """The walking machine's periodic cycle at s × its mean speed (see module doc).
 
+    Solved by continuation from the fitted cycle (speed factors CONTINUATION_STEP apart, each search
+    started from the previous cycle), so the search stays in the basin of the fitted gait.
     Dimensionless fields change; SI fields (l0, mass, reference measurements) are those of ``machine``.
     Raises FitError past the walk-run transition or when no such cycle exists (the message says why).
     """
+    check_walking_speed(machine, s)
+    if s <= 1.0:
+        if s < 1.0:
+            raise FitError(f"no walking cycle is re-solved below the clip's speed (x{s:g}): slower walks are "
+                           "stretched (paper §5.2)")
+        return machine
+    return walking_machines_at_speeds(machine, [s])[float(s)]
+
+
+def _resolve(base: WalkingMachine, start: WalkingMachine, s: float) -> WalkingMachine:
+    """The cycle at s × base's speed (targets from ``base``), searched from ``start``'s cycle."""
     from .walk_fit import _cycle_search
     from .walking import N_PER_STANCE
 
-    check_walking_speed(machine, s)
-    if s == 1.0:
-        return machine
     k = s ** STEP_TIME_EXPONENT
-    t_step, t_double = machine.t_step * k, machine.t_double * k
-    T_c = machine.T_c * k
-    targets = (t_step, t_double, s * machine.mean_speed)
-    z0 = np.array([machine.u * s, machine.v, machine.d, machine.s * k, machine.theta0, machine.K, machine.a,
-                   machine.b, machine.c, machine.l_td])
+    t_step, t_double = base.t_step * k, base.t_double * k
+    T_c = base.T_c * k
+    targets = (t_step, t_double, s * base.mean_speed)
+    r = t_step / start.t_step  # time stretch from the start cycle to the target one
+    z0 = np.array([start.u * (s * base.mean_speed / start.mean_speed), start.v, start.d, start.s * r, start.theta0,
+                   start.K, start.a, start.b, start.c, start.l_td])
     try:
-        z, w, it, _ = _cycle_search(z0, T_c, machine.roll, targets, N_PER_STANCE)
+        z, w, it, _ = _cycle_search(z0, T_c, base.roll, targets, N_PER_STANCE)
     except FitError as e:
-        raise FitError(f"no walking cycle at x{s:g} speed ({s * machine.mean_speed * machine.speed_unit:.2f} m/s): "
-                       f"{e}") from None
+        raise FitError(f"no walking cycle at x{s:.2f} the clip's speed: {e}") from None
     nx = w.next
     per = float(max(abs(nx.u - z[0]), abs(nx.v - z[1]), abs(nx.d - z[2]), abs(nx.s - z[3])))
     return replace(
-        machine, u=float(z[0]), v=float(z[1]), d=float(z[2]), s=float(z[3]), theta0=float(z[4]), K=float(z[5]),
+        base, u=float(z[0]), v=float(z[1]), d=float(z[2]), s=float(z[3]), theta0=float(z[4]), K=float(z[5]),
         a=float(z[6]), b=float(z[7]), c=float(z[8]), l_td=float(z[9]), T_c=T_c, t_stance=w.t_stance,
         t_double=w.t_double, t_step=w.t_step, step_length=w.step_length, mean_speed=w.step_length / w.t_step,
-        periodicity=per, iterations=int(it), source=machine.source + f" (re-solved at x{s:g} speed)",
+        periodicity=per, iterations=int(it),
     )
+
+
+def walking_machines_at_speeds(machine: WalkingMachine, speeds, cache: dict | None = None) -> dict:
+    """{s: the cycle at s × the machine's speed} for speed factors s > 1, solved by one continuation in
+    increasing order of speed (each from the previous cycle). cache: a dict by speed factor, read and
+    filled (``Prepared.faster_machines``)."""
+    cache = {} if cache is None else cache
+    out = {}
+    cur, f_cur = machine, 1.0
+    for s in sorted({float(v) for v in speeds}):
+        check_walking_speed(machine, s)
+        if s in cache:
+            out[s] = cur = cache[s]
+            f_cur = s
+            continue
+        n = max(1, int(math.ceil((s - f_cur) / CONTINUATION_STEP - 1e-9)))
+        for f in np.linspace(f_cur, s, n + 1)[1:]:
+            cur = _resolve(machine, cur, float(f))
+        cur = replace(cur, source=machine.source + f" (re-solved at x{s:g} speed)")
+        out[s] = cache[s] = cur
+        f_cur = s
+    return out

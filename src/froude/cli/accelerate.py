@@ -17,14 +17,15 @@ PLOT_SUFFIXES = (".png",)
 
 
 #: The one-line summary ``froude --help`` lists.
-HELP = "speed up or slow down a run over some steps (transition table, paper 5.3)"
+HELP = "speed up or slow down a run over some steps (step-by-step plan on the simple machine, paper 5.3)"
 
 
 def register(sub) -> None:
     p = sub.add_parser(
         "accelerate", help=HELP,
-        description="Plan touchdown angles step by step so that the simple machine reaches a target speed "
-        "(a step is one stance and the flight after it), simulate it, time-warp the reference cycle onto "
+        description="Plan the touchdown angle of every step, and how hard the leg pushes where the angle alone "
+        "cannot change the speed, so that the simple machine reaches a target speed (a step is one stance and "
+        "the flight after it; each step solved on the simulator), time-warp the reference cycle onto "
         "the planned steps and correct the whole body with IK. Works for any character: the plan is "
         "dimensionless. Writes OUT.bvh (or .glb/.gltf) and OUT.report.json (with the per-step speed profile), "
         "and the plot "
@@ -50,7 +51,8 @@ def register(sub) -> None:
     p.add_argument("--policy", choices=("ease", "even"), default="ease",
                    help="speed profile: ease (smooth start and end, default) or even (equal change per step)")
     p.add_argument("--plot", default=None, metavar="PNG",
-                   help="also plot the speed profile (PNG) and the transition table (PNG-table.png beside it)")
+                   help="also plot the speed profile (PNG) and, as PNG-table.png beside it, the transition table of the "
+                   "start cycle: the next apex speed the touchdown angle alone reaches")
     add_fps(p)
     add_mass(p)
     add_force(p)

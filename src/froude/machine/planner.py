@@ -43,6 +43,10 @@ table, θ0-only plans start from a table rollout (``theta_for_speed`` + ``lookup
 use) and lead/hold steps take their first θ0 from it; the answer never comes from the
 interpolant: the final plan is re-simulated step by step with the simulator's scalar path (the
 one :func:`~froude.machine.dynamics.simulate` uses), so it is exact against direct simulation.
+``pipeline.accelerate`` passes no table: on the 9 CMU running clips θ0 alone reaches neither 0.9× nor
+1.1× in 8 steps, so every plan there is θ0 + δb, which the table (of the fitted control) does not
+cover; given a table, the 18 plans of 0.5×/1.3× are identical to the bit and no faster
+(``benchmarks/bench_plan_table.py``).
 
 Everything is dimensionless (l0 = g = m = 1); nothing depends on a character's size or mass, so one
 plan serves every dynamically similar character. SI appears only in :meth:`SpeedPlan.to_si`.
@@ -503,7 +507,7 @@ def _solve_step(U, H, t0, ref, th_guess, b_guess, cyc, mode, th_b, b_b):
     return float(x[0]), float(x[1]), ok
 
 
-# --- multi-step optimisation of a change (single shooting, exact chain-rule Jacobian) -------------
+# --- multi-step optimisation of a change (multiple shooting, finite-difference Jacobian rows) -----
 def _shoot(U0, H0, t0, tau, b, ctl):
     """Simulate steps with inputs (τ_k, b_k) from apex (U0, H0) at time t0 (scalar simulator path,
     the one ``simulate`` uses). Returns (U (n+1,), H (n+1,), t (n+1,), θ0 (n,), results list, ok)."""

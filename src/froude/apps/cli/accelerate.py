@@ -3,10 +3,30 @@ from __future__ import annotations
 
 import time
 
-from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
-                     add_output_options, add_quiet, add_range_option, add_root_option, bound_work,
-                     character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
-                     output_kwargs, prepare_clip, print_rows, say, speed)
+from .common import (
+    add_character_options,
+    add_force,
+    add_fps,
+    add_keep,
+    add_load_options,
+    add_mass,
+    add_output_options,
+    add_quiet,
+    add_range_option,
+    add_root_option,
+    bound_work,
+    character_input,
+    character_kwargs,
+    check_character,
+    check_inputs,
+    guard_outputs,
+    number,
+    output_kwargs,
+    prepare_clip,
+    print_rows,
+    say,
+    speed,
+)
 from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Steps of a speed change, and of the steady parts around it, froude plans at most.
@@ -66,8 +86,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..io.atomic import atomic_group, require_suffix
-    from ..pipeline import report_path
+    from ...io.atomic import atomic_group, require_suffix
+    from ...pipeline import report_path
 
     out = require_suffix(args.output, MOTION_OUTPUTS)
     data = data_output(args)
@@ -79,7 +99,7 @@ def run(args) -> int:
     goal = args.to_speed
     steps = args.steps if (args.steps is not None or args.within is not None) else 8
 
-    from .. import pipeline
+    from ... import pipeline
 
     t0 = time.perf_counter()
     prep = prepare_clip(args)
@@ -107,7 +127,7 @@ def run(args) -> int:
                                                         **output_kwargs(args))
         written = []
         if plot:
-            from ..viz.plan_plot import plot_plan
+            from ...viz.plan_plot import plot_plan
 
             written = plot_plan(res, plot)
     plan = res.report.extras["plan"]
@@ -133,6 +153,6 @@ def _plot_files(plot):
     """Every file ``plot_plan(res, plot)`` writes (it may add a second figure beside the first)."""
     if plot is None:
         return []
-    from ..viz.plan_plot import plan_plot_paths
+    from ...viz.plan_plot import plan_plot_paths
 
     return plan_plot_paths(plot)

@@ -1,4 +1,4 @@
-"""Issue 6: accelerate and decelerate with a transition table (§5.3), end to end on the real clips."""
+"""Issue 6: accelerate and decelerate, planned step by step (§5.3), end to end on the real clips."""
 from __future__ import annotations
 
 import json

@@ -10,9 +10,9 @@ import pytest
 
 import froude
 from froude import pipeline
-from froude.core import quat
 from froude.body.characters import list_presets
 from froude.constants import GRAVITY
+from froude.core import quat
 from froude.metrics import physics_report
 
 from conftest import RUNNING, clip, clip_params

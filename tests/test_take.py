@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from froude import pipeline
-from froude.body.model import BodyModel
 from froude.body.gait import detect_gait, summarize
+from froude.body.model import BodyModel
 from froude.io.bvh import load_bvh
 
 from conftest import BANDAI_RUNS, RUNNING, clip, clip_params

@@ -17,13 +17,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .body.model import BodyModel
 from .body.characters import Character, Retarget, apply_character, character_from_numbers, load_character
-from .constants import GRAVITY, UP_AXIS
-from .errors import FroudeError, PlanError
 from .body.gait import Gait, GaitSummary, detect_gait, require_running, summarize
-from .metrics import Report, physics_report, write_report
+from .body.model import BodyModel
+from .constants import GRAVITY, UP_AXIS
 from .core.motion import Motion
+from .errors import FroudeError, PlanError
+from .metrics import Report, physics_report, write_report
 from .synthesis.cycle import ReferenceCycle, extract_cycle, min_jerk, sample_cycle
 
 #: Speed factors outside this range leave what a reference clip supports: a warning, not an error.
@@ -135,7 +135,8 @@ def parse_time_range(text: str) -> tuple[float | None, float | None]:
             raise ValueError
         return (float(a) if a.strip() else None), (float(b) if b.strip() else None)
     except ValueError:
-        raise FroudeError(f"cannot read time range '{text}': use T0:T1 in seconds (e.g. 1.2:3.0, or 1.2: to the end)") from None
+        raise FroudeError(f"cannot read time range '{text}': use T0:T1 in seconds (e.g. 1.2:3.0, or 1.2: to the "
+                          "end)") from None
 
 
 def select_range(motion: Motion, time_range, source: str = "motion") -> Motion:
@@ -182,7 +183,8 @@ def modelled_part(motion: Motion, summary: GaitSummary, com: np.ndarray, gait: G
 
 
 #: A clip is a loop when its last pose is this close to its first (mean joint angle), relative to the
-#: median change between neighbouring frames: below LOOP_DUPLICATE the last frame repeats the first, below LOOP_CONTINUES the first
+#: median change between neighbouring frames: below LOOP_DUPLICATE the last frame repeats the first, below
+#: LOOP_CONTINUES the first
 #: frame follows the last.
 LOOP_DUPLICATE = 0.25
 LOOP_CONTINUES = 1.5
@@ -435,7 +437,8 @@ def machine_path(
         contact[(t >= contact_on[i]) & (t < contact_off[i]), f] = True
     return MachinePath(
         times=t, com=com, force=force, psi=psi, stance=stance, contact=contact, foot_of_step=feet,
-        t_touchdown=t_td, t_liftoff=t_lo, contact_on=contact_on, contact_off=contact_off, contacts=contacts, apex_speed=speed * tr.U_apex * m.speed_unit, U=tr.U_apex,
+        t_touchdown=t_td, t_liftoff=t_lo, contact_on=contact_on, contact_off=contact_off, contacts=contacts,
+        apex_speed=speed * tr.U_apex * m.speed_unit, U=tr.U_apex,
         frame=Rh, l0=l0, mass=m.mass,
     )
 
@@ -721,7 +724,8 @@ class Result:
             ("COM tracking", f"RMS {f(r.com_tracking_rms_mm, '.2f')} mm, max {f(r.com_tracking_max_mm, '.2f')} mm"),
             ("foot skate / penetration", f"{f(r.foot_skate_mm, '.2f')} mm / {f(r.penetration_mm, '.2f')} mm "
              f"(ball and tip near the floor: {f(r.foot_skate_floor_mm, '.2f')} mm)"),
-            ("joint jump", f"{f(r.max_joint_jump_deg, '.1f')} deg (reference {f(r.reference_max_joint_jump_deg, '.1f')})"),
+            ("joint jump",
+             f"{f(r.max_joint_jump_deg, '.1f')} deg (reference {f(r.reference_max_joint_jump_deg, '.1f')})"),
         ]
         return rows
 
@@ -1308,8 +1312,8 @@ def in_place_motion(result: Result) -> Motion:
     t = np.arange(motion.n_frames) * motion.frame_time
     fwd = result.path.frame[0] if result.path is not None else _travel_direction(motion, result)
     x = result.path.com @ fwd if result.path is not None else result.retarget.body.com(motion) @ fwd
-    knots = t[[0, -1]] if result.path is None else np.concatenate(
-        [[t[0]], result.path.t_touchdown[(result.path.t_touchdown > t[0]) & (result.path.t_touchdown < t[-1])], [t[-1]]])
+    td = None if result.path is None else result.path.t_touchdown
+    knots = t[[0, -1]] if td is None else np.concatenate([[t[0]], td[(td > t[0]) & (td < t[-1])], [t[-1]]])
     travel = np.interp(t, knots, np.interp(knots, t, x))
     from dataclasses import replace as _replace
 

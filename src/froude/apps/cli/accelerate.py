@@ -4,7 +4,9 @@ from __future__ import annotations
 import time
 
 from .common import (
+    MOTION_OUTPUTS,
     add_character_options,
+    add_data_option,
     add_force,
     add_fps,
     add_keep,
@@ -19,6 +21,7 @@ from .common import (
     character_kwargs,
     check_character,
     check_inputs,
+    data_output,
     guard_outputs,
     number,
     output_kwargs,
@@ -27,7 +30,6 @@ from .common import (
     say,
     speed,
 )
-from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Steps of a speed change, and of the steady parts around it, froude plans at most.
 MAX_STEPS = 500
@@ -71,8 +73,8 @@ def register(sub) -> None:
     p.add_argument("--policy", choices=("ease", "even"), default="ease",
                    help="speed profile: ease (smooth start and end, default) or even (equal change per step)")
     p.add_argument("--plot", default=None, metavar="PNG",
-                   help="also plot the speed profile (PNG) and, as PNG-table.png beside it, the transition table of the "
-                   "start cycle: the next apex speed the touchdown angle alone reaches")
+                   help="also plot the speed profile (PNG) and, as PNG-table.png beside it, the transition "
+                   "table of the start cycle: the next apex speed the touchdown angle alone reaches")
     add_fps(p)
     add_mass(p)
     add_force(p)

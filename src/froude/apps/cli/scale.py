@@ -6,7 +6,9 @@ from pathlib import Path
 
 from ...body.presets import list_presets
 from .common import (
+    MOTION_OUTPUTS,
     add_character_options,
+    add_data_option,
     add_force,
     add_fps,
     add_keep,
@@ -21,16 +23,16 @@ from .common import (
     character_kwargs,
     check_character,
     check_inputs,
+    data_output,
     guard_outputs,
-    number,
     load_clip,
+    number,
     output_kwargs,
     prepare_clip,
     print_rows,
     say,
     speed,
 )
-from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
 MAX_STRIDES = 10_000
@@ -95,7 +97,6 @@ def run(args) -> int:
     t0 = time.perf_counter()
 
     from ... import pipeline
-
     from ...errors import FitError, FroudeError, NotARunningMotion
 
     try:

@@ -420,7 +420,6 @@ def target_cycle(cycle, U_target: float, *, energy: str = "b", comfort: Comfort 
     if not (math.isfinite(U_target) and U_target > 0):
         raise PlanError(f"target speed must be a finite U > 0, got {U_target}")
     n = max(1, int(math.ceil(abs(math.log(U_target / cyc.U)) / math.log(1.10))))
-    last = None
     for nodes in ([U_target], cyc.U * (U_target / cyc.U) ** (np.arange(1, n + 1) / n)):
         *_, last = _orbits(cyc, nodes, energy, comfort, H_prior)  # the continuation's last node
         if last[1] is not None and not last[2] and last[0] == U_target:

@@ -13,6 +13,7 @@ from froude import pipeline
 from froude.body.characters import list_presets
 from froude.constants import GRAVITY
 from froude.core import quat
+from froude.ik.correct import correct
 from froude.metrics import physics_report
 
 from conftest import RUNNING, clip, clip_params
@@ -101,7 +102,7 @@ def test_long_output_is_the_tiled_cycle(prepared):
     prep = prepared["09_03"]
     long = pipeline.scale(prep, "troll", strides=pipeline.PERIODIC_MIN_STRIDES + 2)
     short_path = long.path
-    direct = pipeline.correct(long.targets, long.retarget.body).motion
+    direct = correct(long.targets, long.retarget.body).motion
     p_long = long.retarget.body.foot_markers(long.motion)
     p_direct = long.retarget.body.foot_markers(direct)
     d = np.linalg.norm(p_long - p_direct, axis=-1)

@@ -98,7 +98,7 @@ class Result:
     """A motion with its physics: what ``fit``, ``scale`` and ``accelerate`` return.
 
     motion: the Motion (the input for ``fit``); body: its BodyModel; report: the physics report
-    (metrics.Report); machine_path: the simple machine's path on the same frames (pipeline.MachinePath;
+    (metrics.Report); machine_path: the simple machine's path on the same frames (synthesis.timewarp.MachinePath;
     None for ``fit``); notes: what froude noted on the way; prepared: the fitted clip (pipeline.Prepared),
     reused when this result is passed to ``scale`` or ``accelerate``.
     """

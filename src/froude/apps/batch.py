@@ -134,8 +134,7 @@ def load_plan(path) -> Plan:
 
 def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
     """A Plan from the parsed YAML mapping; every problem is one BatchError line naming the key."""
-    from ..body.characters import list_presets
-    from ..pipeline import resolve_character
+    from ..body.characters import list_presets, resolve_character
 
     def bad(where, msg):
         raise BatchError(f"{source}: {where}: {msg}")

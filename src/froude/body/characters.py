@@ -257,3 +257,12 @@ def character_from_numbers(
         description=base.description,
         skeleton=base.skeleton,
     )
+
+
+def resolve_character(character=None, *, height=None, mass=None, leg_scale=None, arm_scale=None,
+                      head_scale=None, trunk_scale=None) -> Character:
+    """A Character from a preset name / file / Character plus optional numbers (numbers win)."""
+    base = character if isinstance(character, Character) else (load_character(character) if character else None)
+    if base is None and all(v is None for v in (height, mass, leg_scale, arm_scale, head_scale, trunk_scale)):
+        return Character(name="same")
+    return character_from_numbers(base, height, mass, leg_scale, arm_scale, head_scale, trunk_scale)

@@ -159,9 +159,9 @@ def run(args) -> int:
 
 def _steady_range(prep, args) -> str:
     """The steady speeds whose outputs meet every bar for this character (a goal outside them will not)."""
-    from ... import pipeline
+    from ...speed_range import reachable_speed_range
 
-    rng = pipeline.reachable_speed_range(prep, args.character, **character_kwargs(args))
+    rng = reachable_speed_range(prep, args.character, **character_kwargs(args))
     return f"with every physics bar met this character runs steadily at {rng.describe()}"
 
 

@@ -87,7 +87,7 @@ def run(args) -> int:
     # the load's notes are said once the fit succeeded: a clip that cannot be fitted is one error line
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, True, args.joint_map, args.up)
     if args.range:
-        from ...pipeline import select_range
+        from ...body.take import select_range
 
         motion = select_range(motion, args.range, Path(args.clip).name)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
@@ -95,7 +95,7 @@ def run(args) -> int:
 
     if summarize(motion, body).kind == "walking":  # a walk gets the walking machine
         return _run_walk(args, motion, body, out, plot)
-    from ...pipeline import running_take
+    from ...body.take import running_take
 
     motion, notes = running_take(motion, body)  # a loop unrolled, an in-place take given its travel
     for note in notes:

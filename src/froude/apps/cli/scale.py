@@ -98,6 +98,7 @@ def run(args) -> int:
 
     from ... import pipeline
     from ...errors import FitError, FroudeError, NotARunningMotion
+    from ...speed_range import reachable_speed_range
 
     try:
         prep = prepare_clip(args)
@@ -115,7 +116,7 @@ def run(args) -> int:
     except FitError as e:
         if args.method != "physical":
             raise
-        rng = pipeline.reachable_speed_range(prep, args.character, **character_kwargs(args))
+        rng = reachable_speed_range(prep, args.character, **character_kwargs(args))
         asked = goal.m_s if goal and goal.m_s else (goal.factor if goal and goal.factor else 1.0) * rng.base_m_s
         raise FroudeError(f"{Path(args.clip).name}: {asked:.2f} m/s (x{asked / rng.base_m_s:.2f}) is out of reach: "
                           f"with every physics bar met this clip runs {rng.describe()} ({e})") from None
@@ -123,7 +124,7 @@ def run(args) -> int:
         say(f"note: {note}", args.quiet)
     fails = res.report.check_bars() if args.method == "physical" else []
     if fails and not args.keep:
-        rng = pipeline.reachable_speed_range(prep, args.character, **character_kwargs(args))
+        rng = reachable_speed_range(prep, args.character, **character_kwargs(args))
         say(f"froude scale: output not written: it misses physics bars ({'; '.join(fails)}); with every bar "
             f"met this clip runs {rng.describe()}; --keep writes it anyway")
         return 1

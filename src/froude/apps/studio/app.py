@@ -569,11 +569,11 @@ class Tab:
     def _bound_speed(self, character: str) -> None:
         """Work out (once per preset, ~0.5 s) the speed factors whose outputs meet every physics bar and
         bound the speed slider to them (within its own limits)."""
-        from ... import pipeline
+        from ...speed_range import reachable_speed_range
 
         rng = self.session.speed_ranges.get(character)
         if rng is None:
-            rng = pipeline.reachable_speed_range(self.session.prep, None if character == "same" else character)
+            rng = reachable_speed_range(self.session.prep, None if character == "same" else character)
             self.session.speed_ranges[character] = rng
         lim = LIMITS["speed"]
         if rng.empty:

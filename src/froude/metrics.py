@@ -19,7 +19,7 @@ from .io.jsonable import dumps, jsonable
 
 _HORIZONTAL = [a for a in range(3) if a != UP_AXIS]
 
-#: The project's physics bars (DESIGN.md "Quality bars").
+#: The project's physics bars (docs/architecture.md, "Quality bars").
 BARS = {
     "flight_gravity_rel_tol": 0.03,
     "com_tracking_rms_mm": 5.0,
@@ -70,7 +70,7 @@ class Report:
     flight_gravity_per_phase: list
     flight_horizontal_accel_m_s2: float
     foot_skate_mm: float
-    #: the stricter skate measure (issue 13, DESIGN.md quality bars): ball and tip, whole stance including
+    #: the stricter skate measure (issue 13, docs/architecture.md quality bars): ball and tip, whole stance including
     #: touchdown and lift-off, while within 2 % of L of the floor. Reported; not yet one of check_bars.
     foot_skate_floor_mm: float
     penetration_mm: float
@@ -305,7 +305,7 @@ def physics_report(
     reference_max_joint_jump_deg: float | None = None,
     com_and_markers: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Report:
-    """The physics report of DESIGN.md for any motion; tracking figures when targets are given.
+    """The physics report (docs/architecture.md) for any motion; tracking figures when targets are given.
 
     ground_height: the floor's height [m] (outputs know it); None estimates it per stance.
     machine_com: (F, 3) the simple machine's COM path [m]; marker_targets: (F, 2, 3, 3) [m], NaN where

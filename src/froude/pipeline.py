@@ -271,7 +271,7 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
 
 
 def add_report(prep: Prepared, res: Result) -> Result:
-    """The result with its physics report (DESIGN.md) computed: tracking against the machine, the loaded
+    """The result with its physics report (docs/architecture.md) computed: tracking against the machine, the loaded
     foot targets and the time-warped reference pose. (Separate so that a viewer can show the motion first.)
     """
     report = physics_report(

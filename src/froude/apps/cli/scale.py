@@ -47,9 +47,9 @@ def register(sub) -> None:
     p = sub.add_parser(
         "scale", help=HELP,
         description="Fit the simple machine to the clip, scale it to the character by dynamic similarity "
-        "(times x sqrt(L), speeds x sqrt(L)), change its speed by horizontal stretching, synthesise any "
-        "number of strides and correct the whole body with IK. Writes OUT.bvh or OUT.glb/.gltf (same joint names "
-        "and "
+        "(times x sqrt(L), speeds x sqrt(L)), change its speed (slower: horizontal stretching, paper 5.2; "
+        "faster: the machine's cycle re-solved with a shorter stance), synthesise any number of strides and "
+        "correct the whole body with IK. Writes OUT.bvh or OUT.glb/.gltf (same joint names and "
         "channel orders as the input, the target's bone lengths) and OUT.report.json (the physics report), "
         "both or neither. Every option is checked before the work starts; an output that would replace an "
         "input is refused.",

@@ -4,7 +4,7 @@
     python benchmarks/bench_cli.py --runs 15
 
 Each figure is wall time of a fresh process (interpreter start, imports, work, exit), as a user waits
-for it: best and median of N runs. Bars (DESIGN.md): ``froude --help`` <= 2 x ``python -c "import numpy"``;
+for it: best and median of N runs. Bars (docs/architecture.md): ``froude --help`` <= 2 x ``python -c "import numpy"``;
 ``froude scale`` of 4 strides (CMU 09_01, the embedded sample) <= 0.8 s. Run it on an idle machine: on a
 loaded one every figure grows, the start-up ones most. Also prints the import time of the heaviest
 modules a ``froude scale`` loads (``python -X importtime``).
@@ -24,7 +24,7 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_v] = "1"
 
 PY = sys.executable
-FROUDE = [PY, "-m", "froude.cli"]
+FROUDE = [PY, "-m", "froude"]
 
 
 def wall(cmd: list[str], runs: int, expect: int = 0) -> list[float]:

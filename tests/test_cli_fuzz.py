@@ -25,7 +25,7 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from froude.cli import common
+from froude.apps.cli import common
 from froude.samples import sample_path
 
 FUZZ_EXAMPLES = int(os.environ.get("FROUDE_FUZZ_EXAMPLES", "40"))
@@ -144,7 +144,8 @@ def _check(run_cli, args, folder: Path) -> int:
     assert not leftovers, (args, leftovers)
     if code == 0:
         texts = [out] + [p.read_text(errors="replace") for p in folder.rglob("*")
-                         if p.is_file() and p.suffix in (".bvh", ".json", ".md", ".csv", ".gltf") and p.name != "in.bvh"]
+                         if p.is_file() and p.suffix in (".bvh", ".json", ".md", ".csv", ".gltf")
+                         and p.name != "in.bvh"]
         for t in texts:
             m = NON_FINITE.search(t)
             assert m is None, (args, t[max(0, m.start() - 80):m.end() + 80])
@@ -164,9 +165,9 @@ def _folder() -> tempfile.TemporaryDirectory:
 def small_work(monkeypatch):
     """Accepted cases stay small: the work bound at 3,000 frames; the studio never really starts."""
     monkeypatch.setattr(common, "MAX_FRAMES", 3000)
-    import froude.studio
+    import froude.apps.studio
 
-    monkeypatch.setattr(froude.studio, "serve", lambda *a, **k: 0, raising=True)
+    monkeypatch.setattr(froude.apps.studio, "serve", lambda *a, **k: 0, raising=True)
 
 
 @pytest.mark.parametrize("command", ["info", "fit", "scale", "accelerate", "render", "view", "batch", "convert"])

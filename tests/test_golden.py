@@ -33,7 +33,8 @@ def test_outputs_match_golden(clip):
     worst = []
     for key in keys:
         want, got = _saved(key), now[key]
-        assert int(got["n_frames"]) == int(want["n_frames"]), f"{key}: {got['n_frames']} frames, golden {want['n_frames']}"
+        assert int(got["n_frames"]) == int(want["n_frames"]), (
+            f"{key}: {got['n_frames']} frames, golden {want['n_frames']}")
         d = max(np.abs(got["root"] - want["root"]).max(), np.abs(got["sparse"] - want["sparse"]).max())
         worst.append((d, key))
     d, key = max(worst)
@@ -45,7 +46,7 @@ def test_outputs_match_golden(clip):
 def test_golden_fk_matches_froude_fk():
     """The goldens' own FK agrees with froude's (so a golden difference is a motion difference)."""
     from froude import load_bvh
-    from froude.kinematics import fk
+    from froude.core.kinematics import fk
 
     m = load_bvh(Path(__file__).resolve().parent / "fixtures" / "humanoid_metres.bvh")
     assert np.abs(make_golden.world_positions(m) - fk(m)[0]).max() < 1e-12

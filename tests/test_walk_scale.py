@@ -10,8 +10,9 @@ import math
 
 import pytest
 
-from conftest import BANDAI_WALKS, MOCAP, WALKING, clip, clip_params
 from froude import pipeline
+
+from conftest import BANDAI_WALKS, MOCAP, WALKING, clip, clip_params
 
 CHARACTERS = ("child", "troll", "giant")
 

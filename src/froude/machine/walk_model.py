@@ -32,7 +32,7 @@ from ..io.jsonable import dumps
 from .dynamics import Control
 from .walking import WalkState
 
-__all__ = ["WALK_SCHEMA", "WalkingMachine", "load_walking_machine"]
+__all__ = ["WALK_SCHEMA", "WalkingMachine", "is_walking", "load_walking_machine"]
 
 WALK_SCHEMA = "froude.walking/1"
 _CYCLE = ("u", "v", "d", "s", "l_td", "roll", "K", "a", "b", "c", "T_c", "t_stance", "t_double", "t_step",
@@ -158,7 +158,7 @@ class WalkingMachine:
         return {"p_com": p * L, "v_com": tr.vel * self.speed_unit, "force": tr.total_force * mg,
                 "contact": contact, "cop": cop * L, "step": k}
 
-    def scaled(self, L: float, M: float = 1.0) -> "WalkingMachine":
+    def scaled(self, L: float, M: float = 1.0) -> WalkingMachine:
         """The dynamically similar machine for a character L times longer and M times heavier."""
         if not (L > 0 and M > 0):
             raise FitError(f"scale factors must be > 0 (L={L}, M={M})")
@@ -175,7 +175,7 @@ class WalkingMachine:
                 "reference": self.reference, "quality": self.quality, "fit": self.fit}
 
     @classmethod
-    def from_dict(cls, d: dict, where: str = "machine") -> "WalkingMachine":
+    def from_dict(cls, d: dict, where: str = "machine") -> WalkingMachine:
         if not isinstance(d, dict) or d.get("schema") != WALK_SCHEMA:
             got = d.get("schema") if isinstance(d, dict) else type(d).__name__
             raise FitError(f"{where}: not a froude walking machine file (schema {got!r}, expected {WALK_SCHEMA!r})")
@@ -205,3 +205,8 @@ def load_walking_machine(path) -> WalkingMachine:
     except json.JSONDecodeError as e:
         raise FitError(f"{path}:{e.lineno}: not valid JSON ({e.msg})") from None
     return WalkingMachine.from_dict(d, str(path))
+
+
+def is_walking(machine) -> bool:
+    """Whether a fitted machine is the walking one (``froude.walking/1``) rather than the running one."""
+    return getattr(machine, "kind", "running") == "walking"

@@ -29,7 +29,8 @@ import numpy as np
 from ..errors import FitError
 from .walk_model import WalkingMachine
 
-__all__ = ["WALK_RUN_U", "STEP_TIME_EXPONENT", "step_frequency_factor", "walking_machine_at_speed", "walking_machines_at_speeds",
+__all__ = ["WALK_RUN_U", "STEP_TIME_EXPONENT", "step_frequency_factor", "walking_machine_at_speed",
+           "walking_machines_at_speeds",
            "check_walking_speed"]
 
 #: The dimensionless speed U = u/√(g l0) at which people change from walking to running (Fr = U² ≈ 0.5).
@@ -58,7 +59,8 @@ def check_walking_speed(machine: WalkingMachine, s: float, what: str = "walk") -
         raise FitError(
             f"a {what} at {v:.2f} m/s (x{s:g}) is past the walk-run transition for this character "
             f"(Froude number U = {U:.2f} > {WALK_RUN_U}, Fr = U^2 = {U * U:.2f} > 0.5, leg {machine.l0:.2f} m): "
-            f"people run there; ask at most {v_max:.2f} m/s (x{WALK_RUN_U / machine.mean_speed:.2f}) or use a running clip")
+            f"people run there; ask at most {v_max:.2f} m/s (x{WALK_RUN_U / machine.mean_speed:.2f}) "
+            "or use a running clip")
 
 
 #: Largest change of the speed factor per cycle search: farther targets are reached by continuation.

@@ -298,3 +298,86 @@ def test_studio_as_an_animator_uses_it(tmp_path):
     err = proc.stderr.read()
     assert proc.returncode == 0, err[-2000:]
     assert "Traceback" not in err, err[-2000:]
+
+
+@pytest.mark.browser
+@pytest.mark.timeout(600)
+def test_studio_takes_a_walk(tmp_path):
+    """Issue 17 acceptance 4: a walk opened in the studio gets the walking machine; the giant, a faster walk
+    and an acceleration come out with every bar met, and a walk pushed past the walk-run transition is
+    refused in one line in m/s while the last good result stays."""
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium; scripts/test installs it)")
+    pw = pytest.importorskip("playwright.sync_api")
+    pytest.importorskip("viser")
+    walk = clip("02_01")
+    shots = Path(os.environ.get("FROUDE_STUDIO_SHOTS", tmp_path / "shots"))
+    shots.mkdir(parents=True, exist_ok=True)
+    port = _free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "froude", "view", str(walk), "--port", str(port)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    lines, url = [], []
+
+    def read_stdout():
+        for line in proc.stdout:
+            lines.append(line)
+            m = re.search(r"froude studio: (http://\S+)", line)
+            if m:
+                url.append(m.group(1))
+
+    threading.Thread(target=read_stdout, daemon=True).start()
+    try:
+        t_end = time.monotonic() + 180  # the walking fit comes first
+        while not url and proc.poll() is None and time.monotonic() < t_end:
+            time.sleep(0.1)
+        assert url == [f"http://127.0.0.1:{port}"], f"exit {proc.poll()}; stdout {lines}"
+        with pw.sync_playwright() as p:
+            ctx = p.chromium.launch_persistent_context(
+                str(tmp_path / "chromium-profile"), executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True,
+                viewport=VIEWPORT, accept_downloads=True)
+            try:
+                page = ctx.new_page()
+                page.goto(url[0])
+                s0 = _wait_state(page, status="ok", timeout=120)
+                assert s0["clip"] == walk.name
+                page.get_by_text("foot skate [mm]").first.wait_for(timeout=30000)
+                _pick(page, "Character", "giant")
+                s1 = _wait_state(page, status="ok", character="giant", timeout=120)
+                assert s1["hash"] != s0["hash"]
+                _close_toasts(page)
+                page.wait_for_timeout(1500)
+                page.screenshot(path=str(shots / "walk_1_giant.png"))
+                _pick(page, "Character", "same")
+                _wait_state(page, status="ok", character="same", timeout=120)
+                _type(page, "Speed factor", "1.2")
+                s2 = _wait_state(page, status="ok", speed_factor="1.2", timeout=120)
+                assert float(s2["speed_m_s"]) > 1.15 * float(s0["speed_m_s"])
+                # past the walk-run transition: one line in m/s, the last good result stays
+                _type(page, "Speed factor", "2")
+                page.get_by_text("walk-run transition").first.wait_for(timeout=60000)
+                s3 = _wait_state(page, status="error", timeout=60)
+                assert s3["hash"] == s2["hash"]
+                _close_toasts(page)
+                _pick(page, "Mode", "accelerate")
+                _type(page, "Steps to change", "8")
+                _type(page, "Goal speed factor", "1.3")
+                s4 = _wait_state(page, status="ok", mode="accelerate", to_factor="1.3", steps="8", timeout=180)
+                assert int(s4["n_frames"]) > int(s2["n_frames"])
+                _close_toasts(page)
+                page.wait_for_timeout(1500)
+                page.screenshot(path=str(shots / "walk_2_accelerate.png"))
+            finally:
+                ctx.close()
+        print(f"studio screenshots: {shots}")
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            raise
+    err = proc.stderr.read()
+    assert proc.returncode == 0, err[-2000:]
+    assert "Traceback" not in err, err[-2000:]

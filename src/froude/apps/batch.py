@@ -134,8 +134,7 @@ def load_plan(path) -> Plan:
 
 def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
     """A Plan from the parsed YAML mapping; every problem is one BatchError line naming the key."""
-    from ..body.characters import list_presets
-    from ..body.characters import resolve_character
+    from ..body.characters import list_presets, resolve_character
 
     def bad(where, msg):
         raise BatchError(f"{source}: {where}: {msg}")
@@ -452,20 +451,17 @@ def _task_params(task: Task, plan: Plan) -> dict:
 
 def read_done(outdir, task: Task, plan: Plan) -> dict | None:
     """The index row stored by a complete earlier run of ``task``, or None (missing, partial or stale)."""
+    from ..io.jsonable import jsonable
     from ..pipeline import report_path
 
     bvh = Path(outdir) / task.output
     try:
         m = json.loads(marker_path(bvh).read_text())
-        ok = (m.get("schema") == MARKER_SCHEMA and m.get("params") == _jsonable(_task_params(task, plan))
+        ok = (m.get("schema") == MARKER_SCHEMA and m.get("params") == jsonable(_task_params(task, plan))
               and bvh.stat().st_size == m["bvh_bytes"] and report_path(bvh).stat().st_size == m["report_bytes"])
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return None
     return dict(m["row"]) if ok else None
-
-
-def _jsonable(x):
-    return json.loads(json.dumps(x))
 
 
 def is_temporary(name: str) -> bool:
@@ -522,6 +518,7 @@ def run_task(prepped: Prepped, task: Task, plan: Plan, outdir: str) -> dict:
     """Worker task: one variation of one prepared clip → BVH + report (atomic), done-marker last; its index row."""
     from .. import pipeline
     from ..io.bvh import atomic_write_text
+    from ..io.jsonable import dumps
 
     t0, c0 = time.perf_counter(), time.process_time()
     row = base_row(task)
@@ -543,7 +540,7 @@ def run_task(prepped: Prepped, task: Task, plan: Plan, outdir: str) -> dict:
     row["task_s"], row["task_cpu_s"] = time.perf_counter() - t0, time.process_time() - c0
     marker = {"schema": MARKER_SCHEMA, "params": _task_params(task, plan), "row": row,
               "bvh_bytes": bvh.stat().st_size, "report_bytes": rep.stat().st_size}
-    atomic_write_text(marker_path(out), json.dumps(_jsonable(marker), indent=1, allow_nan=True) + "\n")
+    atomic_write_text(marker_path(out), dumps(marker, indent=1) + "\n")  # strict JSON: NaN → null
     return row
 
 
@@ -610,7 +607,9 @@ def index_text(rows) -> str:
 
 
 def _cell(v) -> str:
-    if v is None:
+    """An index cell: empty for a figure that is absent or could not be measured (None, NaN: a done-marker
+    stores NaN as null, so a resumed row and a fresh one read the same)."""
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return ""
     if isinstance(v, float):
         return f"{v:.6g}"

@@ -28,14 +28,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..body.model import BodyModel
-from ..constants import GRAVITY, UP_AXIS
+from ..constants import GRAVITY, UP_AXIS, heading_frame
 from ..errors import FitError, NotARunningMotion
 from ..body.gait import detect_gait, require_running, summarize
 from ..core.motion import Motion
 from .control_fit import fit_leg_control
 from .dynamics import N_PER_STANCE, REASONS, Control, simulate, step
 from .forces import (CUTOFF_HZ, EVENT_THRESHOLD_BW, flight_residual, force_shares,
-                     ground_force, refine_events, sagittal_frame, smooth_com, stance_geometry)
+                     ground_force, refine_events, smooth_com, stance_geometry)
 from .model import SimpleMachine
 
 __all__ = ["StanceFit", "FitResult", "fit_stance_control", "fit_machine", "fit_machine_detailed",
@@ -293,7 +293,7 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     p, v, acc = smooth_com(com, dt, cutoff_hz)
     f = ground_force(acc, mass)
     fy_bw = f[:, UP_AXIS] / mg
-    heading, lateral = sagittal_frame(summary.heading)
+    heading, _, lateral = heading_frame(summary.heading)
 
     # Lateral COM line (least squares over the clip): sway and foot offsets are measured from it.
     lat = p @ lateral

@@ -39,12 +39,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..body.model import BodyModel
-from ..constants import GRAVITY, UP_AXIS
+from ..constants import GRAVITY, UP_AXIS, heading_frame
 from ..errors import FitError, NotARunningMotion
 from ..body.gait import detect_gait, summarize
 from ..core.motion import Motion
 from .dynamics import Control
-from .forces import CUTOFF_HZ, ground_force, sagittal_frame, smooth_com
+from .forces import CUTOFF_HZ, ground_force, smooth_com
 from .walk_model import WalkingMachine
 from .walking import N_PER_STANCE, REASONS, WalkState, record_step, simulate_walk, walk_step
 
@@ -387,7 +387,7 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     times = np.arange(F) * dt
     p, v, acc = smooth_com(com, dt, cutoff_hz)
     f = ground_force(acc, mass)
-    heading, lateral = sagittal_frame(summary.heading)
+    heading, _, lateral = heading_frame(summary.heading)
     lat = p @ lateral
     line = np.polyfit(times, lat, 1)
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..core import quat
 from ..body.model import BodyModel
-from ..constants import UP, UP_AXIS
+from ..constants import UP_AXIS, heading_frame
 from ..errors import FitError
 from ..body.gait import Gait
 from ..core.motion import Motion
@@ -27,15 +27,6 @@ from ..core.motion import Motion
 CYCLE_SAMPLES = 240
 #: A loaded foot marker is held still while within this fraction of the leg length of its lowest point.
 SLIDE_BAND_L = 0.022
-
-
-def heading_frame(heading: np.ndarray) -> np.ndarray:
-    """(3, 3) rows = forward, up, lateral unit vectors (world) for a horizontal travel direction."""
-    fwd = np.asarray(heading, float).copy()
-    fwd[UP_AXIS] = 0.0
-    fwd /= np.linalg.norm(fwd)
-    lat = np.cross(fwd, UP)
-    return np.stack([fwd, UP, lat])
 
 
 def min_jerk(u: np.ndarray) -> np.ndarray:

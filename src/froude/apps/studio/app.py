@@ -258,9 +258,9 @@ def _page_script(title: str) -> str:
 
 
 def _js_str(s: str) -> str:
-    import json
+    from ...io.jsonable import dumps
 
-    return json.dumps(s).replace("<", "\\u003c")
+    return dumps(s).replace("<", "\\u003c")
 
 
 # ---- one browser tab ---------------------------------------------------------------------------------

@@ -707,23 +707,19 @@ def start_client(scheduler: str | None = None, n_workers: int | None = None):
             raise BatchError(f"cannot reach the Dask scheduler at {scheduler}: {e}".splitlines()[0]) from None
     import logging
     import signal
-    import threading
+
+    from .signals import ignoring
 
     n = n_workers or default_workers()
     env = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **WORKER_ENV}
     # Ctrl-C reaches the whole foreground process group: the worker processes ignore it (they inherit
     # SIG_IGN at spawn) and the driver alone stops the batch, cancels and closes the cluster.
-    main = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
-    try:
+    with ignoring(signal.SIGINT):
         with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
             # no dashboard; the scheduler's small HTTP server on a free port (8787 may be taken)
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
                                    scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                                    silence_logs=logging.CRITICAL)  # our rows carry every error
-    finally:
-        if main:
-            signal.signal(signal.SIGINT, previous)
     return Client(cluster), cluster
 
 
@@ -823,33 +819,30 @@ _NOISY_LOGGERS = ("tornado.application", "distributed", "asyncio")
 
 
 def _interrupt_handlers():
-    """SIGINT and SIGTERM → KeyboardInterrupt, Dask's teardown messages silenced (main thread only)."""
+    """SIGINT and SIGTERM → KeyboardInterrupt (``apps.signals``), Dask's teardown messages silenced when
+    one arrives; returns what ``_restore_handlers`` puts back."""
     import logging
-    import signal
-    import threading
 
-    if threading.current_thread() is not threading.main_thread():
-        return None
+    from .signals import interrupt_on_signals
+
     levels = {n: logging.getLogger(n).level for n in _NOISY_LOGGERS}
 
-    def stop(signum, frame):
+    def quiet():
         for n in _NOISY_LOGGERS:
             logging.getLogger(n).setLevel(logging.CRITICAL)
-        raise KeyboardInterrupt
 
-    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
-    return previous, levels
+    return interrupt_on_signals(quiet), levels
 
 
 def _restore_handlers(handlers) -> None:
     import logging
-    import signal
 
-    if handlers is None:
+    from .signals import restore_signals
+
+    if handlers is None:  # stopped before they were installed
         return
     previous, levels = handlers
-    for sig, h in previous.items():
-        signal.signal(sig, h)
+    restore_signals(previous)
     for n, level in levels.items():
         logging.getLogger(n).setLevel(level)
 
@@ -886,7 +879,9 @@ def _run_on_dask(tasks, todo, plan, outdir, summary, client, progress):
                     reason = f"{type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}"
                 except Exception as e:  # noqa: BLE001
                     reason = f"{fut.status}: {e}"
-                row = base_row(tasks[i], "failed", reason)
+                # the worker may have died after its done-marker (the last write): the task is then done
+                done = read_done(outdir, tasks[i], plan)
+                row = dict(done, status="ok", output=tasks[i].output) if done else base_row(tasks[i], "failed", reason)
             rows[i] = row
             summary.ran += 1
             n_ok += row["status"] == "ok"

@@ -215,6 +215,9 @@ def _cycle_search(z0, T_c, targets, n_per_stance, tol=1e-10, max_iter=30, n_coar
     return z, row, calls, R0
 
 
+# Long because the §4 fit is one sequential pass (events → stance geometry → control → priors → cycle →
+# reference comparisons) whose many intermediates all end up in FitResult; split, they would travel
+# between the pieces as a dozen loose arrays.
 def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: float = 70.0, *,
                          cutoff_hz: float = CUTOFF_HZ, n_per_stance: int = N_PER_STANCE,
                          source: str | None = None) -> FitResult:

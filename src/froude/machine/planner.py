@@ -498,6 +498,8 @@ def _shoot(U0, H0, t0, tau, b, ctl):
     return U, H, t, th, res, True
 
 
+# Long because the multiple-shooting problem's unknown layout (index offsets iT, iB, iU, iH, it_, ih_) is
+# shared by its residual, Jacobian and unpacking closures; split apart they would each re-derive it.
 def _optimise_change(cyc, U0, H0, t0, n, U_ref, prior, H_t, mode, comfort, tau_start=None,
                      max_iter=80):
     """Inputs of n change steps from apex (U0, H0) at t0, by constrained Gauss–Newton on the exact
@@ -542,6 +544,8 @@ def _optimise_change(cyc, U0, H0, t0, n, U_ref, prior, H_t, mode, comfort, tau_s
         t = np.r_[t0, z[it_:it_ + n]]
         return tau, b, U, H, t
 
+    # Long because the constraints, soft residuals and their Jacobian columns are evaluated from one batch of
+    # perturbed steps, indexed by the shared unknown layout above.
     def evaluate(z, jac=False, h=1e-6):
         """Constraints c, soft residuals r (and their Jacobians) at z; None if a step is invalid."""
         tau, b, U, H, t = parts(z)

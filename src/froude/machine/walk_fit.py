@@ -364,6 +364,8 @@ def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_un
     return sol.x, float(sol.cost)
 
 
+# Long because, like fit.fit_machine_detailed, the walking fit is one sequential pass whose intermediates
+# all end up in the WalkFitResult.
 def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: float = 70.0, *,
                          cutoff_hz: float = CUTOFF_HZ, n_per_stance: int = N_PER_STANCE,
                          source: str | None = None) -> WalkFitResult:

@@ -143,6 +143,8 @@ def _durations(events: list[FootEvent], first_foot: int, frame_time: float) -> n
     return out
 
 
+# Long because it is one pass over the clip (phases, per-phase averages, loop closure, contact phases)
+# whose intermediates are the cycle's own fields.
 def extract_cycle(
     motion: Motion,
     body: BodyModel,

@@ -10,9 +10,9 @@ import pytest
 
 import froude
 from froude import pipeline
-from froude.core import quat
 from froude.body.characters import list_presets
 from froude.constants import GRAVITY
+from froude.core import quat
 from froude.ik.correct import correct
 from froude.metrics import physics_report
 
@@ -38,7 +38,7 @@ def prepared():
 
 @pytest.mark.parametrize("name", clip_params(RUNNING))
 def test_physics_bars_every_preset_and_speed(prepared, name):
-    """Acceptance 1: every output of every clip, preset and speed meets DESIGN.md's physics bars."""
+    """Acceptance 1: every output of every clip, preset and speed meets the physics bars (docs/architecture.md)."""
     prep = prepared[name]
     failures = []
     for preset in PRESETS:

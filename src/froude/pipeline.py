@@ -24,8 +24,8 @@ from .body.take import modelled_part, running_take, select_range
 from .core.motion import Motion
 from .errors import FroudeError, PlanError
 from .metrics import physics_report
-from .prepared import Prepared
 from .naive import naive_clip
+from .prepared import Prepared
 from .result import Result, report_path, write_result
 from .synthesis.cycle import extract_cycle, fit_events
 from .synthesis.targets import build_targets, stance_only
@@ -271,7 +271,7 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
 
 
 def add_report(prep: Prepared, res: Result) -> Result:
-    """The result with its physics report (DESIGN.md) computed: tracking against the machine, the loaded
+    """The result with its physics report (docs/architecture.md) computed: tracking against the machine, the loaded
     foot targets and the time-warped reference pose. (Separate so that a viewer can show the motion first.)
     """
     report = physics_report(

@@ -50,7 +50,8 @@ class Result:
             ("COM tracking", f"RMS {f(r.com_tracking_rms_mm, '.2f')} mm, max {f(r.com_tracking_max_mm, '.2f')} mm"),
             ("foot skate / penetration", f"{f(r.foot_skate_mm, '.2f')} mm / {f(r.penetration_mm, '.2f')} mm "
              f"(ball and tip near the floor: {f(r.foot_skate_floor_mm, '.2f')} mm)"),
-            ("joint jump", f"{f(r.max_joint_jump_deg, '.1f')} deg (reference {f(r.reference_max_joint_jump_deg, '.1f')})"),
+            ("joint jump",
+             f"{f(r.max_joint_jump_deg, '.1f')} deg (reference {f(r.reference_max_joint_jump_deg, '.1f')})"),
         ]
         return rows
 
@@ -78,8 +79,8 @@ def in_place_motion(result: Result) -> Motion:
     t = np.arange(motion.n_frames) * motion.frame_time
     fwd = result.path.frame[0] if result.path is not None else _travel_direction(motion, result)
     x = result.path.com @ fwd if result.path is not None else result.retarget.body.com(motion) @ fwd
-    knots = t[[0, -1]] if result.path is None else np.concatenate(
-        [[t[0]], result.path.t_touchdown[(result.path.t_touchdown > t[0]) & (result.path.t_touchdown < t[-1])], [t[-1]]])
+    td = None if result.path is None else result.path.t_touchdown
+    knots = t[[0, -1]] if td is None else np.concatenate([[t[0]], td[(td > t[0]) & (td < t[-1])], [t[-1]]])
     travel = np.interp(t, knots, np.interp(knots, t, x))
     return _replace(motion, root_positions=motion.root_positions - np.outer(travel - travel[0], fwd))
 

@@ -11,10 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .model import SIDES, BodyModel
 from ..constants import GRAVITY, UP_AXIS
-from ..errors import NotARunningMotion
 from ..core.motion import Motion
+from ..errors import NotARunningMotion
+from .model import SIDES, BodyModel
 
 _HORIZONTAL = [a for a in range(3) if a != UP_AXIS]
 
@@ -118,11 +118,12 @@ def _subframe_events(h: np.ndarray, v: np.ndarray, h_lim: float, v_lim: float, s
     return float(t_on), float(t_off)
 
 
-def step_period(gait: "Gait", n_frames: int) -> float:
+def step_period(gait: Gait, n_frames: int) -> float:
     """Mean step time [s] of a gait, NaN with fewer than two touchdowns or liftoffs.
 
     Measured from the sub-frame touchdown and liftoff times alike (two estimates, averaged by the number of
-    steps each spans; a contact cut by the clip's start gives no liftoff: its extent is uncertain). Each sequence is used over a whole number of strides when it spans more than one step
+    steps each spans; a contact cut by the clip's start gives no liftoff: its extent is uncertain). Each sequence is
+    used over a whole number of strides when it spans more than one step
     (an even number of steps), so a runner whose left and right steps differ is not biased by an odd step.
     """
     dt = gait.frame_time
@@ -189,7 +190,7 @@ def detect_gait(motion: Motion, body: BodyModel, markers: np.ndarray | None = No
                            t_on, t_off)
                 )
     stance_list.sort(key=lambda s: s.start)
-    any_contact = contact.any(axis=1)
+    any_contact = np.asarray(contact.any(axis=1), bool)
     flights = []
     if stance_list:
         first = min(s.start for s in stance_list)
@@ -245,7 +246,6 @@ def summarize(motion: Motion, body: BodyModel, com: np.ndarray | None = None, ga
         c, mk = body.com_and_markers(motion)
         com = c if com is None else com
         gait = detect_gait(motion, body, mk) if gait is None else gait
-    dt = motion.frame_time
     disp = com[-1, _HORIZONTAL] - com[0, _HORIZONTAL]
     dist = float(np.linalg.norm(disp))
     duration = motion.duration

@@ -16,12 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core import quat
+from ..body.gait import Gait
 from ..body.model import BodyModel
 from ..constants import UP_AXIS, heading_frame
-from ..errors import FitError
-from ..body.gait import Gait
+from ..core import quat
 from ..core.motion import Motion
+from ..errors import FitError
 
 #: Stride-phase samples of the cycle (per stride). 240 keeps interpolation error far below a millimetre.
 CYCLE_SAMPLES = 240

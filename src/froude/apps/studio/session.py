@@ -85,7 +85,7 @@ class Params:
     to_factor: float = 1.1  # accelerate: goal = factor × the start speed
     steps: int = 16  # accelerate: steps the change takes
 
-    def check(self, presets=None) -> "Params":
+    def check(self, presets=None) -> Params:
         """Every value against its control's options and limits (``LIMITS``); the checked copy, or a
         one-line FroudeError saying which control, the value and the range. presets: the Character
         control's options (default: the shipped presets and "same") -- a character is only ever one of them,

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import rig_variants as rv
-from conftest import BANDAI_RUNS, RUNNING, clip, clip_params, read_bvh_oracle
+from conftest import BANDAI_RUNS, MOCAP, RUNNING, clip, clip_params, read_bvh_oracle
 from froude import conventions
 from froude.body import BodyModel, find_roles
 from froude.gait import detect_gait, summarize
@@ -51,8 +51,8 @@ def _variants(name):
     out["cc_helpers"] = lambda b: rv.extra_root(rv.with_helpers(cc(b), helpers), "CC_Base_BoneRoot")
     out["six_channels"] = rv.six_channels
     if kind == "cmu":  # 120 Hz clips; the Bandai clips are 30 Hz already
-        out["60Hz"] = functools.partial(rv.every, n=2)
-        out["30Hz"] = functools.partial(rv.every, n=4)
+        out["60Hz"] = functools.partial(rv.every, n=2, pose_frames=1)  # the CMU files open with a T-pose row
+        out["30Hz"] = functools.partial(rv.every, n=4, pose_frames=1)
     return out
 
 
@@ -92,24 +92,15 @@ ALL_RUNS = RUNNING + BANDAI_RUNS
 
 @pytest.mark.parametrize("name,variant", _cases(ALL_RUNS))
 def test_info_is_the_same_in_every_convention(name, variant, tmp_root):
+    """Speed, Froude number, leg length and step frequency within 1 % (issue 12, acceptance 1), at 30 and
+    60 Hz too: the step period is timed at midstance, where the COM passes over the planted ball, which a
+    30 Hz frame does not quantise (gait.midstance_times)."""
     ref = _info(str(clip(name)))
     got = _info(_variant_file(name, variant, tmp_root))
-    for key in ("speed", "froude", "leg"):
+    for key in ("speed", "froude", "leg", "step_hz"):
         assert got[key] == pytest.approx(ref[key], rel=0.01), (key, got, ref)
-    if variant not in ("60Hz", "30Hz"):  # the contacts at other frame rates: test_step_frequency_at_low_rates
-        assert got["step_hz"] == pytest.approx(ref["step_hz"], rel=0.01)
     # the height is read in a pose from the motion when the rest pose is folded: a few per cent apart
     assert got["height"] == pytest.approx(ref["height"], rel=0.06 if variant == "folded" else 0.005)
-
-
-@pytest.mark.xfail(reason="contacts found at 30/60 Hz give another step frequency on some clips (gait.py, "
-                          "issue 13: engineer take)", strict=False)
-@pytest.mark.parametrize("name", clip_params(RUNNING))
-@pytest.mark.parametrize("variant", ["60Hz", "30Hz"])
-def test_step_frequency_at_low_rates(name, variant, tmp_root):
-    ref = _info(str(clip(name)))
-    got = _info(_variant_file(name, variant, tmp_root))
-    assert got["step_hz"] == pytest.approx(ref["step_hz"], rel=0.01)
 
 
 FIT_CLIPS = ("09_01", "09_05", "02_03", "dataset-1_run_tired_001", "dataset-1_dash_active_001")
@@ -124,21 +115,43 @@ def _fit(path):
     return m.K, m.theta0
 
 
-_RATE_XFAIL = pytest.mark.xfail(reason="the fit at 30/60 Hz (machine/fit.py, issue 13: engineer take) gives K "
-                                       "a few per cent apart on some clips", strict=False)
-
-
-def _fit_cases():
-    return [pytest.param(*c, marks=_RATE_XFAIL) if len(c) == 2 and c[1] in ("30Hz", "60Hz") else c
-            for c in _cases(FIT_CLIPS)]
-
-
-@pytest.mark.parametrize("name,variant", _fit_cases())
-def test_fit_is_the_same_in_every_convention(name, variant, tmp_root):
+def _assert_same_fit(name, path):
     K0, th0 = _fit(str(clip(name)))
-    K, th = _fit(_variant_file(name, variant, tmp_root))
-    assert K == pytest.approx(K0, rel=0.03)
-    assert abs(math.degrees(th - th0)) <= 0.5
+    K, th = _fit(path)
+    assert K == pytest.approx(K0, rel=0.03), (K, K0)
+    assert abs(math.degrees(th - th0)) <= 0.5, (math.degrees(th), math.degrees(th0))
+
+
+@pytest.mark.parametrize("name,variant", [c for c in _cases(FIT_CLIPS) if c[-1] not in ("60Hz", "30Hz")])
+def test_fit_is_the_same_in_every_convention(name, variant, tmp_root):
+    """K within 3 %, θ0 within 0.5° (issue 12, acceptance 1)."""
+    _assert_same_fit(name, _variant_file(name, variant, tmp_root))
+
+
+# Measured on this machine (K, θ0 of the 30 Hz variant against the 120 Hz clip): at 30 Hz the COM's
+# acceleration aliases (a 30 Hz sample of a running body's COM holds its 15-30 Hz impact content folded
+# below 15 Hz, whatever the interpolation: cubic, quintic and band-limited all gave the same), so the
+# force-threshold events move 2-6 ms and the per-stance spring fits, the prior of K, a few per cent.
+_RATE_SHORT = {
+    ("09_02", "30Hz"): "K +4.4 %, θ0 −0.74° (events 5 ms apart: COM acceleration aliased at 30 Hz)",
+    ("09_03", "30Hz"): "K −3.1 % (per-stance spring fits of the aliased force)",
+    ("09_06", "30Hz"): "K +7.4 % (one stance's spring fit 14.1 → 15.6 on the aliased force)",
+    ("09_07", "30Hz"): "K +4.2 % (stance time 2.7 ms short: COM acceleration aliased at 30 Hz)",
+}
+
+
+def _rate_fit_cases():
+    if MOCAP is None:
+        return [pytest.param(None, None, marks=pytest.mark.skip(reason="real clips not found"))]
+    return [pytest.param(n, v, marks=pytest.mark.xfail(reason=_RATE_SHORT[(n, v)], strict=True))
+            if (n, v) in _RATE_SHORT else pytest.param(n, v)
+            for n in RUNNING for v in ("60Hz", "30Hz")]
+
+
+@pytest.mark.parametrize("name,variant", _rate_fit_cases())
+def test_fit_is_the_same_at_60_and_30_hz(name, variant, tmp_root):
+    """Every CMU run thinned to 60 and 30 Hz fits like its 120 Hz original (K 3 %, θ0 0.5°)."""
+    _assert_same_fit(name, _variant_file(name, variant, tmp_root))
 
 
 @pytest.mark.parametrize("variant", list(_variants("09_01")))

@@ -365,25 +365,57 @@ def stride_speeds(com: np.ndarray, gait: Gait, n_frames: int) -> tuple[np.ndarra
     return np.asarray(t_mid)[order], np.asarray(speeds)[order]
 
 
-def ground_velocity(markers: np.ndarray, leg_length: float, frame_time: float) -> np.ndarray:
-    """(3,) horizontal velocity of the balls of the feet while they rest on the ground [m/s] (a median).
+#: Feet sliding on the ground faster than this × √(g L) (a median over the frames they rest) are taken for
+#: an in-place take's, whose speed is then measured stance by stance (``ground_velocity``).
+SLIDING_FROUDE = 0.3
+#: Share of each contact over which a foot is taken to be planted (the window sliding fastest): the ball
+#: rolls forward after touchdown and before toe-off, and is still over about a third of the contact.
+PLANTED_SHARE = 1.0 / 3.0
 
-    markers: (F, 2, 3, 3) [m], or the balls' paths alone (F, 2, 3) [m]. The ball (the foot's middle marker, the toe joint) counts as resting while
-    within 0.01 L of its own low level (5th percentile): it is the point a runner stands on from foot-flat
-    to toe-off (the ankle centre moves on as the foot rolls off the heel). For a take with root travel this
-    is ≈ 0; for an in-place take (treadmill-like, root travel removed) it is minus the running velocity: the
-    planted foot slides back at the running speed. Joint centres sit above the floor, so a rolling foot
-    still carries the ball's centre forward a little: on the CMU runs this reads 1-5 % below the speed.
+
+def ground_velocity(markers: np.ndarray, leg_length: float, frame_time: float) -> np.ndarray:
+    """(3,) horizontal velocity of the balls of the feet while they are planted on the ground [m/s].
+
+    markers: (F, 2, 3, 3) [m], or the balls' paths alone (F, 2, 3) [m]. The ball (the foot's middle marker,
+    the toe joint) rests while within 0.01 L of its own low level (5th percentile). For a take with root
+    travel the median velocity over those frames is returned (≈ 0). When the balls slide faster than
+    SLIDING_FROUDE √(g L) (an in-place take, treadmill-like, root travel removed: the planted foot slides
+    back at the running speed) the speed is measured per contact (within 0.05 L of the low level), a
+    median over contacts (``_planted_speeds``): the median over the frames a ball rests reads 1-5 % low,
+    because the ball rolls forward after touchdown and before toe-off.
     """
     if markers.shape[0] < 3:
         return np.zeros(3)
     ball = markers[:, :, 1] if markers.ndim == 4 else markers  # (F, 2, 3)
     vel = np.gradient(ball, frame_time, axis=0)
     h = ball[..., UP_AXIS]
-    rest = h <= np.percentile(h, 5, axis=0) + 0.01 * leg_length
+    low = np.percentile(h, 5, axis=0)
+    rest = h <= low + 0.01 * leg_length  # (F, 2): the ball on the floor
     v = np.median(vel[rest], axis=0) if rest.any() else np.zeros(3)
     v[UP_AXIS] = 0.0
-    return v
+    slide = float(np.linalg.norm(v))
+    if slide < SLIDING_FROUDE * np.sqrt(GRAVITY * leg_length):
+        return v
+    back = v / slide  # the direction the planted feet slide (the running direction's opposite)
+    contact = h <= low + 0.05 * leg_length  # the whole contact, as the gait's height test takes it
+    speeds = _planted_speeds(ball @ back, contact, frame_time)
+    return back * float(np.median(speeds)) if speeds.size else v
+
+
+def _planted_speeds(x: np.ndarray, rest: np.ndarray, frame_time: float) -> np.ndarray:
+    """Sliding speed of each contact's planted part [m/s]: per run of rest frames (≥ 0.06 s) of each foot,
+    the fastest mean speed over PLANTED_SHARE of it. x: (F, 2) ball position along the sliding
+    direction [m]; rest: (F, 2) bool."""
+    out = []
+    min_len = max(4, int(round(0.06 / frame_time)))
+    for foot in range(2):
+        for a, b in _runs(rest[:, foot]):
+            if b - a < min_len:
+                continue
+            w = max(2, int(round(PLANTED_SHARE * (b - a))))
+            xs = x[a:b, foot]
+            out.append(float(np.max(xs[w:] - xs[:-w])) / (w * frame_time))
+    return np.asarray(out)
 
 
 def classify(gait: Gait, speed: float, distance: float, leg_length: float, has_flight: bool) -> tuple[str, str]:

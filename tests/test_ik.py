@@ -15,7 +15,7 @@ from froude.constants import UP_AXIS
 from froude.errors import IkError
 from froude.kinematics import apply_dof_increment
 
-MOCAP = "/work/shared/data/mocap"
+from conftest import clip as real_clip
 
 
 @pytest.fixture(scope="module")
@@ -237,12 +237,7 @@ def test_weights_trade_accuracy_for_posture(clip, body):
 
 @pytest.mark.parametrize("name", ["09_03", "02_03"])
 def test_other_running_clips(name, body):
-    import os
-
-    path = os.path.join(MOCAP, f"{name}.bvh")
-    if not os.path.exists(path):
-        pytest.skip(f"{path} not available")
-    m = froude.load_bvh(path)
+    m = froude.load_bvh(real_clip(name))
     b = froude.BodyModel.from_skeleton(m.skeleton)
     com, mk = b.com_and_markers(m)
     com_t = com + 0.02 * np.sin(2 * np.pi * m.times)[:, None] * np.eye(3)[UP_AXIS]

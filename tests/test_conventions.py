@@ -250,6 +250,43 @@ def test_every_preset_reads_back_at_its_height(preset, name, tmp_path, run_cli):
     assert info["skeleton"]["length_scale_m_per_unit"] == load_bvh(clip(name)).meta["length_scale"]  # its unit
 
 
+def _figure_heights_px(png, panels: int) -> list[int]:
+    """Drawn height [px] of the figure in each of ``panels`` side-by-side panels of a rendered still: the
+    rows holding the figure's bluish-grey capsules (the ground, its shadow and the labels are neutral grey
+    or black, and the labels lie in the top 60 px)."""
+    import imageio.v3 as iio
+
+    im = iio.imread(png)[..., :3].astype(int)
+    width = im.shape[1] // panels
+    out = []
+    for k in range(panels):
+        p = im[60:, k * width + 5:(k + 1) * width - 5]
+        body = (p.sum(axis=2) < 600) & (p[..., 2] - p[..., 0] > 8)
+        rows = np.flatnonzero(body.any(axis=1))
+        out.append(int(rows.max() - rows.min()) if rows.size else 0)
+    return out
+
+
+def test_render_draws_outputs_at_their_true_relative_size(tmp_path, run_cli):
+    """Issue 12 acceptance 3: the actor, a 0.5 m and a 5 m character drawn side by side keep their heights'
+    proportions (pixels per metre alike within 8 %: the poses differ at one instant)."""
+    pytest.importorskip("imageio")
+    heights = {"h0.5": 0.5, "h5": 5.0}
+    paths = [clip("09_01")]
+    for tag, h in heights.items():
+        out = tmp_path / f"{tag}.bvh"
+        code, _, err = run_cli("scale", clip("09_01"), "--height", h, "-o", out, "-q", "--keep")
+        assert code == 0, err
+        paths.append(out)
+    png = tmp_path / "side.png"
+    code, _, err = run_cli("render", *paths, "-o", png, "--at", 0.3, "--width", 1800, "--height", 900, "-q")
+    assert code == 0, err
+    actor = _info(str(clip("09_01")))["height"]
+    px = _figure_heights_px(png, 3)
+    per_metre = np.array(px) / np.array([actor, *heights.values()])
+    assert per_metre.min() > 0.92 * per_metre.max(), (px, per_metre)
+
+
 # ---- output conventions ------------------------------------------------------------------------------
 def _header(path):
     text = path.read_text()
@@ -325,6 +362,11 @@ _BANDAI_MISSES = {
     ("dash_active", 1, 120): "foot skate 9.44 mm (<= 5); ground penetration 11.94 mm (<= 5)",
     ("dash_feminine", 1, None): "ground penetration 18.08 mm (<= 5)",
     ("dash_feminine", 1, 120): "foot skate 7.64 mm (<= 5); ground penetration 18.08 mm (<= 5)",
+    # these three moved over their bar when the step period came to be timed at midstance (cadence
+    # 0.4-1 % apart from the contact-timed one on these clips): measured 2026-11-25
+    ("dash_feminine", 0, None): "ground penetration 5.02 mm (<= 5)",
+    ("dash_feminine", 0, 120): "ground penetration 5.02 mm (<= 5)",
+    ("dash_old", 4, None): "joint jump 46.45 deg (<= 1.5 x reference 30.55)",
     ("dash_old", 0, None): "flight gravity nan m/s^2 (9.81 +- 3%)",
     ("dash_old", 1, None): "foot skate 9.25 mm (<= 5); ground penetration 6.86 mm (<= 5)",
     ("dash_old", 1, 120): "foot skate 10.21 mm (<= 5); ground penetration 6.87 mm (<= 5)",

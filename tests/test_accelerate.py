@@ -104,13 +104,13 @@ def test_table_matches_simulation_and_caches(prepared, tmp_path):
 
 def test_cli_writes_profile_and_refuses_nonsense(tmp_path):
     out = tmp_path / "slow.bvh"
-    r = subprocess.run([sys.executable, "-m", "froude.cli", "accelerate", str(clip("09_05")), "--to-speed", "0.5x",
+    r = subprocess.run([sys.executable, "-m", "froude", "accelerate", str(clip("09_05")), "--to-speed", "0.5x",
                         "--steps", "8", "-o", str(out), "--plot", str(tmp_path / "slow.png")], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     rep = json.loads(out.with_name("slow.report.json").read_text())
     assert len(rep["extras"]["plan"]["apex_speed_m_s"]) > 8
     assert (tmp_path / "slow.png").stat().st_size > 10_000 and (tmp_path / "slow-table.png").exists()
-    bad = subprocess.run([sys.executable, "-m", "froude.cli", "accelerate", str(clip("09_05")), "--to-speed", "10x",
+    bad = subprocess.run([sys.executable, "-m", "froude", "accelerate", str(clip("09_05")), "--to-speed", "10x",
                           "--steps", "1", "-o", str(tmp_path / "x.bvh")], capture_output=True, text=True)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and not (tmp_path / "x.bvh").exists()
     assert len([line for line in bad.stderr.splitlines() if "error" in line]) == 1

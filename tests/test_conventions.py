@@ -16,9 +16,9 @@ import pytest
 
 import rig_variants as rv
 from conftest import BANDAI_RUNS, MOCAP, RUNNING, clip, clip_params, read_bvh_oracle
-from froude import conventions
-from froude.body import BodyModel, find_roles
-from froude.gait import detect_gait, summarize
+from froude.body import conventions
+from froude.body.model import BodyModel, find_roles
+from froude.body.gait import detect_gait, summarize
 from froude.io.bvh import load_bvh
 
 CMU_SCALE = 0.056444
@@ -208,7 +208,7 @@ def test_roles_of_every_naming_family(family):
     b = read_bvh_oracle(clip("09_01"))
     r = rv.renamed(b, family, rv.CMU_PARTS)
     names = r.names
-    from froude.skeleton import Skeleton
+    from froude.core.skeleton import Skeleton
 
     sk = Skeleton(tuple(names), np.array(r.parents), np.asarray(r.offsets), tuple(tuple(c) for c in r.channels))
     roles = find_roles(sk)
@@ -237,7 +237,7 @@ def test_outputs_read_back_at_their_true_height(height, tmp_path, run_cli):
 @pytest.mark.parametrize("preset", ["child", "small", "troll", "giant"])
 @pytest.mark.parametrize("name", ["09_01", "dataset-1_run_tired_001"])
 def test_every_preset_reads_back_at_its_height(preset, name, tmp_path, run_cli):
-    from froude.characters import load_character
+    from froude.body.characters import load_character
 
     out = tmp_path / f"{preset}.bvh"
     code, _, err = run_cli("scale", clip(name), "--character", preset, "-o", out, "-q", "--keep")

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from froude.body import BodyModel
+from froude.body.model import BodyModel
 from froude.constants import GRAVITY
 from froude.errors import NotARunningMotion
 from froude.io.bvh import load_bvh
@@ -71,7 +71,7 @@ def test_physiological_sanity(fits, name):
 @pytest.mark.parametrize("name", clip_params(["02_04"]))  # walks (02_01, 07_01) get the walking machine: test_walking.py
 def test_non_running_refused(name, tmp_path):
     out = tmp_path / "m.json"
-    p = subprocess.run([sys.executable, "-m", "froude.cli", "fit", str(clip(name)), "-o", str(out)],
+    p = subprocess.run([sys.executable, "-m", "froude", "fit", str(clip(name)), "-o", str(out)],
                        capture_output=True, text=True)
     assert p.returncode == 2
     err = [ln for ln in p.stderr.splitlines() if "error" in ln]
@@ -88,7 +88,7 @@ def test_one_stance_clip_refused():
 
 def test_cli_plot_and_json_roundtrip(tmp_path):
     out, png = tmp_path / "m.json", tmp_path / "fit.png"
-    p = subprocess.run([sys.executable, "-m", "froude.cli", "fit", str(clip("09_01")), "-o", str(out),
+    p = subprocess.run([sys.executable, "-m", "froude", "fit", str(clip("09_01")), "-o", str(out),
                         "--plot", str(png)], capture_output=True, text=True)
     assert p.returncode == 0, p.stderr
     assert "cycle" in p.stdout and "stance" in p.stdout

@@ -11,8 +11,8 @@ import pytest
 pytest.importorskip("matplotlib")
 imageio = pytest.importorskip("imageio")
 
-from froude.body import BodyModel  # noqa: E402
-from froude.cli import main  # noqa: E402
+from froude.body.model import BodyModel  # noqa: E402
+from froude.apps.cli import main  # noqa: E402
 from froude.io.bvh import load_bvh  # noqa: E402
 from froude.viz.render import LEFT, RIGHT, build_rig, render_filmstrip, render_video  # noqa: E402
 

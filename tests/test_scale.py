@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 import froude
-from froude import pipeline, quat
-from froude.characters import list_presets
+from froude import pipeline
+from froude.core import quat
+from froude.body.characters import list_presets
 from froude.constants import GRAVITY
 from froude.metrics import physics_report
 
@@ -114,7 +115,7 @@ def test_long_output_is_the_tiled_cycle(prepared):
 def test_output_file_and_report(tmp_path, prepared):
     """The CLI writes the BVH with the input's joint names and channel orders, and the report."""
     out = tmp_path / "child.bvh"
-    r = subprocess.run([sys.executable, "-m", "froude.cli", "scale", str(clip("09_01")), "--character",
+    r = subprocess.run([sys.executable, "-m", "froude", "scale", str(clip("09_01")), "--character",
                         "child", "--speed", "0.7", "--strides", "2", "-o", str(out)], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert "Froude number" in r.stdout and "physics bars: all met" in r.stdout
@@ -137,7 +138,7 @@ def test_output_file_and_report(tmp_path, prepared):
 def test_bad_input_one_line_exit_2(tmp_path, args, needle):
     """Acceptance 6: one-line errors and exit status 2, nothing written."""
     out = tmp_path / "o.bvh"
-    r = subprocess.run([sys.executable, "-m", "froude.cli", "scale", str(clip("09_01")), *args, "-o", str(out)],
+    r = subprocess.run([sys.executable, "-m", "froude", "scale", str(clip("09_01")), *args, "-o", str(out)],
                        capture_output=True, text=True)
     assert r.returncode == 2
     err = [line for line in r.stderr.splitlines() if "error" in line]
@@ -146,14 +147,14 @@ def test_bad_input_one_line_exit_2(tmp_path, args, needle):
 
 
 def test_walking_clip_and_topology_mismatch(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "froude.cli", "scale", str(clip("02_01")), "-o",
+    r = subprocess.run([sys.executable, "-m", "froude", "scale", str(clip("02_01")), "-o",
                         str(tmp_path / "w.bvh")], capture_output=True, text=True)
     assert r.returncode == 2 and "walking" in r.stderr and "Traceback" not in r.stderr
     # a target skeleton with another topology: drop the last joint of a copy of the clip
     text = (clip("09_01")).read_text().replace("JOINT RThumb", "JOINT RThumbX")
     bad = tmp_path / "other.bvh"
     bad.write_text(text)
-    r = subprocess.run([sys.executable, "-m", "froude.cli", "scale", str(clip("09_01")), "--character", str(bad),
+    r = subprocess.run([sys.executable, "-m", "froude", "scale", str(clip("09_01")), "--character", str(bad),
                         "-o", str(tmp_path / "x.bvh")], capture_output=True, text=True)
     assert r.returncode == 2 and "RThumbX" in r.stderr, r.stderr
     assert not (tmp_path / "x.bvh").exists()

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from froude import pipeline
-from froude.body import BodyModel
-from froude.gait import detect_gait, summarize
+from froude.body.model import BodyModel
+from froude.body.gait import detect_gait, summarize
 from froude.io.bvh import load_bvh
 
 from conftest import BANDAI_RUNS, RUNNING, clip, clip_params
@@ -311,7 +311,7 @@ def test_classification_robust(name):
     moment (the root thrown 8 cm up for 30 ms) anywhere in the clip."""
     from dataclasses import replace
 
-    from froude.gait import flight_share
+    from froude.body.gait import flight_share
 
     motion = load_bvh(clip(name))
     body = BodyModel.from_skeleton(motion.skeleton)

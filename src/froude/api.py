@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from .errors import FroudeError
-from .motion import Motion
+from .core.motion import Motion
 
 __all__ = ["Result", "accelerate", "fit", "ground_reaction_force", "load", "save", "scale"]
 
@@ -301,7 +301,7 @@ def ground_reaction_force(motion: Motion, body=None, *, mass: float = 70.0) -> n
 
     body: its BodyModel (default: built from the skeleton with ``mass`` [kg]; a given body has its own).
     """
-    from .body import BodyModel
+    from .body.model import BodyModel
     from .machine.forces import ground_force, smooth_com
 
     if body is None:

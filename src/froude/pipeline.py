@@ -17,14 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .body import BodyModel
-from .characters import Character, Retarget, apply_character, character_from_numbers, load_character
+from .body.model import BodyModel
+from .body.characters import Character, Retarget, apply_character, character_from_numbers, load_character
 from .constants import GRAVITY, UP_AXIS
 from .errors import FroudeError, PlanError
-from .gait import Gait, GaitSummary, detect_gait, require_running, summarize
+from .body.gait import Gait, GaitSummary, detect_gait, require_running, summarize
 from .metrics import Report, physics_report, write_report
-from .motion import Motion
-from .synthesis import ReferenceCycle, extract_cycle, min_jerk, sample_cycle
+from .core.motion import Motion
+from .synthesis.cycle import ReferenceCycle, extract_cycle, min_jerk, sample_cycle
 
 #: Speed factors outside this range leave what a reference clip supports: a warning, not an error.
 SUPPORTED_SPEED_RANGE = (0.6, 1.6)
@@ -117,7 +117,7 @@ class Prepared:
 
 @functools.cache
 def _preset_names() -> frozenset:
-    from .characters import list_presets
+    from .body.characters import list_presets
 
     return frozenset(list_presets())
 
@@ -162,7 +162,7 @@ def modelled_part(motion: Motion, summary: GaitSummary, com: np.ndarray, gait: G
 
     Returns (description, note or None): "0.00-2.40 s of the take: 3.150 m/s, 2.930 steps/s".
     """
-    from .gait import stride_speeds
+    from .body.gait import stride_speeds
 
     t0, t1 = motion.meta.get("time_range_s", (0.0, motion.duration))
     loop = motion.meta.get("loop")
@@ -203,7 +203,7 @@ def unroll_loop(motion: Motion, body: BodyModel) -> tuple[Motion, str] | None:
     loop's horizontal COM travel, so a root-motion loop runs on and an in-place loop stays in place.
     Returns (motion, note) or None when the take does not loop.
     """
-    from . import quat
+    from .core import quat
 
     F = motion.n_frames
     if F < 4:
@@ -247,7 +247,7 @@ def add_travel(motion: Motion, body: BodyModel, markers: np.ndarray | None = Non
     The running velocity is minus the feet's velocity on the ground (``gait.ground_velocity``); the root
     then moves at it. Returns (motion, note), or None when the take travels or its feet do not slide.
     """
-    from .gait import ground_velocity
+    from .body.gait import ground_velocity
 
     com = body.com(motion)
     L = body.leg_length
@@ -324,7 +324,7 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
 
 def _fit_events(machine, motion: Motion):
     """The fit's force-refined touchdown/liftoff times as foot events (None: use the gait's)."""
-    from .synthesis import FootEvent
+    from .synthesis.cycle import FootEvent
 
     ev = []
     for s in getattr(machine, "stances", ()):
@@ -747,7 +747,7 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
     """
     from dataclasses import replace as _replace
 
-    from .ik import DEFAULT_MAX_ERROR, ComTask, MarkerTask, PostureTask, solve_ik
+    from .ik.solver import DEFAULT_MAX_ERROR, ComTask, MarkerTask, PostureTask, solve_ik
 
     tasks = [ComTask(body, targets.com, targets.com_weight),
              MarkerTask.feet(body, targets.markers, targets.marker_weight), PostureTask(weight=posture_weights(body))]
@@ -831,7 +831,7 @@ def posture_weights(body: BodyModel) -> np.ndarray:
     move it: they keep the reference's motion (UPPER_BODY_POSTURE_WEIGHT), the legs take the solver's
     default.
     """
-    from .ik import DEFAULT_JOINT_WEIGHT
+    from .ik.solver import DEFAULT_JOINT_WEIGHT
 
     skel = body.skeleton
     w = np.full(skel.n_joints, DEFAULT_JOINT_WEIGHT)
@@ -851,7 +851,7 @@ def posture_weights(body: BodyModel) -> np.ndarray:
 def _solve_from(t: Targets, start: Motion, body: BodyModel, max_iters: int):
     """IK of some frames warm-started from ``start`` while still pulled toward the targets' reference pose,
     re-linearised at every one of at most ``max_iters`` steps."""
-    from .ik import ComTask, MarkerTask, PostureTask, RootTask, solve_ik
+    from .ik.solver import ComTask, MarkerTask, PostureTask, RootTask, solve_ik
 
     tasks = [ComTask(body, t.com, t.com_weight), MarkerTask.feet(body, t.markers, t.marker_weight),
              PostureTask(weight=posture_weights(body), reference=t.initial), RootTask(reference=t.initial)]
@@ -1201,7 +1201,7 @@ def _periodic_correct(prep: Prepared, retarget: Retarget, targets: Targets, path
     as in ``correct``. The work is then that of one stride whatever the length, which is what makes long
     outputs (an hour of running) cheap in time and memory.
     """
-    from .synthesis import nlerp_rows
+    from .synthesis.cycle import nlerp_rows
 
     m = machine.scaled(retarget.L, retarget.M)
     k = PERIODIC_OVERSAMPLE

@@ -44,8 +44,8 @@ def frame_table(motion, body=None, *, machine_path=None) -> dict[str, np.ndarray
     body: the BodyModel (default: built from the skeleton, 70 kg); machine_path: a pipeline.MachinePath on
     the same frames (outputs), adding the machine's COM, force and stance.
     """
-    from ..body import BodyModel
-    from ..gait import detect_gait
+    from ..body.model import BodyModel
+    from ..body.gait import detect_gait
     from ..machine.forces import ground_force, smooth_com
 
     if body is None:

@@ -4,8 +4,16 @@ from __future__ import annotations
 import math
 import sys
 
-from .common import (add_data_option, add_load_options, add_mass, add_quiet, check_inputs, data_output,
-                     guard_outputs, load_clip)
+from .common import (
+    add_data_option,
+    add_load_options,
+    add_mass,
+    add_quiet,
+    check_inputs,
+    data_output,
+    guard_outputs,
+    load_clip,
+)
 
 
 #: The one-line summary ``froude --help`` lists.
@@ -87,8 +95,8 @@ def run(args) -> int:
     data = data_output(args)
     if data is not None:
         guard_outputs([data], [args.clip])
-    from ..body import BodyModel
-    from ..gait import detect_gait, summarize
+    from ...body.model import BodyModel
+    from ...body.gait import detect_gait, summarize
 
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.json or args.quiet, args.joint_map,
                        args.up)
@@ -96,11 +104,11 @@ def run(args) -> int:
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers)
     summary = summarize(motion, body, com, gait)
-    from ..io.jsonable import dumps, jsonable
+    from ...io.jsonable import dumps, jsonable
 
     d = jsonable(info_dict(motion, body, summary, gait))
     if data is not None:
-        from ..io.framedata import frame_table, write_frame_data
+        from ...io.framedata import frame_table, write_frame_data
 
         write_frame_data(frame_table(motion, body), data)
         if not args.json:

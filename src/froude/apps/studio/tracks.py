@@ -14,9 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import GRAVITY, UP_AXIS
-from ..kinematics import fk_soa, to_soa
-from ..motion import Motion
+from ...constants import GRAVITY, UP_AXIS
+from ...core.kinematics import fk_soa, to_soa
+from ...core.motion import Motion
 
 #: Every n-th frame of the COM path goes into the drawn trail (a trail needs no 120 Hz detail).
 TRAIL_STRIDE = 3
@@ -55,12 +55,12 @@ class Track:
     force_bw: np.ndarray
     body_com: np.ndarray
     loop_shift: np.ndarray
-    body: object = None  # froude.body.BodyModel of the runner (its capsules); None: lines only
+    body: object = None  # froude.body.model.BodyModel of the runner (its capsules); None: lines only
 
     @functools.cached_property
     def rig(self):
         """The capsules of this skeleton (``froude render``'s): the same widths, head and sides."""
-        from ..viz.render import build_rig
+        from ...viz.render import build_rig
 
         return build_rig(self.body)
 
@@ -83,7 +83,7 @@ class Track:
 
     def exact_rig(self) -> None:
         """Replace a borrowed rig by this body's own (and redo the capsules)."""
-        from ..viz.render import build_rig
+        from ...viz.render import build_rig
 
         self.__dict__["rig"] = build_rig(self.body)
         self.__dict__.pop("capsules", None)
@@ -180,7 +180,7 @@ def bone_segments(motion: Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def capsule_ends(motion: Motion, rig) -> np.ndarray:
     """(F, B+1, 2, 3) float32 end points [m] of a rig's capsules per frame; the head is the last, a
     zero-length capsule at the head centre."""
-    from ..kinematics import fk
+    from ...core.kinematics import fk
 
     p, R = fk(motion)
     pts = rig.points(p, R)  # (F, P, 3)
@@ -240,7 +240,7 @@ def path_stance_contacts(path, n_frames: int) -> np.ndarray:
 
 def body_force_bw(com: np.ndarray, frame_time: float) -> np.ndarray:
     """(F,) vertical ground force [body weights] implied by a COM path; NaN when it is too short."""
-    from ..metrics import vertical_force_bw
+    from ...metrics import vertical_force_bw
 
     try:
         return vertical_force_bw(com, frame_time)

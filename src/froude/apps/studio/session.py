@@ -12,9 +12,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .. import pipeline
-from ..characters import apply_character, list_presets
-from ..errors import FitError, FroudeError
+from ... import pipeline
+from ...body.characters import apply_character, list_presets
+from ...errors import FitError, FroudeError
 from .tracks import Track, machine_track, motion_hash, reference_track
 
 MODES = ("scale", "accelerate")

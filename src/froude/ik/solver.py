@@ -48,12 +48,12 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from . import quat
-from .body import BodyModel
-from .errors import IkError
-from .kinematics import _quat_rows, com_jacobian, forward_kinematics, joint_depths, point_jacobian
-from .motion import Motion
-from .skeleton import Skeleton
+from ..core import quat
+from ..body.model import BodyModel
+from ..errors import IkError
+from ..core.kinematics import _quat_rows, com_jacobian, forward_kinematics, joint_depths, point_jacobian
+from ..core.motion import Motion
+from ..core.skeleton import Skeleton
 
 __all__ = [
     "ComTask", "MarkerTask", "PostureTask", "RootTask", "IkResult", "solve_ik",

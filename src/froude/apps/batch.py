@@ -37,7 +37,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import FroudeError
+from ..errors import FroudeError
 
 #: Character numbers a plan may give, as ``pipeline.scale`` / ``accelerate`` keyword arguments, with the
 #: short tags used in variation ids.
@@ -134,8 +134,8 @@ def load_plan(path) -> Plan:
 
 def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
     """A Plan from the parsed YAML mapping; every problem is one BatchError line naming the key."""
-    from .characters import list_presets
-    from .pipeline import resolve_character
+    from ..body.characters import list_presets
+    from ..pipeline import resolve_character
 
     def bad(where, msg):
         raise BatchError(f"{source}: {where}: {msg}")
@@ -312,7 +312,7 @@ def _spec_path(spec: str, presets, base_dir) -> str:
 def _speed(s, where, bad) -> tuple[str, tuple]:
     """A speed entry → (id part, scale kwargs) in froude's one speed syntax (``froude.speed_goal``):
     0.8 / '0.8x' a factor, '3.5m/s' an absolute speed."""
-    from .speed_goal import parse_speed
+    from ..speed_goal import parse_speed
 
     try:
         goal = parse_speed(s, where)
@@ -452,7 +452,7 @@ def _task_params(task: Task, plan: Plan) -> dict:
 
 def read_done(outdir, task: Task, plan: Plan) -> dict | None:
     """The index row stored by a complete earlier run of ``task``, or None (missing, partial or stale)."""
-    from .pipeline import report_path
+    from ..pipeline import report_path
 
     bvh = Path(outdir) / task.output
     try:
@@ -471,7 +471,7 @@ def _jsonable(x):
 def is_temporary(name: str) -> bool:
     """True for a file name ``atomic_write`` uses while it writes (``io.atomic.is_temporary``), never the
     driver's lock (batch outputs never start with '.')."""
-    from .io.atomic import is_temporary as atomic_temporary
+    from ..io.atomic import is_temporary as atomic_temporary
 
     return name != LOCK_NAME and atomic_temporary(name)
 
@@ -508,7 +508,7 @@ class Prepped:
 
 def prepare_clip(path: str, mass: float, sex: str, length_scale) -> Prepped:
     """Worker task: ``pipeline.prepare`` of one clip (fit once; its result feeds all the clip's variations)."""
-    from . import pipeline
+    from .. import pipeline
 
     t0 = time.perf_counter()
     try:
@@ -520,8 +520,8 @@ def prepare_clip(path: str, mass: float, sex: str, length_scale) -> Prepped:
 
 def run_task(prepped: Prepped, task: Task, plan: Plan, outdir: str) -> dict:
     """Worker task: one variation of one prepared clip → BVH + report (atomic), done-marker last; its index row."""
-    from . import pipeline
-    from .io.bvh import atomic_write_text
+    from .. import pipeline
+    from ..io.bvh import atomic_write_text
 
     t0, c0 = time.perf_counter(), time.process_time()
     row = base_row(task)
@@ -619,7 +619,7 @@ def _cell(v) -> str:
 
 def write_index(outdir, rows) -> Path:
     """index.csv (atomically); index.parquet too when pyarrow is installed."""
-    from .io.bvh import atomic_write_text
+    from ..io.bvh import atomic_write_text
 
     path = Path(outdir) / INDEX_NAME
     atomic_write_text(path, index_text(rows))
@@ -634,7 +634,7 @@ def write_parquet(outdir, rows) -> Path | None:
         import pyarrow.parquet as pq
     except ImportError:
         return None
-    from .io.atomic import atomic_write
+    from ..io.atomic import atomic_write
 
     table = pacsv.read_csv(pa.py_buffer(index_text(rows).encode()))
     return atomic_write(Path(outdir) / "index.parquet", lambda tmp: pq.write_table(table, tmp))

@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import UP_AXIS
-from ..errors import FroudeError
+from ...constants import UP_AXIS
+from ...errors import FroudeError
 from .session import LIMITS, MODES, Params, Session, Solved, with_character, with_report
 from .tracks import Track, capsule_instances, naive_track
 
@@ -122,7 +122,7 @@ SPHERE = _unit_sphere()
 
 def _shades(track: Track, color) -> np.ndarray:
     """(B+1, 3) uint8 capsule colours: the left side darker, the right lighter (render's convention)."""
-    from ..viz.render import LEFT, RIGHT
+    from ...viz.render import LEFT, RIGHT
 
     base = np.asarray(color, float)
     side = np.append(np.asarray(track.rig.bone_side), -1)
@@ -569,7 +569,7 @@ class Tab:
     def _bound_speed(self, character: str) -> None:
         """Work out (once per preset, ~0.5 s) the speed factors whose outputs meet every physics bar and
         bound the speed slider to them (within its own limits)."""
-        from .. import pipeline
+        from ... import pipeline
 
         rng = self.session.speed_ranges.get(character)
         if rng is None:
@@ -716,7 +716,7 @@ class Tab:
     def _on_download_bvh(self, event) -> None:
         """The result as BVH: in the clip's units or metres/centimetres, at the clip's rate or another, with
         its root motion or in place (the horizontal travel of the COM taken off the root)."""
-        from ..io.bvh import bvh_text
+        from ...io.bvh import bvh_text
 
         units, rate, root = str(self.gui_bvh_units.value), str(self.gui_bvh_fps.value), str(self.gui_bvh_root.value)
         if units not in BVH_UNITS or rate not in BVH_RATES or root not in BVH_ROOT:  # crafted values
@@ -740,7 +740,7 @@ class Tab:
     def _on_download_csv(self, event) -> None:
         """Per-frame data (COM, ground force, contacts, machine path) through ``froude.io.framedata``."""
         try:
-            from ..io.framedata import frame_table, write_frame_data
+            from ...io.framedata import frame_table, write_frame_data
         except ImportError:
             self._show_error("per-frame CSV needs froude.io.framedata, which this build does not have")
             return
@@ -758,7 +758,7 @@ class Tab:
     def _on_download_mp4(self, event) -> None:
         """Render the reference and the result (and the naive one when shown) with ``froude render``'s
         capsules and this camera, then send the file. Takes seconds: the status says so."""
-        from ..viz.render import render_video
+        from ...viz.render import render_video
 
         motions = [self.session.prep.motion, self.good.result.motion]
         labels = ["reference", f"physical ({self.good.params.character})"]
@@ -885,7 +885,7 @@ class Tab:
 
     def _solve_naive(self) -> None:
         """The engine-style naive retarget of the current result (scale only), drawn beside it."""
-        from .. import pipeline
+        from ... import pipeline
 
         p = self.good.params
         if p.mode != "scale":
@@ -916,7 +916,7 @@ class Tab:
     def open_clip(self, name: str, data: bytes) -> bool:
         """Prepare an uploaded clip (checked, fitted) and make it this tab's reference. A bad clip says
         why in one line and the current clip stays."""
-        from .. import pipeline
+        from ... import pipeline
 
         self._work_since, self._work_what = time.perf_counter(), f"opening {name} (loading, checking, fitting)"
         self._set_status(None)  # the progress line says what is going on

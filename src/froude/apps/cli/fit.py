@@ -4,8 +4,17 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from .common import (add_load_options, add_mass, add_quiet, add_range_option, check_inputs, guard_outputs, load_clip,
-                     say, say_loaded)
+from .common import (
+    add_load_options,
+    add_mass,
+    add_quiet,
+    add_range_option,
+    check_inputs,
+    guard_outputs,
+    load_clip,
+    say,
+    say_loaded,
+)
 
 
 #: The one-line summary ``froude --help`` lists.
@@ -64,28 +73,28 @@ def fit_table(res) -> str:
 
 
 def run(args) -> int:
-    from ..io.atomic import atomic_group, require_suffix
+    from ...io.atomic import atomic_group, require_suffix
 
     out = require_suffix(args.output, (".json",))
     plot = require_suffix(args.plot, (".png",), "plot") if args.plot else None
     check_inputs(args.clip)
     guard_outputs([out, plot], [args.clip])
 
-    from ..body import BodyModel
-    from ..machine.fit import fit_machine_detailed
+    from ...body.model import BodyModel
+    from ...machine.fit import fit_machine_detailed
 
     # the load's notes are said once the fit succeeded: a clip that cannot be fitted is one error line
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, True, args.joint_map, args.up)
     if args.range:
-        from ..pipeline import select_range
+        from ...pipeline import select_range
 
         motion = select_range(motion, args.range, Path(args.clip).name)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
-    from ..gait import summarize
+    from ...body.gait import summarize
 
     if summarize(motion, body).kind == "walking":  # a walk gets the walking machine
         return _run_walk(args, motion, body, out, plot)
-    from ..pipeline import running_take
+    from ...pipeline import running_take
 
     motion, notes = running_take(motion, body)  # a loop unrolled, an in-place take given its travel
     for note in notes:
@@ -93,7 +102,7 @@ def run(args) -> int:
     res = fit_machine_detailed(motion, body, source=Path(args.clip).name)
     with atomic_group():
         if plot:
-            from ..viz.fit_plot import plot_fit
+            from ...viz.fit_plot import plot_fit
 
             plot_fit(res, plot, title=Path(args.clip).name)
         res.machine.save(out)
@@ -137,13 +146,13 @@ def walk_table(res) -> str:
 
 
 def _run_walk(args, motion, body, out, plot) -> int:
-    from ..io.atomic import atomic_group
-    from ..machine.walk_fit import fit_walking_detailed
+    from ...io.atomic import atomic_group
+    from ...machine.walk_fit import fit_walking_detailed
 
     res = fit_walking_detailed(motion, body, source=Path(args.clip).name)
     with atomic_group():
         if plot:
-            from ..viz.walk_plot import plot_walk_fit
+            from ...viz.walk_plot import plot_walk_fit
 
             plot_walk_fit(res, plot, title=Path(args.clip).name)
         res.machine.save(out)

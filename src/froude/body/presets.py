@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-PRESET_DIR = Path(__file__).parent / "data" / "characters"
+PRESET_DIR = Path(__file__).parents[1] / "data" / "characters"
 
 
 def list_presets() -> list[str]:

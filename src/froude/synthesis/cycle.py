@@ -16,12 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import quat
-from .body import BodyModel
-from .constants import UP, UP_AXIS
-from .errors import FitError
-from .gait import Gait
-from .motion import Motion
+from ..core import quat
+from ..body.model import BodyModel
+from ..constants import UP, UP_AXIS
+from ..errors import FitError
+from ..body.gait import Gait
+from ..core.motion import Motion
 
 #: Stride-phase samples of the cycle (per stride). 240 keeps interpolation error far below a millimetre.
 CYCLE_SAMPLES = 240
@@ -280,7 +280,7 @@ def extract_cycle(
     marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=contact_tol, band=SLIDE_BAND_L * body.leg_length)
     marker_from_com = _close_loop_linear(average(from_com))
 
-    from .metrics import max_joint_jump_deg
+    from ..metrics import max_joint_jump_deg
 
     return ReferenceCycle(
         first_foot=first_foot, phase_events=phase_events, contact_phase=contact_phase, durations=dur, frame=Rh,

@@ -13,10 +13,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from . import quat
-from .constants import GRAVITY, UP_AXIS
-from .motion import Motion
-from .skeleton import Skeleton
+from ..core import quat
+from ..constants import GRAVITY, UP_AXIS
+from ..core.motion import Motion
+from ..core.skeleton import Skeleton
 
 #: Length units a BVH file may be in: (name, metres per file unit). CMU's ASF->BVH conversions use
 #: 1/0.45 inch.
@@ -122,7 +122,7 @@ def _analysed(motion: Motion) -> Motion:
 
 def role_positions(motion: Motion, joints) -> np.ndarray:
     """(F, len(joints), 3) world positions (file units) of some joints over the analysed frames."""
-    from .kinematics import forward_kinematics
+    from ..core.kinematics import forward_kinematics
 
     m = _analysed(motion)
     p, _ = forward_kinematics(m.skeleton, m.root_positions, m.rotations, m.translations)
@@ -169,7 +169,7 @@ def flight_gravity_units(com: np.ndarray, foot_low: np.ndarray, leg_length: floa
     gravity shared by every flight, each its own height and vertical speed). Flights cut by the clip's
     edges are left out (a jump off or a stumble).
     """
-    from .metrics import flight_gravity
+    from ..metrics import flight_gravity
 
     ground = np.percentile(foot_low.min(axis=1), 5)
     air = (foot_low > ground + 0.03 * leg_length).all(axis=1)
@@ -232,7 +232,7 @@ def understand(motion: Motion, *, joint_map=None, length_scale: float | None = N
     units_ambiguous, up_axis, notes (list of sentences).
     Raises ValueError when the unit cannot be told; JointMapError for a bad joint map.
     """
-    from .body import BodyModel, JointMapError, find_roles
+    from .model import BodyModel, JointMapError, find_roles
 
     motion, notes = fold_translations(motion)
     if joint_map:

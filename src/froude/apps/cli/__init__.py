@@ -15,7 +15,7 @@ import os
 import signal
 import sys
 
-from ..errors import FroudeError
+from ...errors import FroudeError
 
 #: Subcommand modules, in the order ``froude --help`` lists them.
 SUBCOMMANDS = ("info", "fit", "scale", "accelerate", "convert", "view", "render", "demo", "batch")
@@ -40,7 +40,7 @@ class _Parser(argparse.ArgumentParser):
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The whole parser; with ``argv``, only the command it names is built in full (the others are listed
     with their one-line help), so a command's start-up never pays for another's ``register``."""
-    from .. import __version__
+    from ... import __version__
 
     parser = _Parser(
         prog="froude",

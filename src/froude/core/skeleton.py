@@ -104,7 +104,7 @@ class Skeleton:
 
     def standing_height(self) -> float:
         """Vertical extent [m] of the rest pose (joints and end sites): the character's stature."""
-        from .constants import UP_AXIS
+        from ..constants import UP_AXIS
 
         pts = np.concatenate([self.rest_positions(), self.rest_end_sites()], axis=0)
         return float(pts[:, UP_AXIS].max() - pts[:, UP_AXIS].min())

@@ -14,11 +14,11 @@ from typing import Callable
 
 import numpy as np
 
-from . import pipeline
-from .io.atomic import atomic_write_text
-from .io.bvh import save_bvh
-from .metrics import physics_report, write_report
-from .samples import sample_path
+from .. import pipeline
+from ..io.atomic import atomic_write_text
+from ..io.bvh import save_bvh
+from ..metrics import physics_report, write_report
+from ..samples import sample_path
 
 
 @dataclass(frozen=True)
@@ -59,7 +59,7 @@ def run_demo(outdir: str | Path, clip: str | Path | None = None, *, strides: int
     m = prep.machine
     files["machine"] = out / "machine.json"
     m.save(files["machine"])
-    from .viz.fit_plot import plot_fit
+    from ..viz.fit_plot import plot_fit
 
     files["fig2"] = out / "fig2_fit.png"
     plot_fit(prep.fit, files["fig2"], title=f"{clip.name}: simple machine fit (Pollard 1999, Fig. 2)")
@@ -96,7 +96,7 @@ def run_demo(outdir: str | Path, clip: str | Path | None = None, *, strides: int
         say(f"      {label:<16} {res.motion.n_frames:>4} frames, {res.report.mean_speed_m_s:.2f} m/s")
 
     say("[3/5] drawing filmstrips (Figure 3 style, snapshots every 0.066 s) ...")
-    from .viz.render import render_filmstrip, render_video
+    from ..viz.render import render_filmstrip, render_video
 
     fig3_motions = [ref_motion] + [results[k].motion for k in ("fast", "decel", "troll", "child")]
     fig3_labels = [r.label for r in rows[:5]]

@@ -11,10 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .body import SIDES, BodyModel
-from .constants import GRAVITY, UP_AXIS
-from .errors import NotARunningMotion
-from .motion import Motion
+from .model import SIDES, BodyModel
+from ..constants import GRAVITY, UP_AXIS
+from ..errors import NotARunningMotion
+from ..core.motion import Motion
 
 _HORIZONTAL = [a for a in range(3) if a != UP_AXIS]
 

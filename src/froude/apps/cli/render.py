@@ -4,9 +4,18 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ..errors import FroudeError
-from .common import (add_force, add_load_options, add_quiet, bound_work, check_inputs, guard_outputs,
-                     load_clip, number, say)
+from ...errors import FroudeError
+from .common import (
+    add_force,
+    add_load_options,
+    add_quiet,
+    bound_work,
+    check_inputs,
+    guard_outputs,
+    load_clip,
+    number,
+    say,
+)
 
 _EXTENSIONS = (".png", ".gif", ".mp4")
 #: Image sizes [px] and filmstrip settings froude draws.
@@ -88,7 +97,7 @@ def run(args) -> int:
     check_inputs(*args.clips)
     guard_outputs([out], args.clips)
 
-    from ..viz import render as R
+    from ...viz import render as R
 
     motions = [load_clip(c, args.length_scale, args.keep_all_frames, args.quiet, args.joint_map, args.up)
                for c in args.clips]

@@ -4,11 +4,32 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from ..presets import list_presets
-from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
-                     add_output_options, add_quiet, add_range_option, add_root_option, bound_work,
-                     character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
-                     load_clip, output_kwargs, prepare_clip, print_rows, say, speed)
+from ...body.presets import list_presets
+from .common import (
+    add_character_options,
+    add_force,
+    add_fps,
+    add_keep,
+    add_load_options,
+    add_mass,
+    add_output_options,
+    add_quiet,
+    add_range_option,
+    add_root_option,
+    bound_work,
+    character_input,
+    character_kwargs,
+    check_character,
+    check_inputs,
+    guard_outputs,
+    number,
+    load_clip,
+    output_kwargs,
+    prepare_clip,
+    print_rows,
+    say,
+    speed,
+)
 from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
@@ -62,8 +83,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..io.atomic import atomic_group, require_suffix
-    from ..pipeline import report_path
+    from ...io.atomic import atomic_group, require_suffix
+    from ...pipeline import report_path
 
     out = require_suffix(args.output, MOTION_OUTPUTS)
     data = data_output(args)
@@ -73,9 +94,9 @@ def run(args) -> int:
     goal = args.speed
     t0 = time.perf_counter()
 
-    from .. import pipeline
+    from ... import pipeline
 
-    from ..errors import FitError, FroudeError, NotARunningMotion
+    from ...errors import FitError, FroudeError, NotARunningMotion
 
     try:
         prep = prepare_clip(args)
@@ -117,7 +138,7 @@ def run(args) -> int:
 
 def _naive_any_clip(args, out, data, goal, why, t0) -> int:
     """--method naive on a clip the fit refuses (a walk, a jump, too short): the clip itself, naively."""
-    from .. import pipeline
+    from ... import pipeline
 
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, True, getattr(args, "joint_map", None),
                        getattr(args, "up", None))
@@ -125,7 +146,7 @@ def _naive_any_clip(args, out, data, goal, why, t0) -> int:
     res = pipeline.naive_clip(motion, args.character, speed=goal.factor if goal and goal.factor else 1.0,
                               target_speed=goal.m_s if goal else None, fps=args.fps, performer_mass=args.mass,
                               **character_kwargs(args))
-    from ..io.atomic import atomic_group
+    from ...io.atomic import atomic_group
 
     with atomic_group():  # the whole result or none
         bvh, rep, *data_written = pipeline.write_result(res, out, data, in_place=args.in_place, **output_kwargs(args))

@@ -16,11 +16,11 @@ from typing import Mapping
 
 import numpy as np
 
-from .constants import UP_AXIS
-from .errors import FroudeError
-from .kinematics import fk_soa, from_soa, to_soa
-from .motion import Motion
-from .skeleton import Skeleton
+from ..constants import UP_AXIS
+from ..errors import FroudeError
+from ..core.kinematics import fk_soa, from_soa, to_soa
+from ..core.motion import Motion
+from ..core.skeleton import Skeleton
 
 
 class JointMapError(FroudeError):

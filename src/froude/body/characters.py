@@ -29,10 +29,10 @@ from typing import Mapping
 
 import numpy as np
 
-from .body import SIDES, BodyModel
-from .errors import CharacterError, FroudeError
+from .model import SIDES, BodyModel
+from ..errors import CharacterError, FroudeError
 from .presets import HEIGHT_RANGE_M, MASS_RANGE_KG, PART_SCALE_RANGE, PRESET_DIR, list_presets
-from .skeleton import Skeleton
+from ..core.skeleton import Skeleton
 
 PARTS = ("legs", "arms", "head", "trunk")
 _LIMB_SEGMENTS = ("upper_arm", "forearm", "hand", "thigh", "shank", "foot")
@@ -84,7 +84,7 @@ def load_character(spec: str | Path) -> Character:
             raise CharacterError(f"{path}: no such character file")
         return _from_yaml(path)
     if path.suffix.lower() == ".bvh":
-        from .io.bvh import load_bvh
+        from ..io.bvh import load_bvh
 
         target = load_bvh(path)
         return Character(name=path.stem, skeleton=target.skeleton, description=f"skeleton of {path.name}")

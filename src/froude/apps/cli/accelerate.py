@@ -3,10 +3,30 @@ from __future__ import annotations
 
 import time
 
-from .common import (add_character_options, add_force, add_fps, add_keep, add_load_options, add_mass,
-                     add_output_options, add_quiet, add_range_option, add_root_option, bound_work,
-                     character_input, character_kwargs, check_character, check_inputs, guard_outputs, number,
-                     output_kwargs, prepare_clip, print_rows, say, speed)
+from .common import (
+    add_character_options,
+    add_force,
+    add_fps,
+    add_keep,
+    add_load_options,
+    add_mass,
+    add_output_options,
+    add_quiet,
+    add_range_option,
+    add_root_option,
+    bound_work,
+    character_input,
+    character_kwargs,
+    check_character,
+    check_inputs,
+    guard_outputs,
+    number,
+    output_kwargs,
+    prepare_clip,
+    print_rows,
+    say,
+    speed,
+)
 from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Steps of a speed change, and of the steady parts around it, froude plans at most.
@@ -66,9 +86,9 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..errors import PlanError
-    from ..io.atomic import atomic_group, require_suffix
-    from ..pipeline import report_path
+    from ...errors import PlanError
+    from ...io.atomic import atomic_group, require_suffix
+    from ...pipeline import report_path
 
     out = require_suffix(args.output, MOTION_OUTPUTS)
     data = data_output(args)
@@ -80,7 +100,7 @@ def run(args) -> int:
     goal = args.to_speed
     steps = args.steps if (args.steps is not None or args.within is not None) else 8
 
-    from .. import pipeline
+    from ... import pipeline
 
     t0 = time.perf_counter()
     prep = prepare_clip(args)
@@ -111,7 +131,7 @@ def run(args) -> int:
                                                         **output_kwargs(args))
         written = []
         if plot:
-            from ..viz.plan_plot import plot_plan
+            from ...viz.plan_plot import plot_plan
 
             written = plot_plan(res, plot)
     plan = res.report.extras["plan"]
@@ -135,7 +155,7 @@ def run(args) -> int:
 
 def _steady_range(prep, args) -> str:
     """The steady speeds whose outputs meet every bar for this character (a goal outside them will not)."""
-    from .. import pipeline
+    from ... import pipeline
 
     rng = pipeline.reachable_speed_range(prep, args.character, **character_kwargs(args))
     return f"with every physics bar met this character runs steadily at {rng.describe()}"
@@ -145,6 +165,6 @@ def _plot_files(plot):
     """Every file ``plot_plan(res, plot)`` writes (it may add a second figure beside the first)."""
     if plot is None:
         return []
-    from ..viz.plan_plot import plan_plot_paths
+    from ...viz.plan_plot import plan_plot_paths
 
     return plan_plot_paths(plot)

@@ -13,8 +13,8 @@ import math
 import sys
 from pathlib import Path
 
-from ..errors import FroudeError
-from ..presets import HEIGHT_RANGE_M, MASS_RANGE_KG, PART_SCALE_RANGE, list_presets
+from ...errors import FroudeError
+from ...body.presets import HEIGHT_RANGE_M, MASS_RANGE_KG, PART_SCALE_RANGE, list_presets
 
 #: Reference body mass the fit assumes [kg] and its supported range.
 BODY_MASS_RANGE_KG = (20.0, 300.0)
@@ -73,7 +73,7 @@ def speed(what: str):
     """An argparse ``type`` for the one speed syntax (``froude.speed_goal``): returns a SpeedGoal."""
 
     def parse(text: str):
-        from ..speed_goal import parse_speed
+        from ...speed_goal import parse_speed
 
         try:
             return parse_speed(text, what)
@@ -86,7 +86,7 @@ def speed(what: str):
 
 def time_range(text: str):
     """An argparse ``type`` for ``--range T0:T1`` [s] (``pipeline.parse_time_range``): (T0, T1), either None."""
-    from ..pipeline import parse_time_range
+    from ...pipeline import parse_time_range
 
     try:
         return parse_time_range(text)
@@ -163,7 +163,7 @@ def add_output_options(p) -> None:
 
 def output_kwargs(args) -> dict:
     """``save_bvh`` options from add_output_options."""
-    from ..conventions import unit_scale
+    from ...body.conventions import unit_scale
 
     return {"length_scale": unit_scale(args.units)[0] if args.units else None,
             "rotations_only": args.rotations_only}
@@ -192,7 +192,7 @@ def check_character(args):
     """Resolve the character options now (unknown preset, YAML errors, bad numbers, a target BVH that
     cannot be read), before the fit; returns the Character. The pipeline resolves it again from the same
     options (cheap), so the name and caching stay the pipeline's."""
-    from ..pipeline import resolve_character
+    from ...pipeline import resolve_character
 
     return resolve_character(args.character, **character_kwargs(args))
 
@@ -221,8 +221,8 @@ def load_clip(path: str, length_scale: float | None = None, keep_all: bool = Fal
     """Load a BVH clip and say which units and conventions were read and what cleaning did.
 
     joint_map: a YAML file 'role: JointName' (``body.load_joint_map``); up: "Y"/"Z" (None: detected)."""
-    from ..body import load_joint_map
-    from ..io.bvh import load_bvh
+    from ...body.model import load_joint_map
+    from ...io.bvh import load_bvh
 
     jm = load_joint_map(joint_map) if joint_map else None
     motion = load_bvh(path, length_scale=length_scale, clean=not keep_all, joint_map=jm, up=up)
@@ -244,7 +244,7 @@ def prepare_clip(args):
     """Load args.clip (with the load options) and fit it: ``pipeline.prepare``; then say the load's notes.
 
     Nothing is printed before the fit succeeds, so a clip that cannot be used is one line."""
-    from .. import pipeline
+    from ... import pipeline
 
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, True, getattr(args, "joint_map", None),
                        getattr(args, "up", None))
@@ -257,7 +257,7 @@ def prepare_clip(args):
 def guard_outputs(outputs, inputs=(), folders=()) -> None:
     """The output guard (``froude.io.atomic.check_outputs``): before any work, every output writable,
     none an input or another output."""
-    from ..io.atomic import check_outputs
+    from ...io.atomic import check_outputs
 
     check_outputs(outputs, inputs, folders=folders)
 
@@ -303,6 +303,6 @@ def add_data_option(p) -> None:
 
 def data_output(args):
     """The --data path with its suffix checked (None when not asked for)."""
-    from ..io.atomic import require_suffix
+    from ...io.atomic import require_suffix
 
     return None if args.data is None else require_suffix(args.data, DATA_OUTPUTS, "--data output")

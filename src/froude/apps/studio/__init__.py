@@ -1,7 +1,7 @@
 """``froude view``: the live studio in the browser (viser, the optional extra ``froude[studio]``).
 
     from froude import pipeline
-    from froude.studio import serve
+    from froude.apps.studio import serve
     serve(pipeline.prepare("run.bvh"), port=8080)      # blocks until Ctrl-C
 
 ``tracks`` (what is drawn, NumPy only) and ``session`` (parameters → pipeline results, no UI) import

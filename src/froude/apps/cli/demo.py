@@ -35,7 +35,7 @@ def run(args) -> int:
     from pathlib import Path
 
     from ..demo import demo_files, run_demo
-    from ..io.atomic import atomic_group
+    from ...io.atomic import atomic_group
 
     check_inputs(args.clip)
     out = Path(args.output)

@@ -2,11 +2,11 @@
 with controls and watch the result run beside the reference, with the simple machine drawn over it."""
 from __future__ import annotations
 
-from ..errors import FroudeError
+from ...errors import FroudeError
 from .common import add_load_options, add_mass, check_inputs, number, say, speed
 
 #: Starting values the studio's controls can show: speed factor and strides (the sliders' ranges; the same
-#: numbers as ``froude.studio.session.LIMITS``, which the server enforces; a test keeps them equal).
+#: numbers as ``froude.apps.studio.session.LIMITS``, which the server enforces; a test keeps them equal).
 VIEW_SPEED_RANGE = (0.5, 2.0)
 VIEW_STRIDES = (1, 12)
 
@@ -57,9 +57,9 @@ def run(args) -> int:
         import viser  # noqa: F401
     except ImportError:
         raise FroudeError("the studio needs viser: pip install 'froude[studio]'") from None
-    from .. import pipeline
-    from ..characters import list_presets
-    from ..samples import sample_path
+    from ... import pipeline
+    from ...body.characters import list_presets
+    from ...samples import sample_path
     from ..studio import Params, serve
 
     check_inputs(args.clip)

@@ -4,7 +4,7 @@
     python benchmarks/bench_cli.py --runs 15
 
 Each figure is wall time of a fresh process (interpreter start, imports, work, exit), as a user waits
-for it: best and median of N runs. Bars (DESIGN.md): ``froude --help`` <= 2 x ``python -c "import numpy"``;
+for it: best and median of N runs. Bars (docs/architecture.md): ``froude --help`` <= 2 x ``python -c "import numpy"``;
 ``froude scale`` of 4 strides (CMU 09_01, the embedded sample) <= 0.8 s. Run it on an idle machine: on a
 loaded one every figure grows, the start-up ones most. Also prints the import time of the heaviest
 modules a ``froude scale`` loads (``python -X importtime``).

@@ -1,7 +1,7 @@
 """Benchmark: 64³ transition table build / cached load, and step() throughput, on one core.
 
 Run:  python benchmarks/bench_table.py
-Targets (DESIGN.md): build ≤ 5 s, cached load ≤ 0.2 s.
+Targets (docs/architecture.md): build ≤ 5 s, cached load ≤ 0.2 s.
 """
 import os
 

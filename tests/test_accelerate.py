@@ -1,4 +1,4 @@
-"""Issue 6: accelerate and decelerate with a transition table (§5.3), end to end on the real clips."""
+"""Issue 6: accelerate and decelerate, planned step by step (§5.3), end to end on the real clips."""
 from __future__ import annotations
 
 import json
@@ -105,7 +105,8 @@ def test_table_matches_simulation_and_caches(prepared, tmp_path):
 def test_cli_writes_profile_and_refuses_nonsense(tmp_path):
     out = tmp_path / "slow.bvh"
     r = subprocess.run([sys.executable, "-m", "froude", "accelerate", str(clip("09_05")), "--to-speed", "0.5x",
-                        "--steps", "8", "-o", str(out), "--plot", str(tmp_path / "slow.png")], capture_output=True, text=True)
+                        "--steps", "8", "-o", str(out), "--plot", str(tmp_path / "slow.png")],
+                       capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     rep = json.loads(out.with_name("slow.report.json").read_text())
     assert len(rep["extras"]["plan"]["apex_speed_m_s"]) > 8

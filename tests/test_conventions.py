@@ -14,12 +14,13 @@ import math
 import numpy as np
 import pytest
 
+from froude.body import conventions
+from froude.body.gait import detect_gait, summarize
+from froude.body.model import BodyModel, find_roles
+from froude.io.bvh import load_bvh
+
 import rig_variants as rv
 from conftest import BANDAI_RUNS, MOCAP, RUNNING, clip, clip_params, read_bvh_oracle
-from froude.body import conventions
-from froude.body.model import BodyModel, find_roles
-from froude.body.gait import detect_gait, summarize
-from froude.io.bvh import load_bvh
 
 CMU_SCALE = 0.056444
 
@@ -62,7 +63,7 @@ def _cases(names):
     return [pytest.param(None, None, marks=pytest.mark.skip(reason="real clips not found"))]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _variant_file(name, variant, tmp_root):
     b = read_bvh_oracle(clip(name))
     path = f"{tmp_root}/{name}.{variant}.bvh"
@@ -76,7 +77,7 @@ def tmp_root(tmp_path_factory):
     return str(tmp_path_factory.mktemp("variants"))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _info(path):
     motion = load_bvh(path)
     body = BodyModel.from_skeleton(motion.skeleton)
@@ -106,7 +107,7 @@ def test_info_is_the_same_in_every_convention(name, variant, tmp_root):
 FIT_CLIPS = ("09_01", "09_05", "02_03", "dataset-1_run_tired_001", "dataset-1_dash_active_001")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _fit(path):
     from froude.machine.fit import fit_machine_detailed
 
@@ -401,7 +402,7 @@ def _bandai_cases():
     return cases
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _bandai_prep(name):
     from froude import pipeline
 

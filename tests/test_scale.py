@@ -10,9 +10,10 @@ import pytest
 
 import froude
 from froude import pipeline
-from froude.core import quat
 from froude.body.characters import list_presets
 from froude.constants import GRAVITY
+from froude.core import quat
+from froude.ik.correct import correct
 from froude.metrics import physics_report
 
 from conftest import RUNNING, clip, clip_params
@@ -37,7 +38,7 @@ def prepared():
 
 @pytest.mark.parametrize("name", clip_params(RUNNING))
 def test_physics_bars_every_preset_and_speed(prepared, name):
-    """Acceptance 1: every output of every clip, preset and speed meets DESIGN.md's physics bars."""
+    """Acceptance 1: every output of every clip, preset and speed meets the physics bars (docs/architecture.md)."""
     prep = prepared[name]
     failures = []
     for preset in PRESETS:
@@ -101,7 +102,7 @@ def test_long_output_is_the_tiled_cycle(prepared):
     prep = prepared["09_03"]
     long = pipeline.scale(prep, "troll", strides=pipeline.PERIODIC_MIN_STRIDES + 2)
     short_path = long.path
-    direct = pipeline.correct(long.targets, long.retarget.body).motion
+    direct = correct(long.targets, long.retarget.body).motion
     p_long = long.retarget.body.foot_markers(long.motion)
     p_direct = long.retarget.body.foot_markers(direct)
     d = np.linalg.norm(p_long - p_direct, axis=-1)

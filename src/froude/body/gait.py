@@ -11,10 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .model import SIDES, BodyModel
 from ..constants import GRAVITY, UP_AXIS
-from ..errors import NotARunningMotion
 from ..core.motion import Motion
+from ..errors import NotARunningMotion
+from .model import SIDES, BodyModel
 
 _HORIZONTAL = [a for a in range(3) if a != UP_AXIS]
 
@@ -192,7 +192,7 @@ def _whole_stride_span(t: np.ndarray) -> tuple[float, int]:
     return t[n] - t[0], n
 
 
-def step_period(gait: "Gait", n_frames: int, com: np.ndarray | None = None) -> float:
+def step_period(gait: Gait, n_frames: int, com: np.ndarray | None = None) -> float:
     """Mean step time [s] of a gait, NaN when it cannot be measured.
 
     From the midstance times (``midstance_times``, needs com (F, 3) [m]) when there are at least two;
@@ -264,7 +264,7 @@ def detect_gait(motion: Motion, body: BodyModel, markers: np.ndarray | None = No
                            t_on, t_off)
                 )
     stance_list.sort(key=lambda s: s.start)
-    any_contact = contact.any(axis=1)
+    any_contact = np.asarray(contact.any(axis=1), bool)
     flights = []
     if stance_list:
         first = min(s.start for s in stance_list)
@@ -321,7 +321,6 @@ def summarize(motion: Motion, body: BodyModel, com: np.ndarray | None = None, ga
         c, mk = body.com_and_markers(motion)
         com = c if com is None else com
         gait = detect_gait(motion, body, mk) if gait is None else gait
-    dt = motion.frame_time
     disp = com[-1, _HORIZONTAL] - com[0, _HORIZONTAL]
     dist = float(np.linalg.norm(disp))
     duration = motion.duration

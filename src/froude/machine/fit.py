@@ -27,15 +27,24 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..body.gait import detect_gait, require_running, summarize
 from ..body.model import BodyModel
 from ..constants import GRAVITY, UP_AXIS
-from ..errors import FitError, NotARunningMotion
-from ..body.gait import detect_gait, require_running, summarize
 from ..core.motion import Motion
+from ..errors import FitError, NotARunningMotion
 from .control_fit import fit_leg_control
 from .dynamics import N_PER_STANCE, REASONS, Control, simulate, step
-from .forces import (CUTOFF_HZ, EVENT_THRESHOLD_BW, flight_residual, force_shares,
-                     ground_force, refine_events, sagittal_frame, smooth_com, stance_geometry)
+from .forces import (
+    CUTOFF_HZ,
+    EVENT_THRESHOLD_BW,
+    flight_residual,
+    force_shares,
+    ground_force,
+    refine_events,
+    sagittal_frame,
+    smooth_com,
+    stance_geometry,
+)
 from .model import SimpleMachine
 
 __all__ = ["StanceFit", "FitResult", "fit_stance_control", "fit_machine", "fit_machine_detailed",
@@ -51,7 +60,8 @@ ANALYSIS_MIN_FPS = 100.0
 ANALYSIS_FPS = 120.0
 #: How far the force-based stance may reach beyond the foot's marker contact [s] (see fit_machine_detailed).
 CONTACT_SLACK_S = 0.02
-#: Only a clip whose contacts last less than this [s] (median of the complete ones) is held to them: the smear of the COM filter (CUTOFF_HZ) matters
+#: Only a clip whose contacts last less than this [s] (median of the complete ones) is held to them: the smear of
+#: the COM filter (CUTOFF_HZ) matters
 #: against a 0.13-0.17 s dash stance, not against the 0.23-0.27 s stances of the CMU runs.
 SHORT_STANCE_S = 0.2
 #: Fewest samples of a stance the control fit takes: K and an offset, then a, b, c (two small least
@@ -305,7 +315,8 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
                       step_frequency=clip_summary.step_frequency)
     if sum(not st.partial for st in gait.stances) < 2:
         raise NotARunningMotion(
-            f"{src}: only {sum(not st.partial for st in gait.stances)} complete stance phase(s) (of {len(gait.stances)} contacts); "
+            f"{src}: only {sum(not st.partial for st in gait.stances)} complete stance phase(s) "
+            f"(of {len(gait.stances)} contacts); "
             "the fit needs two consecutive full stances (one step) and a stride of events")
     dt = motion.frame_time
     F = motion.n_frames

@@ -16,12 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core import quat
+from ..body.gait import Gait
 from ..body.model import BodyModel
 from ..constants import UP, UP_AXIS
-from ..errors import FitError
-from ..body.gait import Gait
+from ..core import quat
 from ..core.motion import Motion
+from ..errors import FitError
 
 #: Stride-phase samples of the cycle (per stride). 240 keeps interpolation error far below a millimetre.
 CYCLE_SAMPLES = 240
@@ -503,3 +503,20 @@ def sample_cycle(cycle: ReferenceCycle, phi: np.ndarray, rotations: bool = True)
         "marker_rel": lin(cycle.marker_rel),
         "marker_from_com": lin(cycle.marker_from_com),
     }
+
+
+def fit_events(machine, motion: Motion):
+    """The fit's force-refined touchdown/liftoff times as foot events (None: use the gait's)."""
+    ev = []
+    for s in getattr(machine, "stances", ()):
+        foot = 0 if s.get("foot") in (0, "left") else 1
+        for key, kind in (("t_touchdown_s", "td"), ("t_liftoff_s", "lo")):
+            t = s.get(key)
+            if t is not None and np.isfinite(t) and 0 < t < motion.duration:
+                ev.append(FootEvent(t / motion.frame_time, foot, kind))
+    ev.sort(key=lambda e: e.frame)
+    # events must alternate td/lo per foot and the feet alternate; otherwise trust the gait
+    for a, b in zip(ev[:-1], ev[1:]):
+        if a.kind == b.kind:
+            return None
+    return ev or None

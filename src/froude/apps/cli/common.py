@@ -13,8 +13,8 @@ import math
 import sys
 from pathlib import Path
 
-from ...errors import FroudeError
 from ...body.presets import HEIGHT_RANGE_M, MASS_RANGE_KG, PART_SCALE_RANGE, list_presets
+from ...errors import FroudeError
 
 #: Reference body mass the fit assumes [kg] and its supported range.
 BODY_MASS_RANGE_KG = (20.0, 300.0)
@@ -85,8 +85,8 @@ def speed(what: str):
 
 
 def time_range(text: str):
-    """An argparse ``type`` for ``--range T0:T1`` [s] (``pipeline.parse_time_range``): (T0, T1), either None."""
-    from ...pipeline import parse_time_range
+    """An argparse ``type`` for ``--range T0:T1`` [s] (``body.take.parse_time_range``): (T0, T1), either None."""
+    from ...body.take import parse_time_range
 
     try:
         return parse_time_range(text)
@@ -192,7 +192,7 @@ def check_character(args):
     """Resolve the character options now (unknown preset, YAML errors, bad numbers, a target BVH that
     cannot be read), before the fit; returns the Character. The pipeline resolves it again from the same
     options (cheap), so the name and caching stay the pipeline's."""
-    from ...pipeline import resolve_character
+    from ...body.characters import resolve_character
 
     return resolve_character(args.character, **character_kwargs(args))
 

@@ -271,7 +271,7 @@ class Tab:
     server itself for a tab without a browser, as in tests); client: the ClientHandle or None.
     """
 
-    def __init__(self, studio: "Studio", target, client=None, root: str = "/froude"):
+    def __init__(self, studio: Studio, target, client=None, root: str = "/froude"):
         self.studio, self.target, self.client, self.root_name = studio, target, client, root
         self.session: Session = studio.session
         self.clip_name = studio.clip_name
@@ -569,11 +569,11 @@ class Tab:
     def _bound_speed(self, character: str) -> None:
         """Work out (once per preset, ~0.5 s) the speed factors whose outputs meet every physics bar and
         bound the speed slider to them (within its own limits)."""
-        from ... import pipeline
+        from ...speed_range import reachable_speed_range
 
         rng = self.session.speed_ranges.get(character)
         if rng is None:
-            rng = pipeline.reachable_speed_range(self.session.prep, None if character == "same" else character)
+            rng = reachable_speed_range(self.session.prep, None if character == "same" else character)
             self.session.speed_ranges[character] = rng
         lim = LIMITS["speed"]
         if rng.empty:
@@ -1211,7 +1211,7 @@ class Studio:
         port = self.server.get_port()
         return [f"http://{f'[{a}]' if ':' in a else a}:{port}" for a in reachable_addresses(self.server.get_host())]
 
-    def start(self) -> "Studio":
+    def start(self) -> Studio:
         self._player.start()
         return self
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ... import pipeline
-from ...body.characters import apply_character, list_presets
+from ...body.characters import apply_character, list_presets, resolve_character
 from ...errors import FitError, FroudeError
 from .tracks import Track, machine_track, motion_hash, reference_track
 
@@ -85,7 +85,7 @@ class Params:
     to_factor: float = 1.1  # accelerate: goal = factor × the start speed
     steps: int = 16  # accelerate: steps the change takes
 
-    def check(self, presets=None) -> "Params":
+    def check(self, presets=None) -> Params:
         """Every value against its control's options and limits (``LIMITS``); the checked copy, or a
         one-line FroudeError saying which control, the value and the range. presets: the Character
         control's options (default: the shipped presets and "same") -- a character is only ever one of them,
@@ -133,7 +133,7 @@ class Session:
         self.prep = prep
         self.reference = reference_track(prep)
         self.presets = [SAME, *list_presets()]
-        #: pipeline.reachable_speed_range per preset on this clip, filled by the studio as presets are used
+        #: speed_range.reachable_speed_range per preset on this clip, filled by the studio as presets are used
         self.speed_ranges: dict = {}
 
     def character_defaults(self, name: str) -> tuple[float, float, float]:
@@ -141,7 +141,7 @@ class Session:
         if name not in self.presets:
             raise FroudeError(f"Character must be one of the presets ({', '.join(self.presets)}); "
                               f"got {str(name)[:40]!r}")
-        char = pipeline.resolve_character(None if name == SAME else name)
+        char = resolve_character(None if name == SAME else name)
         rt = apply_character(char, self.prep.body)
         return float(rt.body.stature), float(rt.body.total_mass), float(char.proportions.get("legs", 1.0))
 
@@ -158,7 +158,7 @@ class Session:
         spec, nums = params.character_args()
         plan = pipeline.plan_scale(self.prep, spec, speed=params.speed, strides=int(params.strides), **nums)
         retarget, path = plan.retarget, plan.path
-        targets = pipeline.build_targets(self.prep, path, retarget)
+        targets = pipeline.targets_of(self.prep, path, retarget)
         _require_finite(targets.initial)
         track = machine_track(targets.initial, retarget.body, path)
         return Solved(params, track, None, True, time.perf_counter() - t0, motion_hash(targets.initial),

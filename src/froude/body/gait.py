@@ -156,14 +156,15 @@ def midstance_times(gait: Gait, com: np.ndarray) -> np.ndarray:
     crossing lies within MIDSTANCE_EXTRAPOLATION_S of the edge. com: (F, 3) [m]. Empty without a
     running direction or the balls' paths.
     """
-    fwd = None if gait.ball is None else running_direction(gait, com)
-    if fwd is None:
+    ball = gait.ball
+    fwd = None if ball is None else running_direction(gait, com)
+    if ball is None or fwd is None:
         return np.zeros(0)
     F = com.shape[0]
     reach = MIDSTANCE_EXTRAPOLATION_S / gait.frame_time
     out = []
     for st in gait.stances:
-        d = (com - gait.ball[:, st.foot]) @ fwd  # (F,) [m]: < 0 while the ball is ahead of the COM
+        d = (com - ball[:, st.foot]) @ fwd  # (F,) [m]: < 0 while the ball is ahead of the COM
         a, b = max(st.start - 1, 0), min(st.stop + 1, F)
         seg = d[a:b]
         up = np.flatnonzero((seg[:-1] < 0) & (seg[1:] >= 0))

@@ -172,7 +172,8 @@ def main(argv=None) -> int:
         share = m["task_cpu"] / (n * t)
         print(f"  {n} worker(s): {ran} tasks in {t:6.2f} s = {rates[n]:5.2f} tasks/s   "
               f"(task CPU {m['task_cpu']:.1f} s = {share:.0%} of {n} core(s); driver CPU {m['driver_cpu']:.1f} s; "
-              f"other programs {m['others']:.0%} of the machine; load avg before {load0:.2f}; worker OMP/OPENBLAS/MKL threads {env['OMP_NUM_THREADS']}/"
+              f"other programs {m['others']:.0%} of the machine; load avg before {load0:.2f}; "
+              f"worker OMP/OPENBLAS/MKL threads {env['OMP_NUM_THREADS']}/"
               f"{env['OPENBLAS_NUM_THREADS']}/{env['MKL_NUM_THREADS']}, BLAS pools {env['blas_threads']})")
         sys.stdout.flush()
     if 1 in rates and 2 in rates:

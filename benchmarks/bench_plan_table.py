@@ -1,7 +1,8 @@
 """Does the §5.3 transition table help ``accelerate``? Plans of the 9 CMU running clips, 0.5x and 1.3x in 8
 steps, with and without ``table=``; and the angle-only (the paper's) plans the table serves.
 
-Run:  python benchmarks/bench_plan_table.py [MOCAP_DIR]
+Run:  python benchmarks/bench_plan_table.py [MOCAP_DIR]   (default: $FROUDE_MOCAP_DIR, else ../shared/data/mocap
+      beside the repository)
 Prints per clip and goal: the mode used, plan time best of 3 without / with the table, and the largest
 difference between the two plans (apex speeds U, touchdown angles, b); then whether θ0 alone (the control the
 table tabulates) reaches 0.9x and 1.1x, and the table's interpolation error against the simulator.
@@ -46,14 +47,16 @@ def compare(clip, m, table):
     for f in (0.5, 1.3):
         (a, ta), (b, tb) = timed_plan(m, f * m.U, None), timed_plan(m, f * m.U, table)
         if isinstance(a, str) or isinstance(b, str):
-            print(f"{clip} x{f}: without: {a if isinstance(a, str) else 'ok'}; with: {b if isinstance(b, str) else 'ok'}")
+            said = [p if isinstance(p, str) else "ok" for p in (a, b)]
+            print(f"{clip} x{f}: without: {said[0]}; with: {said[1]}")
             continue
         d = [np.abs(x - y).max() for x, y in ((a.U, b.U), (a.theta0, b.theta0), (a.b, b.b))]
         print(f"{clip} x{f}: mode {a.mode}/{b.mode}  {ta * 1e3:.0f} / {tb * 1e3:.0f} ms  "
               f"max|dU| {d[0]:.1e} max|dθ0| {np.degrees(d[1]):.1e} deg max|db| {d[2]:.1e}")
     for f in (0.9, 1.1):
         theta_only, _ = timed_plan(m, f * m.U, table, energy="theta")
-        print(f"{clip} x{f} θ0 only (the table's control): {'reached' if not isinstance(theta_only, str) else theta_only}")
+        said = theta_only if isinstance(theta_only, str) else "reached"
+        print(f"{clip} x{f} θ0 only (the table's control): {said}")
 
 
 def interpolation_error(m, table) -> float:
@@ -66,7 +69,8 @@ def interpolation_error(m, table) -> float:
 
 
 def main():
-    mocap = Path(sys.argv[1] if len(sys.argv) > 1 else "../shared/data/mocap")
+    default = os.environ.get("FROUDE_MOCAP_DIR") or Path(__file__).resolve().parents[2] / "shared" / "data" / "mocap"
+    mocap = Path(sys.argv[1] if len(sys.argv) > 1 else default)
     with tempfile.TemporaryDirectory() as cache:
         for clip in CLIPS:
             m = pipeline.prepare(mocap / f"{clip}.bvh").machine

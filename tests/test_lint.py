@@ -33,7 +33,7 @@ def _run(cmd: list[str]) -> subprocess.CompletedProcess:
 
 
 def test_ruff_finds_nothing():
-    r = _run([*_tool("ruff"), "check", "--no-cache", "src", "tests"])
+    r = _run([*_tool("ruff"), "check", "--no-cache", "src", "tests", "benchmarks", "docs", "examples"])
     assert r.returncode == 0, r.stdout + r.stderr
 
 
@@ -52,4 +52,20 @@ def test_public_names_are_listed_once():
     for name in ("load", "save", "fit", "scale", "accelerate", "ground_reaction_force", "Motion", "Skeleton",
                  "BodyModel", "FroudeError"):
         assert name in froude.__all__
+    for name in froude.__all__:
         assert getattr(froude, name) is not None
+    # every error a user can meet is exported, and is a FroudeError
+    errors = {n for n in froude.__all__ if n.endswith("Error") or n == "NotARunningMotion"}
+    assert errors == {"BvhError", "CharacterError", "FitError", "FroudeError", "IkError", "JointMapError",
+                      "NotARunningMotion", "OutputError", "PlanError"}
+    assert all(issubclass(getattr(froude, n), froude.FroudeError) for n in errors)
+
+
+def test_help_imports_no_numpy():
+    """``froude --help`` answers without importing NumPy (the verbs load lazily): measured as the modules
+    loaded, not as time."""
+    code = ("import sys, runpy\nsys.argv = ['froude', '--help']\ntry:\n"
+            "    runpy.run_module('froude', run_name='__main__')\nexcept SystemExit:\n    pass\n"
+            "print('numpy' in sys.modules)")
+    r = _run([sys.executable, "-c", code])
+    assert r.returncode == 0 and r.stdout.strip().endswith("False"), r.stdout + r.stderr

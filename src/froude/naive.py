@@ -36,7 +36,9 @@ def naive_cycle(cyc: ReferenceCycle, retarget: Retarget, speed: float, n_steps: 
     root = com + (L * data["root_from_com"]) @ cyc.frame
     motion = Motion(retarget.skeleton, root, rot, 1.0 / fps, None, dict(meta))
     res = _naive_result(motion, retarget, speed, list(notes), modelled, input_in_place, cyc.max_joint_jump_deg)
-    res.report.extras["machine"] = "walking" if cyc.order == "walking" else "running"  # which bars apply
+    report = res.report
+    assert report is not None  # _naive_result always reports
+    report.extras["machine"] = "walking" if cyc.order == "walking" else "running"  # which bars apply
     return res
 
 

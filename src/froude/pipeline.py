@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 from dataclasses import replace as _replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -85,7 +86,7 @@ class ScalePlan:
     """
 
     prep: Prepared
-    path: MachinePath
+    path: MachinePath | None  # None for the naive method (no machine)
     retarget: Retarget
     speed: float
     notes: tuple
@@ -96,6 +97,7 @@ class ScalePlan:
     def finish(self, report: bool = True) -> Result:
         if self.naive is not None:
             return self.naive
+        assert self.path is not None  # a physical plan has its machine path
         return finish(self.prep, self.path, self.retarget, self.speed, list(self.notes), self.method,
                       periodic=self.periodic, report=report)
 
@@ -189,7 +191,8 @@ def _plan_walk(prep: Prepared, retarget: Retarget, speed: float, n_steps: int, f
     from .machine.walk_speed import check_walking_speed
     from .synthesis.walking import walk_machine_path
 
-    check_walking_speed(prep.machine.scaled(retarget.L, retarget.M), speed)
+    walk: Any = prep.machine  # a WalkingMachine (prepare chose it for the walk)
+    check_walking_speed(walk.scaled(retarget.L, retarget.M), speed)
     if speed > 1.0 + 1e-9:  # longer and quicker steps
         machine, stretch = prep.faster_machine(speed), 1.0
         method = "physical (walking cycle re-solved at the new speed)"
@@ -237,7 +240,11 @@ def accelerate(
     start_speed = m.U * v_unit  # apex speed of the cycle [m/s]
     if (to_speed is None) == (to_factor is None):
         raise FroudeError("give exactly one goal: a target speed [m/s] or a factor of the start speed")
-    target = to_speed if to_speed is not None else to_factor * start_speed
+    if to_speed is not None:
+        target = to_speed
+    else:
+        assert to_factor is not None  # exactly one goal, checked above
+        target = to_factor * start_speed
     if not (np.isfinite(target) and target > 0):
         raise FroudeError(f"target speed must be > 0 m/s, got {target:g} (to stop, end the motion instead)")
     if steps is not None and within is None and not (isinstance(steps, int) and steps >= 1):
@@ -306,6 +313,8 @@ def add_report(prep: Prepared, res: Result) -> Result:
     """The result with its physics report (docs/architecture.md) computed: tracking against the machine, the loaded
     foot targets and the time-warped reference pose. (Separate so that a viewer can show the motion first.)
     """
+    if res.path is None or res.targets is None:
+        raise FroudeError("add_report takes a physical result (a machine path and IK targets)")
     report = physics_report(
         res.motion, res.retarget.body, ground_height=0.0, machine_com=res.path.com,
         marker_targets=stance_only(res.targets), reference_pose=res.targets.initial,

@@ -11,6 +11,7 @@ import numpy as np
 from .body.characters import Retarget
 from .constants import UP_AXIS
 from .core.motion import Motion
+from .errors import FroudeError
 from .metrics import Report, write_report
 from .synthesis.targets import Targets
 from .synthesis.timewarp import MachinePath
@@ -21,7 +22,7 @@ class Result:
     """An output motion with its machine path, targets and physics report."""
 
     motion: Motion
-    report: Report
+    report: Report | None  # None until computed (``pipeline.add_report``; ``report=False`` defers it)
     path: MachinePath | None
     targets: Targets | None
     retarget: Retarget
@@ -34,6 +35,7 @@ class Result:
     def summary_rows(self) -> list[tuple[str, str]]:
         """(label, text) rows of the CLI's result table; a figure that cannot be measured reads "n/a"."""
         r = self.report
+        assert r is not None, "summary_rows needs the physics report (report=True)"
         f = _shown
         rows = [
             ("character", f"{self.retarget.character.name} (L = {self.retarget.L:.3f}, M = {self.retarget.M:.3f})"),
@@ -118,6 +120,9 @@ def write_result(result: Result, out_path, data=None, in_place: bool | None = No
         result.report.extras["written"] = "in place (root travel removed)" if in_place else "with root travel"
     with atomic_group():  # every file of the result or none
         save(in_place_motion(result) if in_place else result.motion, out_path, **bvh_options)
+        if result.report is None:
+            raise FroudeError("a result without its physics report cannot be written: compute it first "
+                              "(pipeline.add_report)")
         write_report(result.report, rp)
         if data is None:
             return out_path, rp

@@ -92,6 +92,7 @@ def run_demo(outdir: str | Path, clip: str | Path | None = None, *, strides: int
         results[key] = res
         p = out / files_of[key]
         pipeline.write_result(res, p)
+        assert res.report is not None  # the pipeline computes it by default
         rows.append(DemoRow(key, label, desc, p, res.report))
         say(f"      {label:<16} {res.motion.n_frames:>4} frames, {res.report.mean_speed_m_s:.2f} m/s")
 

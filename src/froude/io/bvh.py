@@ -402,7 +402,7 @@ def _clean(path, skeleton, values, linenos, finite, channel_names, length_scale)
         # rotations far larger than any other frame-to-frame change.
         jumps = _pose_jump_deg(rot)
         typical = np.percentile(jumps[1:], 99)
-        if jumps[0] > 5.0 and jumps[0] > 5.0 * typical:
+        if jumps[0] > 5.0 and jumps[0] > 3.0 * typical:
             notes.append(
                 f"dropped frame {start} (line {linenos[start]}): synthetic pose frame (T-pose), its joints turn "
                 f"by {jumps[0]:.0f} deg (median) to the next frame (99th percentile elsewhere {typical:.1f} deg)"

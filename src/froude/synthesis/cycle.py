@@ -18,7 +18,7 @@ import numpy as np
 
 from ..body.gait import Gait
 from ..body.model import BodyModel
-from ..constants import UP, UP_AXIS
+from ..constants import UP_AXIS, heading_frame
 from ..core import quat
 from ..core.motion import Motion
 from ..errors import FitError
@@ -27,15 +27,6 @@ from ..errors import FitError
 CYCLE_SAMPLES = 240
 #: A loaded foot marker is held still while within this fraction of the leg length of its lowest point.
 SLIDE_BAND_L = 0.022
-
-
-def heading_frame(heading: np.ndarray) -> np.ndarray:
-    """(3, 3) rows = forward, up, lateral unit vectors (world) for a horizontal travel direction."""
-    fwd = np.asarray(heading, float).copy()
-    fwd[UP_AXIS] = 0.0
-    fwd /= np.linalg.norm(fwd)
-    lat = np.cross(fwd, UP)
-    return np.stack([fwd, UP, lat])
 
 
 def min_jerk(u: np.ndarray) -> np.ndarray:
@@ -149,14 +140,14 @@ def _phase_of_events(events: list[FootEvent], first_foot: int, fractions: np.nda
     pe = event_phases(order, fractions)
     base = {(first_foot, "td"): 0.0, (first_foot, "lo"): pe[1],
             (1 - first_foot, "td"): pe[2], (1 - first_foot, "lo"): pe[3]}
-    psi = []
+    values: list[float] = []
     for e in events:
         p = base[(e.foot, e.kind)]
-        if psi:
-            prev = psi[-1]
+        if values:
+            prev = values[-1]
             p = p + np.ceil(prev - p + 1e-9)  # smallest value ≡ p (mod 1) after prev
-        psi.append(p)
-    psi = np.array(psi)
+        values.append(p)
+    psi = np.array(values)
     first_a_td = next(i for i, e in enumerate(events) if e.foot == first_foot and e.kind == "td")
     return psi - np.floor(psi[first_a_td] + 1e-9)
 
@@ -166,7 +157,7 @@ def _durations(events: list[FootEvent], first_foot: int, frame_time: float, orde
     A, flight after A, stance B, flight after B; walking: double support after A lands, single support on
     A, double support after B lands, single support on B)."""
     seq = [((first_foot if f == 0 else 1 - first_foot), k) for f, k in _order_of(order)]
-    sums = {k: [] for k in range(4)}
+    sums: dict[int, list[float]] = {k: [] for k in range(4)}
     for e0, e1 in zip(events[:-1], events[1:]):
         dt = (e1.frame - e0.frame) * frame_time
         i = seq.index((e0.foot, e0.kind))
@@ -185,6 +176,8 @@ def _durations(events: list[FootEvent], first_foot: int, frame_time: float, orde
     return out
 
 
+# Long because it is one pass over the clip (phases, per-phase averages, loop closure, contact phases)
+# whose intermediates are the cycle's own fields.
 def extract_cycle(
     motion: Motion,
     body: BodyModel,
@@ -257,17 +250,18 @@ def extract_cycle(
     grid = np.arange(K + 1) / K  # include φ = 1 for the loop closure
     n_lo, n_hi = int(np.floor(psi.min())) - 1, int(np.ceil(psi.max())) + 1
     taper = max(1.0, 0.04 / dt)  # frames over which occurrences near the clip's edges fade in
-    occ_frames, occ_w = [], []
+    frames_n: list[np.ndarray] = []
+    weights_n: list[np.ndarray] = []
     for n in range(n_lo, n_hi + 1):
         target = grid + n
         inside = (target >= psi[0]) & (target <= psi[-1])
         f = np.interp(target, psi, frames)
         w = np.clip(np.minimum(f, F - 1 - f) / taper, 0.0, 1.0) * inside
         if np.any(w > 0):
-            occ_frames.append(f)
-            occ_w.append(w)
-    occ_frames = np.array(occ_frames)  # (N, K+1)
-    occ_w = np.array(occ_w)
+            frames_n.append(f)
+            weights_n.append(w)
+    occ_frames = np.array(frames_n)  # (N, K+1)
+    occ_w = np.array(weights_n)
     if np.any(occ_w.sum(axis=0) <= 0):
         raise FitError("the clip does not cover a whole stride: every phase must be seen at least once")
 

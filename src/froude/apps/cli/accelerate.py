@@ -125,6 +125,7 @@ def run(args) -> int:
         raise PlanError(f"{e}; {_steady_range(prep, args)}") from None
     for note in res.notes:
         say(f"note: {note}", args.quiet)
+    assert res.report is not None  # the pipeline computes it by default
     fails = res.report.check_bars()
     if fails and not args.keep:
         say(f"froude accelerate: output not written: it misses physics bars ({'; '.join(fails)}); "

@@ -122,6 +122,7 @@ def run(args) -> int:
                           f"with every physics bar met this clip runs {rng.describe()} ({e})") from None
     for note in res.notes:
         say(f"note: {note}", args.quiet)
+    assert res.report is not None  # the pipeline computes it by default
     fails = res.report.check_bars() if args.method == "physical" else []
     if fails and not args.keep:
         rng = reachable_speed_range(prep, args.character, **character_kwargs(args))

@@ -326,7 +326,7 @@ def add_report(prep: Prepared, res: Result) -> Result:
                           "input_in_place": bool(prep.motion.meta.get("in_place")),
                           **res.extras})
     if is_walking(prep.machine):
-        from .synthesis.walking import walking_extras
+        from .walk_report import walking_extras
 
         report.extras.update(walking_extras(prep, res, report))
     return _replace(res, report=report)

@@ -56,7 +56,7 @@ class Result:
              f"{f(r.max_joint_jump_deg, '.1f')} deg (reference {f(r.reference_max_joint_jump_deg, '.1f')})"),
         ]
         if r.extras.get("machine") == "walking":
-            from .synthesis.walking import walking_rows
+            from .walk_report import walking_rows
 
             rows += walking_rows(r)
         return rows

@@ -1,0 +1,114 @@
+"""The physics report's walking figures (issue 17): double support, the vertical force's two peaks and
+trough, the cadence against dynamic similarity and against the naive retarget; and their rows in the CLI's
+result table. Measured on the motion like the rest of the report (``metrics``).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .synthesis.walking import walking_events
+
+__all__ = ["walking_extras", "walking_report", "walking_rows"]
+
+
+def _double_support_fraction(gait, n_frames: int) -> float:
+    """Mean double support / mean step time over the complete steps (a touchdown, the other foot's
+    liftoff, the next touchdown) at the gait's sub-frame events: the machine's t_double / t_step. The
+    share of frames with both feet down when the motion has no complete step."""
+    ev = walking_events(gait, gait.frame_time, n_frames)
+    ds, steps = [], []
+    for i, e in enumerate(ev):
+        if e.kind != "td":
+            continue
+        lo = next((x for x in ev[i + 1:] if x.kind == "lo"), None)
+        nxt = next((x for x in ev[i + 1:] if x.kind == "td"), None)
+        if lo is None or nxt is None or lo.foot == e.foot or nxt.foot == e.foot or lo.frame > nxt.frame:
+            continue
+        ds.append(lo.frame - e.frame)
+        steps.append(nxt.frame - e.frame)
+    return float(np.mean(ds) / np.mean(steps)) if steps else float(gait.double_support_fraction)
+
+
+def walking_report(com: np.ndarray, gait, frame_time: float) -> dict:
+    """The walking figures of a motion's report (issue 17): double-support fraction, the vertical force's
+    two peaks and trough over a stance [BW] and their stance phases, from the COM (eq. 1, the project's
+    one differentiation) averaged over the complete stances. com: (F, 3) [m]. NaN when not measurable."""
+    from .machine.walk_fit import PROFILE_SAMPLES, force_landmarks
+    from .metrics import vertical_force_bw
+
+    F = com.shape[0]
+    out = {"double_support_fraction": _double_support_fraction(gait, F)}
+    full = [s for s in gait.full_stances]
+    nan = {k: float("nan") for k in ("peak1_bw", "trough_bw", "peak2_bw", "tau_peak1", "tau_trough", "tau_peak2")}
+    if not full or F < 9:
+        out.update(nan)
+        return out
+    fz = vertical_force_bw(com, frame_time)
+    frames = np.arange(F, dtype=float)
+    tau = np.linspace(0.0, 1.0, PROFILE_SAMPLES)
+    prof, durs = [], []
+    for s in full:
+        a = s.t_on if math.isfinite(s.t_on) else float(s.start)
+        b = s.t_off if math.isfinite(s.t_off) else float(s.stop - 1)
+        if a < 3 or b > F - 4:  # the filter's edges are least trustworthy
+            continue
+        prof.append(np.interp(a + tau * (b - a), frames, fz))
+        durs.append((b - a) * frame_time)
+    if not prof:
+        out.update(nan)
+        return out
+    ds = out["double_support_fraction"]  # t_double / t_step; a stance lasts t_step + t_double
+    lm = force_landmarks(tau, np.mean(prof, axis=0), ds / (1.0 + ds))
+    out.update({"peak1_bw": lm["peak1"], "trough_bw": lm["trough"], "peak2_bw": lm["peak2"],
+                "tau_peak1": lm["tau_peak1"], "tau_trough": lm["tau_trough"], "tau_peak2": lm["tau_peak2"]})
+    return out
+
+
+
+def walking_extras(prep, res, report) -> dict:
+    """The walking part of an output's report (``Report.extras``): the walking figures of the output and
+    of the clip, and the cadence the naive retarget would have next to the physical one.
+
+    "cadence": clip [Hz] (measured over its complete steps), output [Hz] (measured), expected = clip × L^-1/2
+    × the speed law's factor (dynamic similarity and ``machine.walk_speed.step_frequency_factor``),
+    naive = clip × s (engines keep the clip's timing, played s times faster) and its error against the
+    expected one.
+    """
+    from .body.gait import detect_gait
+    from .machine.walk_speed import step_frequency_factor
+    from .metrics import _with_ground
+
+    body = res.retarget.body
+    com, markers = body.com_and_markers(res.motion)
+    gait = _with_ground(detect_gait(res.motion, body, markers), 0.0)
+    out = walking_report(com, gait, res.motion.frame_time)
+    clip = walking_report(prep.com, prep.gait, prep.motion.frame_time)
+    L, s = float(res.retarget.L), float(res.speed_factor)
+    # the clip's cadence over its complete steps (what the machine models; the gait summary's counts the
+    # take's first and last touchdowns too, 2 % slower on CMU 07_01, which starts and stops)
+    f_clip = 1.0 / float(prep.machine.reference["step_time_s"])
+    f_out = float(report.step_frequency_hz)
+    expected = f_clip * L ** -0.5 * step_frequency_factor(s)
+    naive = f_clip * s
+    return {"machine": "walking", "walking": {**out, "clip": clip},
+            "cadence": {"clip_step_frequency_hz": f_clip, "step_frequency_hz": f_out,
+                        "expected_step_frequency_hz": expected, "naive_step_frequency_hz": naive,
+                        "naive_error": naive / expected - 1.0, "clip_froude_U": float(prep.summary.froude)}}
+
+
+def walking_rows(report) -> list[tuple[str, str]]:
+    """Rows of the CLI's result table for a walking output (empty for other reports)."""
+    w, c = report.extras.get("walking"), report.extras.get("cadence")
+    if not w or not c:
+        return []
+    return [
+        ("double support", f"{100 * w['double_support_fraction']:.1f} % of the cycle "
+                           f"(clip {100 * w['clip']['double_support_fraction']:.1f} %)"),
+        ("vertical force", f"peaks {w['peak1_bw']:.2f} / {w['peak2_bw']:.2f} BW, trough {w['trough_bw']:.2f} BW "
+                           f"(clip {w['clip']['peak1_bw']:.2f} / {w['clip']['peak2_bw']:.2f}, "
+                           f"{w['clip']['trough_bw']:.2f})"),
+        ("cadence", f"{c['step_frequency_hz']:.3f} Hz (expected {c['expected_step_frequency_hz']:.3f}); the naive "
+                    f"retarget steps at {c['naive_step_frequency_hz']:.3f} Hz ({100 * c['naive_error']:+.0f} %)"),
+    ]

@@ -157,3 +157,25 @@ def test_walk_accelerates_monotonically_with_every_bar(name, factor, walks):
     assert v[0] == pytest.approx(plan["start_speed_m_s"], rel=0.02)
     assert v[-1] == pytest.approx(factor * plan["start_speed_m_s"], rel=0.02)
     assert r.check_bars() == []
+
+
+@pytest.mark.parametrize("name", clip_params(WALKING[:1]))
+def test_render_takes_scaled_walks(name, tmp_path, run_cli):
+    """Issue 17 acceptance 4: ``render`` takes walks: the child's and the giant's walks in one filmstrip."""
+    from PIL import Image
+
+    from froude.io.bvh import load_bvh
+
+    outs = []
+    for who in ("child", "giant"):
+        out = tmp_path / f"{who}.bvh"
+        code, _, err = run_cli("scale", clip(name), "--character", who, "--strides", "1", "-o", out, "-q")
+        assert code == 0, err
+        outs.append(out)
+    # a walk has no flight to weigh its units by: read the outputs in the clip's own units
+    scale = load_bvh(clip(name)).meta["length_scale"]
+    png = tmp_path / "walks.png"
+    code, _, err = run_cli("render", *outs, "--filmstrip", "--length-scale", scale, "-o", png)
+    assert code == 0, err
+    im = Image.open(png)
+    assert im.size[0] > 100 and im.size[1] > 100

@@ -80,7 +80,7 @@ def test_preview_is_the_results_machine_and_skeleton(session):
     (Params(height=0.0), "Height 0 m is outside 0.5 m to 4 m"),
     (Params(speed=0.0), "Speed 0× is outside 0.5× to 2×"),
     (Params(mode="accelerate", to_factor=2.0, steps=1),
-     r"cannot go from \d.\d\d m/s to \d.\d\d m/s \(×2\) in 1 steps: use more"),
+     r"cannot change speed from \d.\d\d to \d.\d\d m/s \(x2.00\) in 1 step: too abrupt; give at least \d+ steps"),
 ])
 def test_bad_params_raise_one_line_froude_errors(session, bad, words):
     with pytest.raises(FroudeError, match=words):
@@ -123,8 +123,13 @@ def test_studio_previews_only_when_the_result_would_be_slow(session, monkeypatch
     try:
         tab.apply(Params(speed=1.05))  # a warm solve sets the expectation
         quick = tab.expected_seconds(Params(speed=1.1))
-        assert 0 < quick < app.SLOW_RESULT_S  # 4 strides of the sample: the last solve was quick
-        assert tab.expected_seconds(Params(speed=1.1, strides=400)) > app.SLOW_RESULT_S  # scales with length
+        assert 0 < quick < float("inf")
+        # The expectation scales with the output's length (wall time itself is not asserted: the machine may
+        # be loaded). The threshold is placed between the two expectations so the branch taken is decided by
+        # the studio's logic alone.
+        long = tab.expected_seconds(Params(speed=1.1, strides=400))
+        assert long == pytest.approx(quick * 400 / Params(speed=1.1).strides)
+        monkeypatch.setattr(app, "SLOW_RESULT_S", (quick * long) ** 0.5)
         shown.clear()
         t = tab.apply(Params(speed=1.1))
         assert np.isnan(t.preview_compute) and [s.preview for s in shown] == [False, False]  # result, then report

@@ -161,6 +161,20 @@ def test_speed_refusals_name_the_reachable_range(run_cli, tmp_path):
         assert code == 2 and "out of reach" in err
 
 
+def test_acceleration_refusals_are_in_metres_per_second(run_cli, tmp_path):
+    """An unreachable acceleration goal: one line in m/s and x with the machine's and the bars' ranges (no
+    dimensionless U, no solver internals), exit 2, nothing written."""
+    path = clip("09_01")
+    prep = pipeline.prepare(load_bvh(path))
+    rng = pipeline.reachable_speed_range(prep)
+    for goal, words in (("3x", "the simple machine runs steadily only between"), ("2x", "too abrupt")):
+        code, out, err = run_cli("accelerate", path, "--to-speed", goal, "-o", tmp_path / "a.bvh")
+        line = [l for l in err.splitlines() if "error" in l]
+        assert code == 2 and not (tmp_path / "a.bvh").exists(), err
+        assert len(line) == 1 and words in line[0] and "U =" not in line[0] and "[" not in line[0], line
+        assert f"x{rng.lo:.2f}-{rng.hi:.2f} ({rng.lo_m_s:.2f}-{rng.hi_m_s:.2f} m/s" in line[0]
+
+
 # ---- loops and in-place takes (issue 13 acceptance 2) ---------------------------------------------------
 def _in_place(motion):
     """The take with its root travel removed (the COM's mean horizontal velocity taken off the root)."""

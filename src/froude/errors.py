@@ -37,4 +37,19 @@ class CharacterError(FroudeError):
 
 
 class PlanError(FroudeError):
-    """A speed or acceleration goal cannot be met; the message says what can."""
+    """A speed or acceleration goal cannot be met; the message says what can.
+
+    When the planner knows what is reachable it says so in dimensionless apex speeds U (the machine's own
+    units; the pipeline turns them into m/s for the character): ``U_goal``, ``U_start``, ``U_one_step``
+    (the fastest, or slowest, apex speed one step from the start reaches), ``U_sustainable`` (lo, hi) and
+    ``steps_needed`` (None when more steps would not help). Any of them may be None.
+    """
+
+    def __init__(self, message: str, *, U_goal=None, U_start=None, U_one_step=None, U_sustainable=None,
+                 steps_needed=None):
+        super().__init__(message)
+        self.U_goal = U_goal
+        self.U_start = U_start
+        self.U_one_step = U_one_step
+        self.U_sustainable = U_sustainable
+        self.steps_needed = steps_needed

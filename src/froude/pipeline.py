@@ -20,7 +20,7 @@ import numpy as np
 from .body import BodyModel
 from .characters import Character, Retarget, apply_character, character_from_numbers, load_character
 from .constants import GRAVITY, UP_AXIS
-from .errors import FroudeError
+from .errors import FroudeError, PlanError
 from .gait import Gait, GaitSummary, detect_gait, require_running, summarize
 from .metrics import Report, physics_report, write_report
 from .motion import Motion
@@ -1095,11 +1095,14 @@ def accelerate(
         raise FroudeError(f"steps must be a whole number >= 1, got {steps}")
     if within is not None and not (np.isfinite(within) and within > 0):
         raise FroudeError(f"--within must be > 0 s, got {within}")
-    plan = plan_speed_change(
-        m, target / v_unit, n_steps=None if within is not None else steps,
-        within_time=None if within is None else within / m.time_unit, energy=energy, policy=policy,
-        lead_steps=lead_steps, hold_steps=hold_steps,
-    )
+    try:
+        plan = plan_speed_change(
+            m, target / v_unit, n_steps=None if within is not None else steps,
+            within_time=None if within is None else within / m.time_unit, energy=energy, policy=policy,
+            lead_steps=lead_steps, hold_steps=hold_steps,
+        )
+    except PlanError as e:
+        raise PlanError(plan_refusal(e, start_speed, target, v_unit, steps, within)) from e
     fps = prep.motion.fps if fps is None else float(fps)
     path = machine_path(prep, retarget, n_steps=plan.n_steps, fps=fps, theta0=plan.theta0,
                         controls=plan.controls, start_state=(float(plan.U[0]), float(plan.H[0])))
@@ -1115,6 +1118,29 @@ def accelerate(
         }
     }
     return finish(prep, path, retarget, 1.0, notes, "physical", plan=plan, report=report, extras=extras)
+
+
+def plan_refusal(err, start_m_s: float, goal_m_s: float, v_unit: float, steps, within) -> str:
+    """The planner's refusal (``PlanError`` with its U facts) said in the user's terms: m/s, ×, steps, s.
+
+    start_m_s / goal_m_s: the apex speeds [m/s] the change goes between; v_unit: √(g l0) of the
+    character [m/s], which turns the planner's dimensionless U into m/s. The planner's own words (in U)
+    stay on the exception's ``__cause__`` for debugging.
+    """
+    head = f"cannot change speed from {start_m_s:.2f} to {goal_m_s:.2f} m/s (x{goal_m_s / start_m_s:.2f})"
+    sus = getattr(err, "U_sustainable", None)
+    if sus is not None and not sus[0] <= err.U_goal <= sus[1]:
+        lo, hi = sus[0] * v_unit, sus[1] * v_unit
+        return (f"{head}: the simple machine runs steadily only between {lo:.2f} and {hi:.2f} m/s "
+                f"(x{lo / start_m_s:.2f}-{hi / start_m_s:.2f}); choose a goal in that range")
+    in_steps = f"in {steps} step{'' if steps == 1 else 's'}"
+    if getattr(err, "steps_needed", None):
+        return f"{head} {in_steps}: too abrupt; give at least {err.steps_needed} steps"
+    if within is not None:
+        return f"{head} within {within:g} s: too abrupt; allow more time"
+    one = getattr(err, "U_one_step", None)
+    reach = "" if one is None else f" (one step from the start reaches {one * v_unit:.2f} m/s)"
+    return f"{head} {in_steps}{reach}: try more steps or a goal nearer x1"
 
 
 #: A steady (periodic) output longer than this many strides is corrected by solving the IK of one stride

@@ -66,6 +66,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from ..errors import PlanError
     from ..io.atomic import atomic_group, require_suffix
     from ..pipeline import report_path
 
@@ -90,17 +91,20 @@ def run(args) -> int:
     if bound_work(n_steps * step_s * (args.fps or prep.motion.fps), prep.motion.skeleton.n_joints, args.force,
                   "froude accelerate", args.quiet):
         say(f"planning {n_steps:.0f} steps and synthesising ...", args.quiet)
-    res = pipeline.accelerate(
-        prep, args.character, to_speed=goal.m_s, to_factor=goal.factor, steps=None if args.within else steps,
-        within=args.within, lead_steps=args.lead_steps, hold_steps=args.hold_steps, fps=args.fps,
-        policy=args.policy, **character_kwargs(args),
-    )
+    try:
+        res = pipeline.accelerate(
+            prep, args.character, to_speed=goal.m_s, to_factor=goal.factor, steps=None if args.within else steps,
+            within=args.within, lead_steps=args.lead_steps, hold_steps=args.hold_steps, fps=args.fps,
+            policy=args.policy, **character_kwargs(args),
+        )
+    except PlanError as e:
+        raise PlanError(f"{e}; {_steady_range(prep, args)}") from None
     for note in res.notes:
         say(f"note: {note}", args.quiet)
     fails = res.report.check_bars()
     if fails and not args.keep:
         say(f"froude accelerate: output not written: it misses physics bars ({'; '.join(fails)}); "
-            "--keep writes it anyway")
+            f"{_steady_range(prep, args)}; --keep writes it anyway")
         return 1
     with atomic_group():
         bvh, rep, *data_written = pipeline.write_result(res, out, data, in_place=args.in_place,
@@ -127,6 +131,14 @@ def run(args) -> int:
     also = "".join(f" and {d}" for d in data_written)
     say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep}{also} in {time.perf_counter() - t0:.2f} s", args.quiet)
     return 0
+
+
+def _steady_range(prep, args) -> str:
+    """The steady speeds whose outputs meet every bar for this character (a goal outside them will not)."""
+    from .. import pipeline
+
+    rng = pipeline.reachable_speed_range(prep, args.character, **character_kwargs(args))
+    return f"with every physics bar met this character runs steadily at {rng.describe()}"
 
 
 def _plot_files(plot):

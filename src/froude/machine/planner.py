@@ -883,7 +883,8 @@ def _table_ok(table, cyc):
 
 
 def _unreachable(cyc, U_target, n, fail, comfort, energy, what):
-    """PlanError text naming what is reachable: one step from the start, the sustainable range."""
+    """PlanError text naming what is reachable (one step from the start, the sustainable range), in the
+    machine's dimensionless U, and the same facts as PlanError's keyword arguments: (text, facts)."""
     e = "theta" if energy == "theta" else "b"
     lo1, hi1 = one_step_range(cyc.U, cyc.H, cyc, energy=e, comfort=comfort)
     smin, smax = sustainable_range(cyc, energy=e, comfort=comfort)
@@ -897,6 +898,7 @@ def _unreachable(cyc, U_target, n, fail, comfort, energy, what):
         sus = (f"max sustainable U > {smax:.3g}" if smax >= 2.7 * cyc.U else f"max sustainable U ≈ {smax:.3g}")
     else:
         sus = (f"min sustainable U < {smin:.3g}" if smin <= 0.28 * cyc.U else f"min sustainable U ≈ {smin:.3g}")
+    n_min = 0
     if not smin <= U_target <= smax:
         rng = f"; reaching U = {U_target:.3g} is outside the machine's range ({sus}, start U = {cyc.U:.3g})"
     else:
@@ -910,7 +912,10 @@ def _unreachable(cyc, U_target, n, fail, comfort, energy, what):
     if fail is not None:
         where = (f" [failed at step {fail.i + 1}, from U = {fail.U:.4g}, H = {fail.H:.4g} toward "
                  f"U = {fail.U_ref:.4g}: {fail.why}]")
-    return f"cannot reach U = {U_target:.3g} {what}: {one}{rng}{where}"
+    facts = dict(U_goal=float(U_target), U_start=float(cyc.U),
+                 U_one_step=float(hi1 if faster else lo1) if math.isfinite(lo1) else None,
+                 U_sustainable=(float(smin), float(smax)), steps_needed=n_min if n_min > (n or 0) else None)
+    return f"cannot reach U = {U_target:.3g} {what}: {one}{rng}{where}", facts
 
 
 def _as_target(target_U):
@@ -990,10 +995,10 @@ def _plan_n(cyc, U_t, n, table, comfort, policy, energy, lead_steps, hold_steps)
                                                                       lead_steps, hold_steps))
     if plan is not None:
         return plan
-    msg = _unreachable(cyc, U_t, n, fail, comfort, energy, f"in {n} step{'s' if n != 1 else ''}")
+    msg, facts = _unreachable(cyc, U_t, n, fail, comfort, energy, f"in {n} step{'s' if n != 1 else ''}")
     if fail is None:
         msg += " [" + "; ".join(tried) + "]"
-    raise PlanError(msg)
+    raise PlanError(msg, **facts)
 
 
 def _table_rollout(table, U0, H0, t0, n, U_ref, step_time, tau_fallback):

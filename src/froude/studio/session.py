@@ -207,13 +207,8 @@ class Session:
                 f"machine has no running cycle there; pick a speed nearer ×1")
 
     def _accelerate_message(self, params: Params, err: FroudeError) -> str:
-        """The planner's refusal in the user's terms (m/s, ×, steps) with the fix."""
-        text = str(err).splitlines()[0] if str(err) else type(err).__name__
-        if not text.startswith("cannot reach"):
-            return text
-        v0 = self.start_speed(params)
-        return (f"cannot go from {v0:.2f} m/s to {params.to_factor * v0:.2f} m/s (×{params.to_factor:g}) in "
-                f"{params.steps} steps: use more steps or a goal nearer ×1")
+        """The refusal's first line: the pipeline already says it in m/s, × and steps (``plan_refusal``)."""
+        return str(err).splitlines()[0] if str(err) else type(err).__name__
 
 
 def with_report(prep: pipeline.Prepared, solved: Solved) -> Solved:

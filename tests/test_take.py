@@ -131,7 +131,9 @@ def test_speed_range_outputs_or_refusals(name):
     every bar (joint jump included); outside it ``scale`` refuses (see the CLI test)."""
     prep = pipeline.prepare(load_bvh(clip(name)))
     rng = pipeline.reachable_speed_range(prep)
-    assert not rng.empty and rng.lo <= 0.5 and 1.2 <= rng.hi
+    # every run reaches x0.7-1.2; the slow end is x0.30-0.52 (09_03: a knee pop at lift-off below x0.5,
+    # benchmarks/bars_matrix.py --matrix speeds), so 0.5 may be refused, with the range
+    assert not rng.empty and rng.lo <= 0.7 and 1.2 <= rng.hi
     assert rng.hi_m_s == pytest.approx(rng.hi * prep.summary.mean_speed, rel=1e-6)
     for s in (0.5, 0.7, 1.5, 1.8, 2.0):
         if rng.lo <= s <= rng.hi:

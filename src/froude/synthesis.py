@@ -394,6 +394,8 @@ def _anchors(gait: Gait, psi: np.ndarray, stride: np.ndarray, F: int):
 
 #: Per-sample relaxation of an unloaded marker's own de-skating correction toward the foot's common one.
 RELAX = 0.2
+#: Fraction of a tilt's rise a marker keeps from one cycle sample to the next once the tilt is over.
+TILT_RELAX = 0.5
 
 
 def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, band: float) -> np.ndarray:
@@ -410,7 +412,7 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
     """
     out = rel.copy()
     K = rel.shape[0]
-    firm = np.full(rel.shape[:3], RIGID_MIN_FIRM)  # (K, 2, 3) how firmly each marker is held (for the bones)
+    firm = np.zeros(rel.shape[:3])  # (K, 2, 3) how firmly each marker is held (for the bones)
     in_place = np.zeros(rel.shape[:3], bool)  # (K, 2, 3) markers held in place (loaded in a stance)
     for foot in range(2):
         idx = np.flatnonzero(stance[:, foot])
@@ -461,6 +463,8 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
                 own[i] = np.where(both[i - 1][:, None], held, relaxed)
             pose = rel[idx[i], foot].copy()  # (3 markers, 3)
             pose[:, [0, 2]] += own[i]
+            if i > 0:  # a marker a tilt raised comes back down over a few samples, not at once
+                pose[:, 1] += TILT_RELAX * np.maximum(lift[i - 1], 0.0)
             rigid = _rigid_foot(pose[None], bones, f_firm[i][None], f_held[i][None])[0]
             own[i] = rigid[:, [0, 2]] - rel[idx[i], foot][:, [0, 2]]
             lift[i] = rigid[:, 1] - rel[idx[i], foot, :, 1]
@@ -477,6 +481,7 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
             fade = 1.0 - min_jerk(np.linspace(0, 1, sw.size))
             corr = (d[None, :] + rest)[None] * fade[:, None, None]  # (n_sw, 3, 2)
             out[sw, foot, :, 0] += corr[..., 0]
+            out[sw, foot, :, 1] += lift[-1][None, :] * fade[:, None]  # a tilt's rise fades with them
             out[sw, foot, :, 2] += corr[..., 1]
     out[..., 1] = np.maximum(out[..., 1], 0.0)
     return _keep_feet_rigid(out, rel, firm, in_place)
@@ -484,10 +489,10 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
 
 #: Bones of the foot between its markers (ankle-ball: the foot; ball-tip: the toes): their lengths are fixed.
 FOOT_BONES = ((1, 2), (0, 1))
-#: Sweeps of the bone-length projection (each sweep restores both bones; a few settle the chain to < 0.1 mm).
+#: Sweeps of the bone-length projection (each restores both bones; a few settle the chain to < 0.1 mm).
 RIGID_SWEEPS = 4
-#: Firmness of a marker that bears no load (the bones' ends then share a correction equally), and of one
-#: held in place (it does not give way to an unheld one).
+#: Firmness of a marker off the floor (the bones' ends then share a correction equally), and of one held in
+#: place horizontally (it does not give way to one that is not).
 RIGID_MIN_FIRM = 1e-3
 RIGID_HELD_FIRM = 1e6
 
@@ -512,14 +517,15 @@ def _rigid_foot(pose: np.ndarray, length: np.ndarray, firm: np.ndarray, held: np
     Holding each loaded marker where it is while the reference foot rolls would keep a rising ball in its
     place instead of swinging it back round the tip: the ball-tip distance shrank by up to 14 % (09_08), and
     IK, unable to meet such targets, split the difference and slid the held tip 5-7 mm on a giant. So each
-    bone (FOOT_BONES, lengths ``length`` (3, 3)) gets its length back. A bone with both ends held (held:
-    (N, 3), loaded in a stance) keeps them where they are and tilts: its less firm end (firm: (N, 3), how
-    near each is to its lowest point of the stance) moves up or down, which is not sliding (the toes flex
+    bone (FOOT_BONES, lengths ``length`` (3, 3)) gets its length back. A bone with both ends held in place
+    (held: (N, 3)) keeps them where they are and tilts: its less firm end moves up or down (firm: (N, 3),
+    how near each is to its lowest point of the stance), which is not sliding (the toes flex
     about the ball, or the ball rolls over the tip). Otherwise the bone slides along itself horizontally, a
-    held end not at all and otherwise the firmer end least; heights stay (they decide what is on the ground).
+    held end not at all and otherwise the firmer end less; heights stay (they decide what is on the ground).
     """
     hor = pose[..., [0, 2]].copy()  # (N, 3, 2)
     height = pose[..., 1].copy()  # (N, 3)
+    firm = RIGID_MIN_FIRM + firm
     for _ in range(RIGID_SWEEPS):
         for i, j in FOOT_BONES:
             d = length[i, j]
@@ -535,9 +541,9 @@ def _rigid_foot(pose: np.ndarray, length: np.ndarray, firm: np.ndarray, held: np
             change = np.where(tilt, 0.0, want - n)[:, None] * u  # j moves by +a·change, i by -(1-a)·change
             fi = np.where(held[:, i], RIGID_HELD_FIRM, firm[:, i])
             fj = np.where(held[:, j], RIGID_HELD_FIRM, firm[:, j])
-            a = (fi / (fi + fj))[:, None]
-            hor[:, j] += a * change
-            hor[:, i] -= (1.0 - a) * change
+            b = (fi / (fi + fj))[:, None]
+            hor[:, j] += b * change
+            hor[:, i] -= (1.0 - b) * change
     out = pose.copy()
     out[..., 0], out[..., 1], out[..., 2] = hor[..., 0], height, hor[..., 1]
     return out

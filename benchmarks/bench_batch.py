@@ -23,7 +23,7 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from froude import batch  # noqa: E402
+from froude.apps import batch  # noqa: E402
 
 MOCAP = Path(os.environ.get("FROUDE_MOCAP_DIR", Path(__file__).resolve().parents[2] / "shared" / "data" / "mocap"))
 CLIPS = ("09_01", "09_02", "09_03", "09_04", "09_05", "09_06", "09_07", "09_08")

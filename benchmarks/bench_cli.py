@@ -24,7 +24,7 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_v] = "1"
 
 PY = sys.executable
-FROUDE = [PY, "-m", "froude.cli"]
+FROUDE = [PY, "-m", "froude"]
 
 
 def wall(cmd: list[str], runs: int, expect: int = 0) -> list[float]:

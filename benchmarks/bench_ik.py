@@ -6,7 +6,7 @@
 Problem (issue 4): the real clip 09_01 tiled to about 1500 frames (each copy shifted forward by the
 clip's own travel); targets are its own COM displaced vertically by 2 cm · sin(2π t) and its six foot
 markers displaced 1 cm sideways (perpendicular to the running direction). Both solvers minimise the
-same weighted objective (``froude.ik``'s defaults: task weights 1 /m², posture/root weights 1e-4),
+same weighted objective (``froude.ik.solver``'s defaults: task weights 1 /m², posture/root weights 1e-4),
 start from the reference pose and stop a frame at the same tolerance (every COM/marker error below
 ``tol`` = 1 mm, or a step below 1e-6, at most 4 iterations). The peer is a straightforward per-frame
 damped-least-squares loop on Pinocchio (Jacobians recomputed every iteration, the same dual-form
@@ -29,7 +29,8 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 import froude  # noqa: E402
-from froude import ik, quat  # noqa: E402
+from froude.ik import solver as ik
+from froude.core import quat  # noqa: E402
 from froude.constants import UP_AXIS  # noqa: E402
 
 
@@ -67,7 +68,7 @@ def max_step_excluding(motion: froude.Motion, joints, seams) -> float:
 
 # ---- the peer: per-frame DLS on Pinocchio ----------------------------------------------------------------
 def pinocchio_model(body: froude.BodyModel):
-    """A Pinocchio model of the skeleton with the same DOF layout as froude.kinematics:
+    """A Pinocchio model of the skeleton with the same DOF layout as froude.core.kinematics:
     a world translation joint, then one spherical joint per skeleton joint (local-axis increments);
     de Leva segments as point masses; the six foot markers as operational frames."""
     import pinocchio as pin  # optional, benchmark only
@@ -98,7 +99,7 @@ def to_pin_q(root: np.ndarray, rotations: np.ndarray) -> np.ndarray:
 
 
 def pinocchio_solve(body, motion, com_target, marker_target, active, w_pos, w_rot, tol, step_tol, max_iters, max_step):
-    """Per-frame Gauss-Newton with the same objective and stopping rule as froude.ik.solve_ik."""
+    """Per-frame Gauss-Newton with the same objective and stopping rule as froude.ik.solver.solve_ik."""
     import pinocchio as pin
 
     model, fids = pinocchio_model(body)

@@ -122,8 +122,8 @@ def main() -> None:
 
     from froude import pipeline
     from froude.samples import sample_path
-    from froude.studio.app import Studio
-    from froude.studio.session import Params, Session
+    from froude.apps.studio.app import Studio
+    from froude.apps.studio.session import Params, Session
 
     t = time.perf_counter()
     prep = pipeline.prepare(sample_path())

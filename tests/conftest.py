@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from froude.cli import main as cli_main
+from froude.apps.cli import main as cli_main
 
 REPO = Path(__file__).resolve().parents[1]
 FIXTURES = Path(__file__).resolve().parent / "fixtures"

@@ -12,21 +12,27 @@ from froude import pipeline
 from froude.errors import PlanError
 from froude.machine.table import grid_around, load_or_build_table
 
-from conftest import MOCAP
+from conftest import RUNNING, clip, clip_params
 
-RUNNING = ["09_01", "09_02", "09_03", "09_04", "09_05", "09_06", "09_07", "09_08", "02_03"]
+
+class _Prepared(dict):
+    """Running clips fitted on first use (once per module); a missing clip skips the test that asks."""
+
+    def __missing__(self, name: str):
+        self[name] = pipeline.prepare(clip(name))
+        return self[name]
 
 
 @pytest.fixture(scope="module")
 def prepared():
-    return {c: pipeline.prepare(MOCAP / f"{c}.bvh") for c in RUNNING}
+    return _Prepared()
 
 
-@pytest.mark.parametrize("clip", RUNNING)
+@pytest.mark.parametrize("name", clip_params(RUNNING))
 @pytest.mark.parametrize("factor", [0.5, 1.3])
-def test_reach_goal_in_eight_steps(prepared, clip, factor):
+def test_reach_goal_in_eight_steps(prepared, name, factor):
     """Acceptance 2: 0.5x and 1.3x within 8 steps: final speed within 3 %, monotone, physics bars met."""
-    res = pipeline.accelerate(prepared[clip], to_factor=factor, steps=8)
+    res = pipeline.accelerate(prepared[name], to_factor=factor, steps=8)
     plan = res.report.extras["plan"]
     v = np.asarray(plan["apex_speed_m_s"])
     change = [i for i, p in enumerate(plan["phase"]) if p == "change"]
@@ -98,13 +104,13 @@ def test_table_matches_simulation_and_caches(prepared, tmp_path):
 
 def test_cli_writes_profile_and_refuses_nonsense(tmp_path):
     out = tmp_path / "slow.bvh"
-    r = subprocess.run([sys.executable, "-m", "froude.cli", "accelerate", str(MOCAP / "09_05.bvh"), "--to-speed", "0.5x",
+    r = subprocess.run([sys.executable, "-m", "froude", "accelerate", str(clip("09_05")), "--to-speed", "0.5x",
                         "--steps", "8", "-o", str(out), "--plot", str(tmp_path / "slow.png")], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     rep = json.loads(out.with_name("slow.report.json").read_text())
     assert len(rep["extras"]["plan"]["apex_speed_m_s"]) > 8
     assert (tmp_path / "slow.png").stat().st_size > 10_000 and (tmp_path / "slow-table.png").exists()
-    bad = subprocess.run([sys.executable, "-m", "froude.cli", "accelerate", str(MOCAP / "09_05.bvh"), "--to-speed", "10x",
+    bad = subprocess.run([sys.executable, "-m", "froude", "accelerate", str(clip("09_05")), "--to-speed", "10x",
                           "--steps", "1", "-o", str(tmp_path / "x.bvh")], capture_output=True, text=True)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and not (tmp_path / "x.bvh").exists()
     assert len([line for line in bad.stderr.splitlines() if "error" in line]) == 1

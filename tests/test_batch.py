@@ -18,8 +18,9 @@ from pathlib import Path
 import pytest
 
 from conftest import MOCAP, RUNNING, WALKING, clip
-from froude import batch, load_bvh, pipeline
-from froude.batch import BatchError
+from froude.apps import batch
+from froude import load_bvh, pipeline
+from froude.apps.batch import BatchError
 
 pytest.importorskip("distributed")
 
@@ -309,7 +310,7 @@ def test_sigkill_midway_then_resume(tmp_path, run_cli):
     plan = write(tmp_path / "plan.yaml", "characters: [child, small]\nspeeds: [0.9, 1.0, 1.1]\nstrides: 2\n")
     inputs = [str(MOCAP / f"{n}.bvh") for n in ("09_02", "09_03", "09_04")]
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "froude.cli", "batch", *inputs, "--plan", str(plan), "-o", str(out), "-q"]
+    cmd = [sys.executable, "-m", "froude", "batch", *inputs, "--plan", str(plan), "-o", str(out), "-q"]
     proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 120
@@ -356,7 +357,7 @@ def _group_workers(pgid: int) -> list[int]:
 
 
 def _start_batch(inputs, plan, out):
-    cmd = [sys.executable, "-m", "froude.cli", "batch", *map(str, inputs), "--plan", str(plan), "-o", str(out),
+    cmd = [sys.executable, "-m", "froude", "batch", *map(str, inputs), "--plan", str(plan), "-o", str(out),
            "-q", "--workers", "2"]
     return subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
@@ -478,7 +479,7 @@ def test_ctrl_c_stops_cleanly(tmp_path):
         pytest.skip("real clips not found")
     plan = write(tmp_path / "plan.yaml", "characters: [child, small]\nspeeds: [0.9, 1.0, 1.1]\nstrides: 2\n")
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "froude.cli", "batch", *(str(MOCAP / f"{n}.bvh") for n in ("09_02", "09_03", "09_04")),
+    cmd = [sys.executable, "-m", "froude", "batch", *(str(MOCAP / f"{n}.bvh") for n in ("09_02", "09_03", "09_04")),
            "--plan", str(plan), "-o", str(out), "-q"]
     proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:

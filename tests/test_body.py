@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from froude import BodyModel, FroudeError, Skeleton, detect_gait, find_roles, load_bvh, load_joint_map, quat
-from froude.body import DE_LEVA, REQUIRED_ROLES, JointMapError
-from froude.motion import Motion
+from froude import BodyModel, FroudeError, Skeleton, detect_gait, find_roles, load_bvh, load_joint_map
+from froude.core import quat
+from froude.body.model import DE_LEVA, REQUIRED_ROLES, JointMapError
+from froude.core.motion import Motion
 
 from conftest import FIXTURES, RUNNING, clip, clip_params, oracle_fk, read_bvh_oracle
 
@@ -151,7 +152,7 @@ def _three_joint_body(skeleton):
 
 
 def test_three_joint_fixture_com_by_hand():
-    from froude.kinematics import com_jacobian
+    from froude.core.kinematics import com_jacobian
 
     motion = load_bvh(FIXTURES / "three_joint.bvh", clean=False)
     body = _three_joint_body(motion.skeleton)

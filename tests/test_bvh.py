@@ -368,7 +368,7 @@ def test_console_script_exit_status_and_no_traceback(tmp_path):
     """The real entry point (a subprocess), not just main(): exit 2, one line on stderr."""
     p = tmp_path / "bad.bvh"
     p.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n")
-    r = subprocess.run([sys.executable, "-m", "froude.cli", "info", str(p)], capture_output=True, text=True,
+    r = subprocess.run([sys.executable, "-m", "froude", "info", str(p)], capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 2
     assert "Traceback" not in r.stderr

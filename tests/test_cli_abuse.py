@@ -22,7 +22,7 @@ import pytest
 from conftest import clip
 from froude.samples import sample_path
 
-FROUDE = [sys.executable, "-m", "froude.cli"]
+FROUDE = [sys.executable, "-m", "froude"]
 
 
 def snapshot(folder: Path) -> dict:
@@ -204,7 +204,7 @@ def test_no_command_exits_2_with_usage(run_cli):
 
 
 def test_quiet_is_everywhere_and_quiet(work, run_cli):
-    from froude.cli import build_parser
+    from froude.apps.cli import build_parser
 
     code, out, err = run_cli("info", "in.bvh", "-q")
     assert code == 0 and err == "" and "Froude number" in out
@@ -400,17 +400,17 @@ def test_os_errors_during_work_are_one_line(work, run_cli, monkeypatch):
 @pytest.mark.parametrize("args", [["--help"], ["scale", "--help"], ["scale", "x.bvh", "--fps", "0", "-o", "o.bvh"],
                                   ["batch", "--help"], []])
 def test_help_and_option_errors_import_no_numpy(args):
-    r = subprocess.run([sys.executable, "-X", "importtime", "-m", "froude.cli", *args], capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-X", "importtime", "-m", "froude", *args], capture_output=True, text=True)
     imported = {line.split("|")[-1].strip() for line in r.stderr.splitlines() if line.startswith("import time:")}
     assert r.returncode in (0, 2)
-    assert not {"numpy", "scipy", "froude.batch", "yaml"} & imported or args == ["batch", "--help"], \
+    assert not {"numpy", "scipy", "froude.apps.batch", "yaml"} & imported or args == ["batch", "--help"], \
         sorted(m for m in imported if m.split(".")[0] in ("numpy", "scipy", "froude", "yaml"))
     if args == ["batch", "--help"]:
         assert "numpy" not in imported
 
 
 def test_every_command_module_lists_its_help():
-    from froude.cli import SUBCOMMANDS, build_parser
+    from froude.apps.cli import SUBCOMMANDS, build_parser
 
     full = build_parser()
     sub = next(a for a in full._actions if a.dest == "command")

@@ -25,7 +25,7 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from froude.cli import common
+from froude.apps.cli import common
 from froude.samples import sample_path
 
 FUZZ_EXAMPLES = int(os.environ.get("FROUDE_FUZZ_EXAMPLES", "40"))
@@ -164,9 +164,9 @@ def _folder() -> tempfile.TemporaryDirectory:
 def small_work(monkeypatch):
     """Accepted cases stay small: the work bound at 3,000 frames; the studio never really starts."""
     monkeypatch.setattr(common, "MAX_FRAMES", 3000)
-    import froude.studio
+    import froude.apps.studio
 
-    monkeypatch.setattr(froude.studio, "serve", lambda *a, **k: 0, raising=True)
+    monkeypatch.setattr(froude.apps.studio, "serve", lambda *a, **k: 0, raising=True)
 
 
 @pytest.mark.parametrize("command", ["info", "fit", "scale", "accelerate", "render", "view", "batch", "convert"])

@@ -16,9 +16,9 @@ import pytest
 
 import rig_variants as rv
 from conftest import BANDAI_RUNS, RUNNING, clip, clip_params, read_bvh_oracle
-from froude import conventions
-from froude.body import BodyModel, find_roles
-from froude.gait import detect_gait, summarize
+from froude.body import conventions
+from froude.body.model import BodyModel, find_roles
+from froude.body.gait import detect_gait, summarize
 from froude.io.bvh import load_bvh
 
 CMU_SCALE = 0.056444
@@ -102,10 +102,33 @@ def test_info_is_the_same_in_every_convention(name, variant, tmp_root):
     assert got["height"] == pytest.approx(ref["height"], rel=0.06 if variant == "folded" else 0.005)
 
 
-@pytest.mark.xfail(reason="contacts found at 30/60 Hz give another step frequency on some clips (gait.py, "
-                          "issue 13: engineer take)", strict=False)
-@pytest.mark.parametrize("name", clip_params(RUNNING))
-@pytest.mark.parametrize("variant", ["60Hz", "30Hz"])
+# Step frequency [Hz] found from the contacts at 60/30 Hz vs at the clip's 120 Hz, measured 2026-11-25 with
+# `pytest tests/test_conventions.py -k low_rates --runxfail`: the contacts (gait.py) at low rates move a
+# touchdown by a frame on these clips. The other clips agree within the 1 % bar and must keep doing so.
+_STEP_HZ_MISSES = {
+    ("09_03", "60Hz"): (2.742, 2.775), ("09_04", "60Hz"): (3.197, 2.844), ("09_06", "60Hz"): (2.815, 2.684),
+    ("09_08", "60Hz"): (2.498, 2.666), ("09_02", "30Hz"): (2.868, 2.758), ("09_03", "30Hz"): (2.745, 2.775),
+    ("09_04", "30Hz"): (2.793, 2.844), ("09_05", "30Hz"): (2.723, 2.805), ("09_06", "30Hz"): (2.764, 2.684),
+    ("09_07", "30Hz"): (2.574, 2.608), ("09_08", "30Hz"): (2.555, 2.666),
+}
+
+
+def _low_rate_cases():
+    names = clip_params(RUNNING)
+    if not isinstance(names[0], str):
+        return names
+    cases = []
+    for variant in ("60Hz", "30Hz"):
+        for n in names:
+            miss = _STEP_HZ_MISSES.get((n, variant))
+            marks = () if miss is None else pytest.mark.xfail(strict=True, reason=(
+                f"step frequency at {variant} {miss[0]:.3f} Hz vs {miss[1]:.3f} Hz at 120 Hz "
+                f"({100 * (miss[0] / miss[1] - 1):+.1f} %, bar 1 %): contacts at low rates (gait.py, issue 13)"))
+            cases.append(pytest.param(n, variant, marks=marks, id=f"{variant}-{n}"))
+    return cases
+
+
+@pytest.mark.parametrize("name,variant", _low_rate_cases())
 def test_step_frequency_at_low_rates(name, variant, tmp_root):
     ref = _info(str(clip(name)))
     got = _info(_variant_file(name, variant, tmp_root))
@@ -124,13 +147,15 @@ def _fit(path):
     return m.K, m.theta0
 
 
-_RATE_XFAIL = pytest.mark.xfail(reason="the fit at 30/60 Hz (machine/fit.py, issue 13: engineer take) gives K "
-                                       "a few per cent apart on some clips", strict=False)
+# Measured 2026-11-25 (`pytest tests/test_conventions.py -k fit_is_the_same --runxfail`): the other 30/60 Hz
+# cases agree within the 3 % bar and must keep doing so.
+_FIT_MISSES = {("09_01", "30Hz"): "the fit at 30 Hz gives K = 14.56 vs 15.33 at 120 Hz (-5.0 %, bar 3 %): "
+                                  "machine/fit.py at low rates, issue 13"}
 
 
 def _fit_cases():
-    return [pytest.param(*c, marks=_RATE_XFAIL) if len(c) == 2 and c[1] in ("30Hz", "60Hz") else c
-            for c in _cases(FIT_CLIPS)]
+    return [pytest.param(*c, marks=pytest.mark.xfail(strict=True, reason=_FIT_MISSES[tuple(c)]))
+            if isinstance(c, tuple) and c in _FIT_MISSES else c for c in _cases(FIT_CLIPS)]
 
 
 @pytest.mark.parametrize("name,variant", _fit_cases())
@@ -195,7 +220,7 @@ def test_roles_of_every_naming_family(family):
     b = read_bvh_oracle(clip("09_01"))
     r = rv.renamed(b, family, rv.CMU_PARTS)
     names = r.names
-    from froude.skeleton import Skeleton
+    from froude.core.skeleton import Skeleton
 
     sk = Skeleton(tuple(names), np.array(r.parents), np.asarray(r.offsets), tuple(tuple(c) for c in r.channels))
     roles = find_roles(sk)
@@ -224,7 +249,7 @@ def test_outputs_read_back_at_their_true_height(height, tmp_path, run_cli):
 @pytest.mark.parametrize("preset", ["child", "small", "troll", "giant"])
 @pytest.mark.parametrize("name", ["09_01", "dataset-1_run_tired_001"])
 def test_every_preset_reads_back_at_its_height(preset, name, tmp_path, run_cli):
-    from froude.characters import load_character
+    from froude.body.characters import load_character
 
     out = tmp_path / f"{preset}.bvh"
     code, _, err = run_cli("scale", clip(name), "--character", preset, "-o", out, "-q", "--keep")
@@ -299,8 +324,51 @@ def test_output_unit_rotations_only_and_frame_time(tmp_path, run_cli):
 
 # ---- the Bandai clips as delivered (issue 12, acceptance 2) ---------------------------------------------
 BANDAI_STRIDING = tuple(n for n in BANDAI_RUNS if n != "dataset-1_dash_normal_001")
-_BARS_OPEN = ("physics bars on outputs of the 30 Hz Bandai clips: foot skate/penetration, joint jumps and "
-              "flight gravity are not all met yet (IK, fit: issues 12.2 and 13)")
+# The cases that miss a bar, measured 2026-11-25 (`pytest tests/test_conventions.py -k bandai_clips_as_delivered
+# -rx`): (clip, index in _CHANGES, output rate) -> the bars missed. IK and the fit on 30 Hz input (issues 12.2
+# and 13). Every other case meets every bar and must keep doing so; a case listed here that starts meeting the
+# bars fails (strict) so that it is taken off the list.
+_CHANGES = [("child", 1.0), ("troll", 1.0), ("giant", 1.0), (None, 0.7), (None, 1.2), ("accelerate", 0.5),
+            ("accelerate", 1.3)]
+_BANDAI_MISSES = {
+    ("dash_active", 0, None): "foot skate 6.40 mm (<= 5); ground penetration 6.35 mm (<= 5)",
+    ("dash_active", 0, 120): "foot skate 6.70 mm (<= 5); ground penetration 6.47 mm (<= 5)",
+    ("dash_active", 1, None): "foot skate 8.95 mm (<= 5); ground penetration 11.93 mm (<= 5)",
+    ("dash_active", 1, 120): "foot skate 9.44 mm (<= 5); ground penetration 11.94 mm (<= 5)",
+    ("dash_feminine", 1, None): "ground penetration 18.08 mm (<= 5)",
+    ("dash_feminine", 1, 120): "foot skate 7.64 mm (<= 5); ground penetration 18.08 mm (<= 5)",
+    ("dash_old", 0, None): "flight gravity nan m/s^2 (9.81 +- 3%)",
+    ("dash_old", 1, None): "foot skate 9.25 mm (<= 5); ground penetration 6.86 mm (<= 5)",
+    ("dash_old", 1, 120): "foot skate 10.21 mm (<= 5); ground penetration 6.87 mm (<= 5)",
+    ("run_tired", 0, None): "flight gravity nan m/s^2 (9.81 +- 3%); joint jump 38.66 deg (<= 1.5 x reference 24.87)",
+    ("run_tired", 0, 120): "flight gravity nan m/s^2 (9.81 +- 3%); foot skate 5.23 mm (<= 5)",
+    ("run_tired", 1, None): "flight gravity nan m/s^2 (9.81 +- 3%); foot skate 8.53 mm (<= 5)",
+    ("run_tired", 1, 120): "flight gravity nan m/s^2 (9.81 +- 3%); foot skate 8.52 mm (<= 5)",
+    ("run_tired", 2, None): "flight gravity nan m/s^2 (9.81 +- 3%); joint jump 57.43 deg (<= 1.5 x reference 24.87)",
+    ("run_tired", 2, 120): "flight gravity nan m/s^2 (9.81 +- 3%); joint jump 78.96 deg (<= 1.5 x reference 24.87)",
+    ("run_tired", 3, None): "flight gravity nan m/s^2 (9.81 +- 3%)",
+    ("run_tired", 3, 120): "flight gravity nan m/s^2 (9.81 +- 3%); joint jump 49.62 deg (<= 1.5 x reference 24.87)",
+    ("run_tired", 4, None): "joint jump 82.28 deg (<= 1.5 x reference 24.87)",
+    ("run_tired", 4, 120): "joint jump 55.76 deg (<= 1.5 x reference 24.87)",
+    ("run_tired", 5, None): "refused: cannot reach U = 0.302 in 8 steps (min sustainable U = 0.499, start U = 0.604)",
+    ("run_tired", 5, 120): "refused: cannot reach U = 0.302 in 8 steps (min sustainable U = 0.499, start U = 0.604)",
+    ("run_tired", 6, None): "joint jump 91.92 deg (<= 1.5 x reference 24.87)",
+    ("run_tired", 6, 120): "joint jump 57.64 deg (<= 1.5 x reference 24.87)",
+}
+
+
+def _bandai_cases():
+    names = clip_params(BANDAI_STRIDING)
+    if not isinstance(names[0], str):
+        return names
+    cases = []
+    for name in names:
+        for i, change in enumerate(_CHANGES):
+            for fps in (None, 120.0):
+                miss = _BANDAI_MISSES.get((name[len("dataset-1_"):-len("_001")], i, None if fps is None else 120))
+                marks = () if miss is None else pytest.mark.xfail(strict=True, reason=miss)
+                cases.append(pytest.param(name, change, fps, marks=marks, id=f"{name}-change{i}-{fps}"))
+    return cases
 
 
 @functools.lru_cache(maxsize=None)
@@ -310,13 +378,10 @@ def _bandai_prep(name):
     return pipeline.prepare(load_bvh(clip(name)))
 
 
-@pytest.mark.parametrize("fps", [None, 120.0])
-@pytest.mark.parametrize("change", [("child", 1.0), ("troll", 1.0), ("giant", 1.0), (None, 0.7), (None, 1.2),
-                                    ("accelerate", 0.5), ("accelerate", 1.3)])
-@pytest.mark.parametrize("name", clip_params(BANDAI_STRIDING))
-def test_bandai_clips_as_delivered_meet_the_bars(name, change, fps, request):
+@pytest.mark.parametrize("name,change,fps", _bandai_cases())
+def test_bandai_clips_as_delivered_meet_the_bars(name, change, fps):
     """Every striding Bandai run goes through scale and accelerate with no option; the output meets the
-    physics bars, measured at its own rate (the input's 30 Hz, or 120 Hz)."""
+    physics bars, measured at its own rate (the input's 30 Hz, or 120 Hz). A refusal is one line."""
     from froude import pipeline
     from froude.errors import FroudeError
 
@@ -329,13 +394,9 @@ def test_bandai_clips_as_delivered_meet_the_bars(name, change, fps, request):
             res = pipeline.scale(prep, what, speed=factor, fps=fps)
     except FroudeError as e:  # a refusal must be one line (an unreachable speed, say)
         assert "\n" not in str(e)
-        request.applymarker(pytest.mark.xfail(reason=f"refused: {e}", strict=False))
         raise
     assert res.motion.fps == pytest.approx(fps or 30.0, rel=1e-3)
-    fails = res.report.check_bars()
-    if fails:
-        request.applymarker(pytest.mark.xfail(reason=f"{_BARS_OPEN}: {'; '.join(fails)}", strict=False))
-    assert fails == []
+    assert res.report.check_bars() == []
 
 
 def test_bandai_loop_is_unrolled_and_walk_refused_in_one_line(run_cli, tmp_path):

@@ -20,7 +20,7 @@ import pytest
 import froude
 from conftest import clip
 from froude.io.framedata import peak_vertical_force_bw, read_frame_data
-from froude.kinematics import fk
+from froude.core.kinematics import fk
 
 pytest.importorskip("pygltflib")
 

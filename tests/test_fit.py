@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from froude.body import BodyModel
+from froude.body.model import BodyModel
 from froude.constants import GRAVITY
 from froude.errors import NotARunningMotion
 from froude.io.bvh import load_bvh
@@ -17,20 +17,26 @@ from froude.machine.fit import fit_machine_detailed, fit_stance_control
 from froude.machine.forces import ground_force, smooth_com
 from froude.machine.model import SimpleMachine, load_machine
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "mocap"
-if not DATA.exists():
-    DATA = Path("/work/shared/data/mocap")
-RUNS = ["09_01", "09_02", "09_03", "09_04", "09_05", "09_06", "09_07", "09_08", "02_03"]
+from conftest import RUNNING as RUNS
+from conftest import clip, clip_params
+
+
+class _Fits(dict):
+    """Running clips fitted on first use (once per module); a missing clip skips the test that asks."""
+
+    def __missing__(self, name: str):
+        self[name] = fit_machine_detailed(load_bvh(clip(name)), source=name)
+        return self[name]
 
 
 @pytest.fixture(scope="module")
 def fits():
-    return {c: fit_machine_detailed(load_bvh(DATA / f"{c}.bvh"), source=c) for c in RUNS}
+    return _Fits()
 
 
-@pytest.mark.parametrize("clip", RUNS)
-def test_cycle_matches_reference(fits, clip):
-    r = fits[clip]
+@pytest.mark.parametrize("name", clip_params(RUNS))
+def test_cycle_matches_reference(fits, name):
+    r = fits[name]
     m = r.machine
     assert m.periodicity <= 1e-6
     # independent re-check of periodicity with the simulator
@@ -47,9 +53,9 @@ def test_cycle_matches_reference(fits, clip):
     assert abs(m.mean_speed * m.speed_unit / m.reference["mean_speed_m_s"] - 1) <= 0.03
 
 
-@pytest.mark.parametrize("clip", RUNS)
-def test_physiological_sanity(fits, clip):
-    r = fits[clip]
+@pytest.mark.parametrize("name", clip_params(RUNS))
+def test_physiological_sanity(fits, name):
+    r = fits[name]
     m = r.machine
     assert 7 <= m.K <= 35
     full = [s for s in r.stances if not s.partial]
@@ -62,10 +68,10 @@ def test_physiological_sanity(fits, clip):
     assert 0.5 < sh["vertical"] < 1 and 0.5 < sh["leg"] < 1
 
 
-@pytest.mark.parametrize("clip", ["02_04"])  # walks (02_01, 07_01) get the walking machine: test_walking.py
-def test_non_running_refused(clip, tmp_path):
+@pytest.mark.parametrize("name", clip_params(["02_04"]))  # walks (02_01, 07_01) get the walking machine: test_walking.py
+def test_non_running_refused(name, tmp_path):
     out = tmp_path / "m.json"
-    p = subprocess.run([sys.executable, "-m", "froude.cli", "fit", str(DATA / f"{clip}.bvh"), "-o", str(out)],
+    p = subprocess.run([sys.executable, "-m", "froude", "fit", str(clip(name)), "-o", str(out)],
                        capture_output=True, text=True)
     assert p.returncode == 2
     err = [ln for ln in p.stderr.splitlines() if "error" in ln]
@@ -74,7 +80,7 @@ def test_non_running_refused(clip, tmp_path):
 
 
 def test_one_stance_clip_refused():
-    m = load_bvh(DATA / "09_01.bvh")
+    m = load_bvh(clip("09_01"))
     cut = m.cut(30, 80)  # one full right stance only
     with pytest.raises(NotARunningMotion, match="complete stance|foot contact|flight"):
         fit_machine_detailed(cut)
@@ -82,7 +88,7 @@ def test_one_stance_clip_refused():
 
 def test_cli_plot_and_json_roundtrip(tmp_path):
     out, png = tmp_path / "m.json", tmp_path / "fit.png"
-    p = subprocess.run([sys.executable, "-m", "froude.cli", "fit", str(DATA / "09_01.bvh"), "-o", str(out),
+    p = subprocess.run([sys.executable, "-m", "froude", "fit", str(clip("09_01")), "-o", str(out),
                         "--plot", str(png)], capture_output=True, text=True)
     assert p.returncode == 0, p.stderr
     assert "cycle" in p.stdout and "stance" in p.stdout

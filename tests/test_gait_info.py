@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from froude import BodyModel, NotARunningMotion, detect_gait, load_bvh, summarize
-from froude.gait import require_running
+from froude.body.gait import require_running
 
 from conftest import RUNNING, WALKING, clip, clip_params
 

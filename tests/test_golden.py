@@ -45,7 +45,7 @@ def test_outputs_match_golden(clip):
 def test_golden_fk_matches_froude_fk():
     """The goldens' own FK agrees with froude's (so a golden difference is a motion difference)."""
     from froude import load_bvh
-    from froude.kinematics import fk
+    from froude.core.kinematics import fk
 
     m = load_bvh(Path(__file__).resolve().parent / "fixtures" / "humanoid_metres.bvh")
     assert np.abs(make_golden.world_positions(m) - fk(m)[0]).max() < 1e-12

@@ -1,4 +1,4 @@
-"""Tests of froude.ik: whole-body IK for all frames at once (paper §6, issue 4).
+"""Tests of froude.ik.solver: whole-body IK for all frames at once (paper §6, issue 4).
 
 Oracles: a dense Gauss-Newton step assembled from the task objects' own Jacobians (which wrap the
 finite-difference-checked ``kinematics`` Jacobians), finite differences of the task errors, and the
@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 
 import froude
-from froude import ik, quat
+from froude.ik import solver as ik
+from froude.core import quat
 from froude.constants import UP_AXIS
 from froude.errors import IkError
-from froude.kinematics import apply_dof_increment
+from froude.core.kinematics import apply_dof_increment
 
-MOCAP = "/work/shared/data/mocap"
+from conftest import clip as real_clip
 
 
 @pytest.fixture(scope="module")
@@ -237,12 +238,7 @@ def test_weights_trade_accuracy_for_posture(clip, body):
 
 @pytest.mark.parametrize("name", ["09_03", "02_03"])
 def test_other_running_clips(name, body):
-    import os
-
-    path = os.path.join(MOCAP, f"{name}.bvh")
-    if not os.path.exists(path):
-        pytest.skip(f"{path} not available")
-    m = froude.load_bvh(path)
+    m = froude.load_bvh(real_clip(name))
     b = froude.BodyModel.from_skeleton(m.skeleton)
     com, mk = b.com_and_markers(m)
     com_t = com + 0.02 * np.sin(2 * np.pi * m.times)[:, None] * np.eye(3)[UP_AXIS]
@@ -252,7 +248,7 @@ def test_other_running_clips(name, body):
 
 def test_kept_buffer_fk_matches_fk_soa(clip, body):
     """The solver's in-place FK (buffers kept across iterations) reproduces kinematics.fk_soa."""
-    from froude.kinematics import fk_soa
+    from froude.core.kinematics import fk_soa
 
     m = clip[:50]
     w_pos, w_rot = ik.dof_weights(m.skeleton, ik.PostureTask(), ik.RootTask())

@@ -5,10 +5,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from froude import BodyModel, load_bvh, quat
-from froude.kinematics import (
-    ancestor_mask, apply_dof_increment, com_jacobian, fk, forward_kinematics, fk_soa, from_soa, point_jacobian,
-    points_world, to_soa,
+from froude import BodyModel, load_bvh
+from froude.core import quat
+from froude.core.kinematics import (
+    ancestor_mask,
+    apply_dof_increment,
+    com_jacobian,
+    fk,
+    forward_kinematics,
+    fk_soa,
+    from_soa,
+    point_jacobian,
+    points_world,
+    to_soa,
 )
 
 from conftest import FIXTURES, clip, clip_params, oracle_fk, read_bvh_oracle
@@ -174,7 +183,7 @@ def test_com_jacobian_matches_finite_differences():
     # the COM itself: the mass-weighted segment points, and BodyModel.com's fast path
     seg = body.segment_points(p, R)
     np.testing.assert_allclose(com, np.einsum("s,fsa->fa", body.seg_mass, seg) / 70.0, atol=1e-12)
-    from froude.motion import Motion
+    from froude.core.motion import Motion
 
     np.testing.assert_allclose(com, body.com(Motion(skel, root, rot, 1 / 120)), atol=1e-12)
     J_fd = _fd_jacobian(com_of, root, rot, 3 + 3 * skel.n_joints)

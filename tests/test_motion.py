@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
-from froude import Motion, load_bvh, quat
+from froude import Motion, load_bvh
+from froude.core import quat
 
 from conftest import FIXTURES, clip
 

@@ -1,5 +1,4 @@
 """§5.3 planner: speed changes of the dimensionless machine, exact against the simulator."""
-import glob
 import math
 from types import SimpleNamespace
 
@@ -7,11 +6,15 @@ import numpy as np
 import pytest
 
 from froude.errors import PlanError
+from froude.io.bvh import load_bvh
 from froude.machine.cycle import find_limit_cycle
 from froude.machine.dynamics import Control, step
+from froude.machine.fit import fit_machine
 from froude.machine.planner import (Comfort, SpeedPlan, one_step_range, plan_speed_change,
                                     plan_speed_profile, speed_fraction_at, target_cycle)
 from froude.machine.table import build_table, grid_around
+
+from conftest import RUNNING, clip, clip_params
 
 # Realistic dimensionless running cycles (U 0.9-1.25, K 10-25, small a, b, c).
 PRIORS = {
@@ -20,7 +23,6 @@ PRIORS = {
     "K20_slow": (0.9, 1.0, 0.35, Control(K=20, a=0.01, b=-0.03, c=0.02, T_c=0.6)),
     "K25_fast": (1.25, 1.0, 0.42, Control(K=25, a=0.0, b=0.02, c=-0.01, T_c=0.5)),
 }
-MOCAP = "/work/shared/data/mocap"
 
 
 @pytest.fixture(scope="module")
@@ -236,26 +238,11 @@ def test_target_cycle_is_periodic(cycles):
         assert abs(float(r.U_next) - tc.U) <= 1e-9 and abs(float(r.H_next) - tc.H) <= 1e-9
 
 
-def _fit_or_skip():
-    try:
-        from froude.io.bvh import load_bvh
-        from froude.machine.fit import fit_machine
-    except ImportError as e:  # pragma: no cover - depends on the fit module's progress
-        pytest.skip(f"froude.machine.fit is not available yet: {e}")
-    return load_bvh, fit_machine
-
-
-RUNNING = sorted(glob.glob(f"{MOCAP}/09_0*.bvh")) + [f"{MOCAP}/02_03.bvh"]
-
-
-@pytest.mark.parametrize("path", RUNNING, ids=lambda p: p.rsplit("/", 1)[-1])
-def test_real_clips_decelerate_and_accelerate(path):
-    load_bvh, fit_machine = _fit_or_skip()
-    from froude.errors import FroudeError
-    try:
-        m = fit_machine(load_bvh(path))
-    except FroudeError as e:
-        pytest.skip(f"fit_machine does not fit {path} yet: {e}")
+@pytest.mark.parametrize("name", clip_params(RUNNING))
+def test_real_clips_decelerate_and_accelerate(name):
+    """Every running clip fits (a fit error fails the test) and its machine slows to 0.5x and speeds up to
+    1.3x in 8 steps."""
+    m = fit_machine(load_bvh(clip(name)))
     assert 0.8 <= m.U <= 1.3
     for factor in (0.5, 1.3):
         plan = plan_speed_change(m, factor * m.U, n_steps=8)

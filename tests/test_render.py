@@ -11,19 +11,18 @@ import pytest
 pytest.importorskip("matplotlib")
 imageio = pytest.importorskip("imageio")
 
-from froude.body import BodyModel  # noqa: E402
-from froude.cli import main  # noqa: E402
+from froude.body.model import BodyModel  # noqa: E402
+from froude.apps.cli import main  # noqa: E402
 from froude.io.bvh import load_bvh  # noqa: E402
 from froude.viz.render import LEFT, RIGHT, build_rig, render_filmstrip, render_video  # noqa: E402
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "mocap"
-if not DATA.is_dir():
-    DATA = Path("/work/shared/data/mocap")
+from conftest import clip  # noqa: E402
+
 
 
 @pytest.fixture(scope="module")
 def clips():
-    return load_bvh(DATA / "09_01.bvh"), load_bvh(DATA / "02_03.bvh")
+    return load_bvh(clip("09_01")), load_bvh(clip("02_03"))
 
 
 @pytest.fixture(scope="module")
@@ -107,7 +106,7 @@ def _cli(capsys, argv):
 
 def test_cli_unknown_extension(tmp_path, capsys):
     out = tmp_path / "run.avi"
-    code, err = _cli(capsys, ["render", str(DATA / "09_01.bvh"), "-o", str(out), "--quiet"])
+    code, err = _cli(capsys, ["render", str(clip("09_01")), "-o", str(out), "--quiet"])
     assert code == 2
     assert len(err.strip().splitlines()) == 1 and ".avi" in err
     assert list(tmp_path.iterdir()) == []
@@ -125,7 +124,7 @@ def test_cli_broken_bvh(tmp_path, capsys):
 
 def test_cli_filmstrip(tmp_path, capsys):
     out = tmp_path / "fs.png"
-    code, err = _cli(capsys, ["render", str(DATA / "09_01.bvh"), "-o", str(out), "--filmstrip", "--width", "800",
+    code, err = _cli(capsys, ["render", str(clip("09_01")), "-o", str(out), "--filmstrip", "--width", "800",
                               "--labels", "runner", "--quiet"])
     assert code == 0 and err == ""
     assert imageio.v3.imread(out).shape[1] == 800

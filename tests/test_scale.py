@@ -9,43 +9,52 @@ import numpy as np
 import pytest
 
 import froude
-from froude import pipeline, quat
-from froude.characters import list_presets
+from froude import pipeline
+from froude.core import quat
+from froude.body.characters import list_presets
 from froude.constants import GRAVITY
+from froude.ik.correct import correct
 from froude.metrics import physics_report
 
-from conftest import MOCAP
+from conftest import RUNNING, clip, clip_params
 
-RUNNING = ["09_01", "09_02", "09_03", "09_04", "09_05", "09_06", "09_07", "09_08", "02_03"]
 PRESETS = ["child", "troll", "giant", "small"]
 SPEEDS = [0.7, 1.0, 1.2]
+
+
+class _Prepared(dict):
+    """Running clips fitted on first use (once per module); a missing clip skips the test that asks."""
+
+    def __missing__(self, name: str):
+        self[name] = pipeline.prepare(clip(name))
+        return self[name]
 
 
 @pytest.fixture(scope="module")
 def prepared():
     """Each running clip fitted once for the whole module."""
-    return {c: pipeline.prepare(MOCAP / f"{c}.bvh") for c in RUNNING}
+    return _Prepared()
 
 
-@pytest.mark.parametrize("clip", RUNNING)
-def test_physics_bars_every_preset_and_speed(prepared, clip):
+@pytest.mark.parametrize("name", clip_params(RUNNING))
+def test_physics_bars_every_preset_and_speed(prepared, name):
     """Acceptance 1: every output of every clip, preset and speed meets DESIGN.md's physics bars."""
-    prep = prepared[clip]
+    prep = prepared[name]
     failures = []
     for preset in PRESETS:
         for s in SPEEDS:
             rep = pipeline.scale(prep, preset, speed=s, strides=4).report
             for f in rep.check_bars():
-                failures.append(f"{clip} {preset} x{s}: {f}")
+                failures.append(f"{name} {preset} x{s}: {f}")
             assert np.isfinite(rep.com_tracking_max_mm) and rep.reference_max_joint_jump_deg > 0
     assert not failures, "\n".join(failures)
 
 
-@pytest.mark.parametrize("clip", ["09_01", "09_05", "02_03"])
-def test_dynamic_similarity(prepared, clip):
+@pytest.mark.parametrize("name", clip_params(["09_01", "09_05", "02_03"]))
+def test_dynamic_similarity(prepared, name):
     """Acceptance 2: step frequency × L^-1/2 and U unchanged for a scaled character; speed × s and step
     duration unchanged for a speed change."""
-    prep = prepared[clip]
+    prep = prepared[name]
     same = pipeline.scale(prep, None, speed=1.0, strides=6).report
     for preset in ("child", "troll", "giant"):
         res = pipeline.scale(prep, preset, speed=1.0, strides=6)
@@ -72,11 +81,11 @@ def test_naive_baseline_floats(prepared):
     assert physical.report.flight_gravity_m_s2 == pytest.approx(GRAVITY, rel=0.03)
 
 
-@pytest.mark.parametrize("clip", RUNNING)
-def test_ten_strides_no_seam(prepared, clip):
+@pytest.mark.parametrize("name", clip_params(RUNNING))
+def test_ten_strides_no_seam(prepared, name):
     """Acceptance 4: 10 strides from a 1.5-2 stride clip, no visible seam: the largest joint-angle jump
     anywhere (loop points included) is at most 1.5 × the largest in the reference."""
-    prep = prepared[clip]
+    prep = prepared[name]
     res = pipeline.scale(prep, None, strides=10)
     m = res.motion
     assert len(res.path.foot_of_step) == 20
@@ -93,7 +102,7 @@ def test_long_output_is_the_tiled_cycle(prepared):
     prep = prepared["09_03"]
     long = pipeline.scale(prep, "troll", strides=pipeline.PERIODIC_MIN_STRIDES + 2)
     short_path = long.path
-    direct = pipeline.correct(long.targets, long.retarget.body).motion
+    direct = correct(long.targets, long.retarget.body).motion
     p_long = long.retarget.body.foot_markers(long.motion)
     p_direct = long.retarget.body.foot_markers(direct)
     d = np.linalg.norm(p_long - p_direct, axis=-1)
@@ -107,11 +116,11 @@ def test_long_output_is_the_tiled_cycle(prepared):
 def test_output_file_and_report(tmp_path, prepared):
     """The CLI writes the BVH with the input's joint names and channel orders, and the report."""
     out = tmp_path / "child.bvh"
-    r = subprocess.run([sys.executable, "-m", "froude.cli", "scale", str(MOCAP / "09_01.bvh"), "--character",
+    r = subprocess.run([sys.executable, "-m", "froude", "scale", str(clip("09_01")), "--character",
                         "child", "--speed", "0.7", "--strides", "2", "-o", str(out)], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert "Froude number" in r.stdout and "physics bars: all met" in r.stdout
-    ref = froude.load_bvh(MOCAP / "09_01.bvh")
+    ref = froude.load_bvh(clip("09_01"))
     got = froude.load_bvh(out)
     assert got.skeleton.names == ref.skeleton.names and got.skeleton.channels == ref.skeleton.channels
     assert got.skeleton.same_topology(ref.skeleton) is None
@@ -130,7 +139,7 @@ def test_output_file_and_report(tmp_path, prepared):
 def test_bad_input_one_line_exit_2(tmp_path, args, needle):
     """Acceptance 6: one-line errors and exit status 2, nothing written."""
     out = tmp_path / "o.bvh"
-    r = subprocess.run([sys.executable, "-m", "froude.cli", "scale", str(MOCAP / "09_01.bvh"), *args, "-o", str(out)],
+    r = subprocess.run([sys.executable, "-m", "froude", "scale", str(clip("09_01")), *args, "-o", str(out)],
                        capture_output=True, text=True)
     assert r.returncode == 2
     err = [line for line in r.stderr.splitlines() if "error" in line]
@@ -139,14 +148,14 @@ def test_bad_input_one_line_exit_2(tmp_path, args, needle):
 
 
 def test_walking_clip_and_topology_mismatch(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "froude.cli", "scale", str(MOCAP / "02_01.bvh"), "-o",
+    r = subprocess.run([sys.executable, "-m", "froude", "scale", str(clip("02_01")), "-o",
                         str(tmp_path / "w.bvh")], capture_output=True, text=True)
     assert r.returncode == 2 and "walking" in r.stderr and "Traceback" not in r.stderr
     # a target skeleton with another topology: drop the last joint of a copy of the clip
-    text = (MOCAP / "09_01.bvh").read_text().replace("JOINT RThumb", "JOINT RThumbX")
+    text = (clip("09_01")).read_text().replace("JOINT RThumb", "JOINT RThumbX")
     bad = tmp_path / "other.bvh"
     bad.write_text(text)
-    r = subprocess.run([sys.executable, "-m", "froude.cli", "scale", str(MOCAP / "09_01.bvh"), "--character", str(bad),
+    r = subprocess.run([sys.executable, "-m", "froude", "scale", str(clip("09_01")), "--character", str(bad),
                         "-o", str(tmp_path / "x.bvh")], capture_output=True, text=True)
     assert r.returncode == 2 and "RThumbX" in r.stderr, r.stderr
     assert not (tmp_path / "x.bvh").exists()

@@ -11,10 +11,10 @@ import pytest
 
 from froude import pipeline
 from froude.errors import FroudeError
-from froude.kinematics import fk
+from froude.core.kinematics import fk
 from froude.samples import sample_path
-from froude.studio.session import Params, Session
-from froude.studio.tracks import bone_segments, motion_hash, spring_legs, trail_segments
+from froude.apps.studio.session import Params, Session
+from froude.apps.studio.tracks import bone_segments, motion_hash, spring_legs, trail_segments
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +89,7 @@ def test_bad_params_raise_one_line_froude_errors(session, bad, words):
 
 def test_studio_keeps_last_good_result_on_bad_edits(session):
     pytest.importorskip("viser")
-    from froude.studio.app import Studio
+    from froude.apps.studio.app import Studio
 
     studio = Studio(session.prep, port=_free_port())
     try:
@@ -111,8 +111,8 @@ def test_studio_keeps_last_good_result_on_bad_edits(session):
 def test_studio_previews_only_when_the_result_would_be_slow(session, monkeypatch):
     """A quick result goes straight to the page; an expected-slow one shows the IK-free preview first."""
     pytest.importorskip("viser")
-    from froude.studio import app
-    from froude.studio.app import Studio
+    from froude.apps.studio import app
+    from froude.apps.studio.app import Studio
 
     studio = Studio(session.prep, port=_free_port())
     tab = studio.open_tab()
@@ -145,7 +145,7 @@ def test_studio_previews_only_when_the_result_would_be_slow(session, monkeypatch
 def test_naive_comparison_and_clip_facts(session):
     """The naive retarget (engines' way) beside the physical one, with the numbers that tell them apart."""
     pytest.importorskip("viser")
-    from froude.studio.app import Studio
+    from froude.apps.studio.app import Studio
 
     studio = Studio(session.prep, port=_free_port())
     try:
@@ -171,7 +171,7 @@ def test_speed_control_bounded_to_what_is_reachable(session):
     """The speed slider spans the factors whose outputs meet every physics bar (pipeline's
     reachable_speed_range), and the server refuses a value beyond them whatever sent it."""
     pytest.importorskip("viser")
-    from froude.studio.app import Studio
+    from froude.apps.studio.app import Studio
 
     studio = Studio(session.prep, port=_free_port())
     try:
@@ -205,7 +205,7 @@ class _Catch:
 def test_bvh_export_options(session, tmp_path):
     pytest.importorskip("viser")
     from froude.io.bvh import load_bvh
-    from froude.studio.app import Studio
+    from froude.apps.studio.app import Studio
 
     studio = Studio(session.prep, port=_free_port())
     try:
@@ -253,8 +253,8 @@ def test_open_clip_from_the_page_is_checked(session, monkeypatch):
     from conftest import clip
     from viser import UploadedFile
 
-    from froude.studio import app
-    from froude.studio.app import Studio
+    from froude.apps.studio import app
+    from froude.apps.studio.app import Studio
 
     studio = Studio(session.prep, port=_free_port())
     try:
@@ -283,7 +283,7 @@ def test_open_clip_from_the_page_is_checked(session, monkeypatch):
 def test_two_tabs_hold_two_sessions(session):
     """Each tab its own parameters, result and scene (acceptance 15.4, without a browser)."""
     pytest.importorskip("viser")
-    from froude.studio.app import Studio
+    from froude.apps.studio.app import Studio
 
     studio = Studio(session.prep, port=_free_port())
     try:
@@ -297,7 +297,7 @@ def test_two_tabs_hold_two_sessions(session):
 
 def test_view_cli_refuses_bad_clips_in_one_line(tmp_path, capsys):
     from conftest import clip
-    from froude.cli import main as cli_main
+    from froude.apps.cli import main as cli_main
 
     assert cli_main(["view", str(tmp_path / "missing.bvh"), "--port", "0"]) == 2
     assert cli_main(["view", str(clip("02_01")), "--port", "0"]) == 2  # walking, not running

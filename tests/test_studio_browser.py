@@ -140,7 +140,7 @@ def test_studio_as_an_animator_uses_it(tmp_path):
     shots = Path(os.environ.get("FROUDE_STUDIO_SHOTS", tmp_path / "shots"))
     shots.mkdir(parents=True, exist_ok=True)
     port = _free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "froude.cli", "view", "--port", str(port)],
+    proc = subprocess.Popen([sys.executable, "-m", "froude", "view", "--port", str(port)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=dict(os.environ, PYTHONUNBUFFERED="1"))
     lines, url = [], []

@@ -16,8 +16,8 @@ import pytest
 from froude import pipeline
 from froude.errors import FroudeError
 from froude.samples import sample_path
-from froude.studio.guard import allowed_hosts, handshake_refusal, is_loopback
-from froude.studio.session import LIMITS, Params
+from froude.apps.studio.guard import allowed_hosts, handshake_refusal, is_loopback
+from froude.apps.studio.session import LIMITS, Params
 
 viser = pytest.importorskip("viser")
 zstandard = pytest.importorskip("zstandard")
@@ -71,7 +71,7 @@ def _free_port() -> int:
 
 @pytest.fixture(scope="module")
 def studio():
-    from froude.studio.app import Studio
+    from froude.apps.studio.app import Studio
 
     st = Studio(pipeline.prepare(sample_path()), port=_free_port()).start()
     yield st
@@ -196,9 +196,9 @@ def test_crafted_control_values_are_refused_and_the_result_stays(studio, tmp_pat
 
 
 def test_view_refuses_out_of_range_start_values(capsys):
-    from froude.cli import main as cli_main
+    from froude.apps.cli import main as cli_main
 
-    from froude.cli.view import VIEW_SPEED_RANGE, VIEW_STRIDES
+    from froude.apps.cli.view import VIEW_SPEED_RANGE, VIEW_STRIDES
 
     assert VIEW_SPEED_RANGE == (LIMITS["speed"].lo, LIMITS["speed"].hi)  # the CLI's ranges are the page's
     assert VIEW_STRIDES == (LIMITS["strides"].lo, LIMITS["strides"].hi)
@@ -217,7 +217,7 @@ def test_view_beyond_loopback_warns_and_prints_real_addresses():
     import sys
 
     port = _free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "froude.cli", "view", "--host", "0.0.0.0", "--port", str(port)],
+    proc = subprocess.Popen([sys.executable, "-m", "froude", "view", "--host", "0.0.0.0", "--port", str(port)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         lines = []

@@ -8,9 +8,11 @@ import numpy as np
 import pytest
 
 from froude import pipeline
-from froude.body import BodyModel
-from froude.gait import detect_gait, summarize
+from froude.body.gait import detect_gait, summarize
+from froude.body.model import BodyModel
+from froude.body.take import select_range
 from froude.io.bvh import load_bvh
+from froude.speed_range import reachable_speed_range
 
 from conftest import BANDAI_RUNS, RUNNING, clip, clip_params
 
@@ -113,7 +115,7 @@ def test_changing_speed_says_what_is_modelled(name, run_cli, tmp_path):
     assert pipeline.scale(prep).report.step_frequency_hz == pytest.approx(info.step_frequency, rel=0.01)
     # a part of the take: its own speed
     part = pipeline.prepare(motion, time_range=(0.0, 0.97))
-    cut = pipeline.select_range(motion, (0.0, 0.97))
+    cut = select_range(motion, (0.0, 0.97))
     assert part.summary.mean_speed == pytest.approx(_summary(cut).mean_speed, rel=1e-9)
     assert part.summary.mean_speed < 0.97 * info.mean_speed
     rep = pipeline.scale(part).report
@@ -130,7 +132,7 @@ def test_speed_range_outputs_or_refusals(name):
     """Issue 13 acceptance 4: --speed 0.5, 0.7, 1.5, 1.8, 2.0: inside the reachable range the output meets
     every bar (joint jump included); outside it ``scale`` refuses (see the CLI test)."""
     prep = pipeline.prepare(load_bvh(clip(name)))
-    rng = pipeline.reachable_speed_range(prep)
+    rng = reachable_speed_range(prep)
     # every run reaches x0.7-1.2; the slow end is x0.30-0.52 (09_03: a knee pop at lift-off below x0.5,
     # benchmarks/bars_matrix.py --matrix speeds), so 0.5 may be refused, with the range
     assert not rng.empty and rng.lo <= 0.7 and 1.2 <= rng.hi
@@ -146,7 +148,7 @@ def test_speed_range_outputs_or_refusals(name):
 def test_speed_refusals_name_the_reachable_range(run_cli, tmp_path):
     path = clip("09_01")
     prep = pipeline.prepare(load_bvh(path))
-    rng = pipeline.reachable_speed_range(prep)
+    rng = reachable_speed_range(prep)
     assert rng.hi < 1.8  # 09_01 does not reach 1.8x: a refusal, said in one line with the range
     code, out, err = run_cli("scale", path, "--speed", "1.8", "-o", tmp_path / "fast.bvh")
     assert code == 2 and not (tmp_path / "fast.bvh").exists()
@@ -168,7 +170,7 @@ def test_acceleration_refusals_are_in_metres_per_second(run_cli, tmp_path):
     dimensionless U, no solver internals), exit 2, nothing written."""
     path = clip("09_01")
     prep = pipeline.prepare(load_bvh(path))
-    rng = pipeline.reachable_speed_range(prep)
+    rng = reachable_speed_range(prep)
     for goal, words in (("3x", "the simple machine runs steadily only between"), ("2x", "too abrupt")):
         code, out, err = run_cli("accelerate", path, "--to-speed", goal, "-o", tmp_path / "a.bvh")
         line = [l for l in err.splitlines() if "error" in l]
@@ -312,7 +314,7 @@ def test_classification_robust(name):
     moment (the root thrown 8 cm up for 30 ms) anywhere in the clip."""
     from dataclasses import replace
 
-    from froude.gait import flight_share
+    from froude.body.gait import flight_share
 
     motion = load_bvh(clip(name))
     body = BodyModel.from_skeleton(motion.skeleton)

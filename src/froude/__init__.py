@@ -25,14 +25,15 @@ __version__ = "0.1.0"
 _LAZY = {
     "Result": ".api", "accelerate": ".api", "fit": ".api", "ground_reaction_force": ".api", "load": ".api",
     "save": ".api", "scale": ".api",
-    "BodyModel": ".body", "find_roles": ".body", "load_joint_map": ".body",
+    "BodyModel": ".body.model", "find_roles": ".body.model", "load_joint_map": ".body.model",
     "BvhError": ".errors", "CharacterError": ".errors", "FitError": ".errors", "FroudeError": ".errors",
     "IkError": ".errors", "NotARunningMotion": ".errors", "PlanError": ".errors",
-    "Gait": ".gait", "GaitSummary": ".gait", "Stance": ".gait", "detect_gait": ".gait", "summarize": ".gait",
+    "Gait": ".body.gait", "GaitSummary": ".body.gait", "Stance": ".body.gait", "detect_gait": ".body.gait",
+    "summarize": ".body.gait",
     "load_bvh": ".io.bvh", "save_bvh": ".io.bvh",
-    "Motion": ".motion",
+    "Motion": ".core.motion",
     "sample_path": ".samples",
-    "Skeleton": ".skeleton",
+    "Skeleton": ".core.skeleton",
 }
 
 __all__ = sorted(_LAZY)
@@ -53,10 +54,10 @@ def __dir__():
 
 if TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from .api import Result, accelerate, fit, ground_reaction_force, load, save, scale
-    from .body import BodyModel, find_roles, load_joint_map
+    from .body.model import BodyModel, find_roles, load_joint_map
     from .errors import BvhError, CharacterError, FitError, FroudeError, IkError, NotARunningMotion, PlanError
-    from .gait import Gait, GaitSummary, Stance, detect_gait, summarize
+    from .body.gait import Gait, GaitSummary, Stance, detect_gait, summarize
     from .io.bvh import load_bvh, save_bvh
-    from .motion import Motion
+    from .core.motion import Motion
     from .samples import sample_path
-    from .skeleton import Skeleton
+    from .core.skeleton import Skeleton

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from .errors import FroudeError
-from .motion import Motion
+from .core.motion import Motion
 
 __all__ = ["Result", "accelerate", "fit", "ground_reaction_force", "load", "save", "scale"]
 
@@ -98,7 +98,7 @@ class Result:
     """A motion with its physics: what ``fit``, ``scale`` and ``accelerate`` return.
 
     motion: the Motion (the input for ``fit``); body: its BodyModel; report: the physics report
-    (metrics.Report); machine_path: the simple machine's path on the same frames (pipeline.MachinePath;
+    (metrics.Report); machine_path: the simple machine's path on the same frames (synthesis.timewarp.MachinePath;
     None for ``fit``); notes: what froude noted on the way; prepared: the fitted clip (pipeline.Prepared),
     reused when this result is passed to ``scale`` or ``accelerate``.
     """
@@ -301,7 +301,7 @@ def ground_reaction_force(motion: Motion, body=None, *, mass: float = 70.0) -> n
 
     body: its BodyModel (default: built from the skeleton with ``mass`` [kg]; a given body has its own).
     """
-    from .body import BodyModel
+    from .body.model import BodyModel
     from .machine.forces import ground_force, smooth_com
 
     if body is None:

@@ -10,12 +10,12 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from . import quat
-from .body import BodyModel
+from .core import quat
+from .body.model import BodyModel
 from .constants import GRAVITY, UP_AXIS
-from .gait import Gait, detect_gait, summarize
+from .body.gait import Gait, detect_gait, summarize
 from .io.jsonable import dumps, jsonable
-from .motion import Motion
+from .core.motion import Motion
 
 _HORIZONTAL = [a for a in range(3) if a != UP_AXIS]
 

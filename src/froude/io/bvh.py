@@ -3,7 +3,7 @@
 Reading accepts any channel order per joint, 3- or 6-channel (or any subset) joints, End Sites, tabs or
 spaces, CRLF, scientific notation and large files. Units are converted to metres and the up axis to +Y at
 this boundary: ``length_scale`` is given, or detected from the motion and reported; the rest of the rig's
-conventions (folded bind pose, translation channels) are read from the motion too (``froude.conventions``).
+conventions (folded bind pose, translation channels) are read from the motion too (``froude.body.conventions``).
 Writing keeps the input's conventions (unit, up axis, names, channel orders) unless told otherwise. Cleaning (the
 synthetic T-pose first frame of the CMU conversions, invalid leading or trailing rows) is reported in
 ``motion.meta["cleaning"]``, never silent. Every problem raises ``BvhError`` naming file and line.
@@ -20,12 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import quat
+from ..core import quat
 from ..errors import BvhError
-from ..conventions import understand
-from ..motion import Motion
+from ..body.conventions import understand
+from ..core.motion import Motion
 from .atomic import atomic_write_text
-from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
+from ..core.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 
 _VALID_CHANNELS = set(POSITION_CHANNELS) | set(ROTATION_CHANNELS)
 
@@ -331,7 +331,7 @@ def load_bvh(path: str | os.PathLike, *, length_scale: float | None = None, clea
     del parser  # the text lines
 
     # Cleaning is about rotations and rows: done in file units; the conventions are then read from the
-    # motion (froude.conventions): units, up axis, the rest pose, translation channels.
+    # motion (froude.body.conventions): units, up axis, the rest pose, translation channels.
     skel_file = Skeleton(tuple(names), np.array(parents), np.array(offsets, dtype=float), tuple(channels),
                          tuple((j, np.array(o, float)) for j, o in end_sites))
     finite = np.isfinite(values).all(axis=1)
@@ -495,7 +495,7 @@ def file_convention(motion: Motion, *, length_scale: float | None = None, up: st
     rotations_only drops the position channels of every joint but the root (some readers mishandle
     them); refused when such a joint moves.
     """
-    from ..conventions import Z_UP_TO_Y_UP, change_basis
+    from ..body.conventions import Z_UP_TO_Y_UP, change_basis
 
     if length_scale is None:
         length_scale = float(motion.meta.get("length_scale", 1.0))

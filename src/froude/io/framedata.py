@@ -41,11 +41,11 @@ EDGE_FRAMES = 3
 def frame_table(motion, body=None, *, machine_path=None) -> dict[str, np.ndarray]:
     """The per-frame columns (module docstring) of ``motion`` as {name: (F,) array}, in column order.
 
-    body: the BodyModel (default: built from the skeleton, 70 kg); machine_path: a pipeline.MachinePath on
+    body: the BodyModel (default: built from the skeleton, 70 kg); machine_path: a synthesis.timewarp.MachinePath on
     the same frames (outputs), adding the machine's COM, force and stance.
     """
-    from ..body import BodyModel
-    from ..gait import detect_gait
+    from ..body.model import BodyModel
+    from ..body.gait import detect_gait
     from ..machine.forces import ground_force, smooth_com
 
     if body is None:

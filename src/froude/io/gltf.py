@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FroudeError
-from ..motion import Motion
-from ..skeleton import Skeleton
+from ..core.motion import Motion
+from ..core.skeleton import Skeleton
 from .atomic import atomic_write
 
 #: glTF component types and accessor types used here.
@@ -312,7 +312,7 @@ def load_gltf(path: str | os.PathLike, *, fps: float | None = None) -> Motion:
             return v[np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 1)]
         return np.stack([np.interp(times, t, v[:, c]) for c in range(v.shape[1])], axis=1)
 
-    from .. import quat
+    from ..core import quat
 
     rot = np.empty((n, J, 4))
     for j in range(J):

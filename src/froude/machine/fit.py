@@ -27,11 +27,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..body import BodyModel
+from ..body.model import BodyModel
 from ..constants import GRAVITY, UP_AXIS
 from ..errors import FitError, NotARunningMotion
-from ..gait import detect_gait, require_running, summarize
-from ..motion import Motion
+from ..body.gait import detect_gait, require_running, summarize
+from ..core.motion import Motion
 from .control_fit import fit_leg_control
 from .dynamics import N_PER_STANCE, REASONS, Control, simulate, step
 from .forces import (CUTOFF_HZ, EVENT_THRESHOLD_BW, flight_residual, force_shares,

@@ -15,7 +15,7 @@ Differentiation (documented choice, see docs/force_shares.md):
   used for fitting.
 * Eq. 1: f(t) = m (a_com(t) − g) with g = G_WORLD (pointing down), so a body at rest feels +m g.
 
-Events: the marker-threshold contacts of :mod:`froude.gait` are ±1–2 frames rough. Each touchdown
+Events: the marker-threshold contacts of :mod:`froude.body.gait` are ±1–2 frames rough. Each touchdown
 and liftoff is refined to the (linearly interpolated) time at which the filtered vertical force
 crosses ``EVENT_THRESHOLD_BW`` = 0.5 body weights nearest the marker event (within
 ``EVENT_SEARCH_S``); if no crossing is found there, the marker event is kept.

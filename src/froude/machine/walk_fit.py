@@ -6,7 +6,7 @@
     squares) → exact periodic cycle again → WalkingMachine
 
 Events. In walking the total vertical force never falls near zero, so the running fit's force-refined
-events do not exist; touchdown and liftoff are the sub-frame contact events of :mod:`froude.gait`
+events do not exist; touchdown and liftoff are the sub-frame contact events of :mod:`froude.body.gait`
 (``Stance.t_on`` / ``t_off``).
 
 Geometry. A walking foot rolls: the centre of pressure travels from the heel to the toes. Each stance's
@@ -38,11 +38,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..body import BodyModel
+from ..body.model import BodyModel
 from ..constants import GRAVITY, UP_AXIS
 from ..errors import FitError, NotARunningMotion
-from ..gait import detect_gait, summarize
-from ..motion import Motion
+from ..body.gait import detect_gait, summarize
+from ..core.motion import Motion
 from .dynamics import Control
 from .forces import CUTOFF_HZ, ground_force, sagittal_frame, smooth_com
 from .walk_model import WalkingMachine

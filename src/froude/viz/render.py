@@ -22,12 +22,12 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..body import BodyModel
+from ..body.model import BodyModel
 from ..constants import UP, UP_AXIS
 from ..errors import FroudeError
-from ..gait import detect_gait, summarize
-from ..kinematics import ancestor_mask, points_world
-from ..motion import Motion
+from ..body.gait import detect_gait, summarize
+from ..core.kinematics import ancestor_mask, points_world
+from ..core.motion import Motion
 
 INSTALL_HINT = "pip install 'froude[render]'"
 CAMERAS = ("side", "three-quarter", "front")

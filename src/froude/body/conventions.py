@@ -1,0 +1,288 @@
+"""A rig's conventions read from its motion, not from its zero pose: up axis, length unit, a standing
+reference pose, and per-joint translation channels folded into offsets and the root.
+
+The zero-rotation pose of many rigs is not an upright human (bind orientations fold it: the
+Maya/MotionBuilder habit), so everything here is measured on the animated frames, in file units.
+The length unit is chosen among the usual ones by the physics of the motion where it can be
+(a body in flight falls at 9.81 m/s² whatever its size), else by the most human stature, and the
+choice is said aloud. All functions are pure.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..core import quat
+from ..constants import GRAVITY, UP_AXIS
+from ..core.motion import Motion
+from ..core.skeleton import Skeleton
+
+#: Length units a BVH file may be in: (name, metres per file unit). CMU's ASF->BVH conversions use
+#: 1/0.45 inch.
+UNITS = (
+    ("metres", 1.0),
+    ("centimetres", 0.01),
+    ("millimetres", 0.001),
+    ("inches", 0.0254),
+    ("CMU units", 0.056444),
+)
+UNIT_ALIASES = {"m": "metres", "cm": "centimetres", "mm": "millimetres", "in": "inches", "inch": "inches",
+                "cmu": "CMU units"}
+#: Statures [m] a unit may imply and still be considered (children to giants).
+STATURE_RANGE_M = (0.35, 6.5)
+#: The stature [m] preferred when the motion cannot decide (no flight phase).
+TYPICAL_STATURE_M = 1.70
+#: A flight gravity this close (ratio) to 9.81 m/s² decides the unit; the units differ by >= 1.77x.
+GRAVITY_DECIDES = 1.33
+#: At most this many frames (from the middle of the clip) are analysed: long clips load fast.
+MAX_FRAMES = 2400
+
+#: File axes -> froude's (+Y up): a Z-up file's (x, y, z) is (x, z, -y) here (Blender's BVH importer
+#: reads files the same way with its axis_up="Y", axis_forward="-Z" conversion inverted).
+Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+def unit_scale(name: str) -> tuple[float, str]:
+    """(metres per unit, unit name) of a unit name or abbreviation (m, cm, mm, in, cmu)."""
+    full = UNIT_ALIASES.get(name.strip().lower(), name.strip())
+    for n, s in UNITS:
+        if n.lower() == full.lower():
+            return s, n
+    raise ValueError(f"unknown length unit '{name}'; use one of: {', '.join(UNIT_ALIASES)}")
+
+
+def change_basis(motion: Motion, C: np.ndarray) -> Motion:
+    """The same motion with every length and rotation expressed in new axes ``x' = C x`` (C proper).
+
+    Offsets, end sites, root positions and translations are rotated; local rotations are conjugated
+    (R' = C R Cᵀ), so the world motion is the same up to the rigid change of axes and every joint keeps
+    its channels. A reference pose is conjugated too.
+    """
+    qc = quat.from_matrix(C)
+    sk = motion.skeleton
+    conj = lambda q: quat.mul(quat.mul(qc, q), quat.conj(qc))  # noqa: E731
+    skel = replace(
+        sk,
+        offsets=sk.offsets @ C.T,
+        end_sites=tuple((j, np.asarray(o) @ C.T) for j, o in sk.end_sites),
+        reference_pose=None if sk.reference_pose is None else conj(sk.reference_pose),
+    )
+    tr = None if motion.translations is None else motion.translations @ C.T
+    return replace(motion, skeleton=skel, root_positions=motion.root_positions @ C.T,
+                   rotations=conj(motion.rotations), translations=tr)
+
+
+def fold_translations(motion: Motion) -> tuple[Motion, list[str]]:
+    """Translation channels below the root made offsets where they are constant (the six-channel habit:
+    position channels equal to the OFFSET), and the moving translation of a joint directly below a
+    static or moving root folded into the root's position (a static reference root above the hips).
+
+    The world motion is unchanged (FK of the result equals FK of the input to rounding); returns the
+    motion and notes saying what was folded.
+    """
+    if motion.translations is None:
+        return motion, []
+    sk = motion.skeleton
+    tr = motion.translations.copy()
+    offsets = sk.offsets.copy()
+    size = max(float(np.abs(sk.offsets).max()), 1e-9)
+    root = motion.root_positions.copy()
+    notes = []
+    moving = []
+    for j in range(1, sk.n_joints):
+        if not sk.has_translation_channels(j):
+            continue
+        if np.ptp(tr[:, j], axis=0).max() <= 1e-6 * size:
+            offsets[j] = tr[0, j]
+        else:
+            moving.append(j)
+    folded = [j for j in moving if sk.parents[j] == 0]
+    if len(folded) == 1 and len(moving) == 1:
+        j = folded[0]
+        # p_j = p_root + R_root t_j(t) = (p_root + R_root (t_j(t) - offset_j)) + R_root offset_j
+        root = root + quat.rotate(motion.rotations[:, 0], tr[:, j] - offsets[j])
+        notes.append(f"the translation of '{sk.names[j]}' is carried by the root '{sk.names[0]}' "
+                     "(the world motion is unchanged)")
+        moving = []
+    if moving:
+        return motion, [f"joints with moving translation channels: {', '.join(sk.names[j] for j in moving)}"]
+    skel = sk.with_offsets(offsets)
+    return replace(motion, skeleton=skel, root_positions=root, translations=None), notes
+
+
+def _analysed(motion: Motion) -> Motion:
+    """At most MAX_FRAMES frames from the middle of the clip."""
+    F = motion.n_frames
+    if F <= MAX_FRAMES:
+        return motion
+    a = (F - MAX_FRAMES) // 2
+    return motion.cut(a, a + MAX_FRAMES)
+
+
+def role_positions(motion: Motion, joints) -> np.ndarray:
+    """(F, len(joints), 3) world positions (file units) of some joints over the analysed frames."""
+    from ..core.kinematics import forward_kinematics
+
+    m = _analysed(motion)
+    p, _ = forward_kinematics(m.skeleton, m.root_positions, m.rotations, m.translations)
+    return p[:, list(joints)]
+
+
+def detect_up(motion: Motion, roles) -> tuple[str, float]:
+    """("Y" or "Z" or "-Y" ..., agreement 0..1): the axis from the feet to the head over the motion."""
+    p = role_positions(motion, [roles["head"], roles["left_ankle"], roles["right_ankle"]])
+    d = (p[:, 0] - 0.5 * (p[:, 1] + p[:, 2])).mean(axis=0)
+    a = int(np.argmax(np.abs(d)))
+    sign = "" if d[a] > 0 else "-"
+    return sign + "XYZ"[a], float(abs(d[a]) / max(np.linalg.norm(d), 1e-12))
+
+
+def rest_is_upright(skeleton: Skeleton, roles) -> bool:
+    """Whether the zero-rotation pose stands (+Y up): legs hanging straight down, head over pelvis."""
+    rest = skeleton.rest_positions()
+    for side in ("left", "right"):
+        h, k, a = (rest[roles[f"{side}_{r}"]] for r in ("hip", "knee", "ankle"))
+        length = np.linalg.norm(k - h) + np.linalg.norm(a - k)
+        if not (h - a)[UP_AXIS] >= 0.9 * length > 0:
+            return False
+    up = rest[roles["head"]] - rest[roles["pelvis"]]
+    return bool(up[UP_AXIS] >= 0.8 * np.linalg.norm(up) > 0)
+
+
+def reference_pose(motion: Motion, roles) -> tuple[np.ndarray, int]:
+    """(J, 4) local rotations of a standing frame of the motion and its index: mid-stance, where the
+    lower ankle is lowest (the stance foot flat, the trunk near upright). The motion must be +Y up."""
+    m = _analysed(motion)
+    p = role_positions(m, [roles["left_ankle"], roles["right_ankle"]])
+    f = int(np.argmin(p[..., UP_AXIS].min(axis=1)))
+    return m.rotations[f].copy(), f + (motion.n_frames - m.n_frames) // 2
+
+
+def flight_gravity_units(com: np.ndarray, foot_low: np.ndarray, leg_length: float, frame_time: float):
+    """Gravity seen in the flight phases, in file units/s², or None when the motion has no flight of
+    three frames or more.
+
+    com: (F, 3) COM; foot_low: (F, 2) lowest foot marker height per foot; leg_length in the same
+    units. A frame is in flight when both feet are above the ground (5th percentile of the lower foot)
+    by 3 % of the leg, a scale-free test. The curvature is fitted by ``metrics.flight_gravity`` (one
+    gravity shared by every flight, each its own height and vertical speed). Flights cut by the clip's
+    edges are left out (a jump off or a stumble).
+    """
+    from ..metrics import flight_gravity
+
+    ground = np.percentile(foot_low.min(axis=1), 5)
+    air = (foot_low > ground + 0.03 * leg_length).all(axis=1)
+    d = np.diff(np.concatenate([[0], air.astype(np.int8), [0]]))
+    flights = [(a, b) for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)) if a > 0 and b < len(air)]
+    g, per_phase, _ = flight_gravity(com, frame_time, flights, min_frames=3)
+    if not per_phase or not np.isfinite(g):
+        return None, 0
+    return float(g), len(per_phase)
+
+
+def choose_unit(stature_units: float, gravity_units: float | None) -> tuple[float, str, str, bool]:
+    """(metres per unit, unit name, a sentence saying why, ambiguous?) from the stature and the flight
+    gravity measured in file units.
+
+    Among the units giving a stature in STATURE_RANGE_M, the flight gravity (when the motion flies)
+    picks the one making it 9.81 m/s²: this does not depend on the character's size. Without a flight
+    the most human stature wins and the choice is flagged ambiguous when another unit is plausible.
+    """
+    lo, hi = STATURE_RANGE_M
+    plausible = [(n, s) for n, s in UNITS if lo <= stature_units * s <= hi]
+    if not plausible:
+        raise ValueError(
+            f"cannot tell the length unit: a stature of {stature_units:g} file units is no human size in "
+            f"{', '.join(n for n, _ in UNITS)}; pass length_scale (--length-scale, metres per file unit)"
+        )
+
+    def desc(n, s):
+        g = f", flight gravity {gravity_units * s:.2f} m/s²" if gravity_units else ""
+        return f"{n} (stature {stature_units * s:.2f} m{g})"
+
+    if gravity_units is not None and gravity_units > 0:
+        err = [abs(np.log(gravity_units * s / GRAVITY)) for _, s in plausible]
+        i = int(np.argmin(err))
+        if err[i] <= np.log(GRAVITY_DECIDES):
+            n, s = plausible[i]
+            others = [desc(*c) for k, c in enumerate(plausible) if k != i]
+            why = f"{desc(n, s)}, detected by the flight gravity" + (f"; not {', '.join(others)}" if others else "")
+            return s, n, why, False
+    err = [abs(np.log(stature_units * s / TYPICAL_STATURE_M)) for _, s in plausible]
+    i = int(np.argmin(err))
+    n, s = plausible[i]
+    others = [desc(*c) for k, c in enumerate(plausible) if k != i and 0.5 <= stature_units * c[1] <= 5.0]
+    reason = "no flight phase to weigh" if gravity_units is None else \
+        f"the flight gravity ({gravity_units:g} units/s²) fits no unit"
+    why = f"{desc(n, s)}, detected as the most human stature ({reason})"
+    if others:
+        why += f"; AMBIGUOUS, also possible: {', '.join(others)}: pass --length-scale if it is wrong"
+    return s, n, why, bool(others)
+
+
+def understand(motion: Motion, *, joint_map=None, length_scale: float | None = None,
+               up: str | None = None) -> tuple[Motion, dict]:
+    """A motion in file units and file axes, made SI and +Y up, with its conventions.
+
+    motion: as read (lengths in file units). joint_map: role -> joint name for unusual names.
+    length_scale: metres per file unit (None: detected, see ``choose_unit``). up: "Y" or "Z" (None:
+    detected from the motion). Returns the motion (metres, +Y up, translations folded, a reference
+    pose set when the rest pose is folded) and meta entries: length_scale, units (a sentence),
+    units_ambiguous, up_axis, notes (list of sentences).
+    Raises ValueError when the unit cannot be told; JointMapError for a bad joint map.
+    """
+    from .model import BodyModel, JointMapError, find_roles
+
+    motion, notes = fold_translations(motion)
+    if joint_map:
+        motion = replace(motion, skeleton=replace(motion.skeleton, joint_map=tuple(sorted(joint_map.items()))))
+    sk = motion.skeleton
+    try:
+        roles = find_roles(sk, joint_map)
+    except JointMapError as e:
+        if joint_map and "role(s)" not in str(e):
+            raise  # the user's map itself is wrong
+        roles = None  # the body model raises the same error, naming the roles, when it is needed
+    up_axis = "Y" if up is None else up.upper()
+    if roles is not None and up is None:
+        up_axis, agree = detect_up(motion, roles)
+        if up_axis not in ("Y", "Z"):
+            notes.append(f"the body's up is {up_axis} in the file; read as +Y up")
+            up_axis = "Y"
+    if up_axis not in ("Y", "Z"):
+        raise ValueError(f"up axis must be Y or Z, got '{up}'")
+    if up_axis == "Z":
+        motion = change_basis(motion, Z_UP_TO_Y_UP)
+        motion = replace(motion, skeleton=replace(motion.skeleton, file_up="Z"))
+        notes.append("Z-up file: read as +Y up (x, z, -y); outputs are written Z-up again")
+    if roles is not None and not rest_is_upright(motion.skeleton, roles):
+        pose, f = reference_pose(motion, roles)
+        motion = replace(motion, skeleton=replace(motion.skeleton, reference_pose=pose))
+        notes.append(f"the zero-rotation pose is not upright (bind orientations): the body is measured "
+                     f"in frame {f} of the motion (mid-stance)")
+    ambiguous = False
+    if length_scale is None:
+        if roles is not None:
+            body = BodyModel.from_skeleton(motion.skeleton, joint_map=joint_map)
+            m = _analysed(motion)
+            com, mk = body.com_and_markers(m)
+            g_u, _ = flight_gravity_units(com, mk[..., UP_AXIS].min(axis=2), body.leg_length, m.frame_time)
+            length_scale, name, units, ambiguous = choose_unit(body.stature, g_u)
+        else:
+            stature = motion.skeleton.standing_height()
+            length_scale, name, units, ambiguous = choose_unit(stature, None)
+            units += " (joint roles unknown: stature from the zero pose)"
+    else:
+        if not (np.isfinite(length_scale) and length_scale > 0):
+            raise ValueError(f"length_scale must be > 0, got {length_scale}")
+        units = f"length scale {length_scale:g} m per file unit (given)"
+    s = float(length_scale)
+    out = replace(
+        motion,
+        skeleton=motion.skeleton.scaled(s),
+        root_positions=motion.root_positions * s,
+        translations=None if motion.translations is None else motion.translations * s,
+    )
+    return out, {"length_scale": s, "units": units, "units_ambiguous": ambiguous, "up_axis": up_axis,
+                 "notes": tuple(notes)}

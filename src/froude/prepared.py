@@ -1,0 +1,92 @@
+"""A reference clip made ready for any number of changes (``pipeline.prepare`` builds it), and what it
+builds on demand and remembers (``Memo``)."""
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .body.characters import Retarget, apply_character, resolve_character
+from .body.gait import Gait, GaitSummary
+from .body.model import BodyModel
+from .core.motion import Motion
+from .synthesis.cycle import ReferenceCycle
+
+
+@dataclass(eq=False)
+class Memo:
+    """What a prepared clip builds on demand and remembers: an editor asks for the same character again
+    and again (every speed change), and the studio's speed slider revisits values.
+
+    retargets: (preset name or None, character numbers) -> Retarget (built-in presets and the reference's
+    own body only; files and Character objects are built each time); faster_machines: speed factor ->
+    the machine re-solved for it; speed_ranges: character key -> speed_range.SpeedRange.
+    """
+
+    retargets: dict = field(default_factory=dict)
+    faster_machines: dict = field(default_factory=dict)
+    speed_ranges: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True, eq=False)
+class Prepared:
+    """A reference clip made ready for any number of changes (fit once, reuse for every variation)."""
+
+    motion: Motion
+    body: BodyModel
+    com: np.ndarray
+    markers: np.ndarray
+    gait: Gait
+    summary: GaitSummary
+    machine: object  # froude.machine.model.SimpleMachine
+    cycle: ReferenceCycle
+    source: str = ""
+    fit: object = None  # froude.machine.fit.FitResult: everything the fit measured (plots, tables)
+    #: What the machine stands for ("0.00-2.40 s of the take: 3.150 m/s, 2.930 steps/s") and notes about
+    #: the take (its speed changes: which part is modelled, how to choose another).
+    modelled: str = ""
+    notes: tuple = ()
+    #: What is built on demand for this clip and remembered (see Memo).
+    memo: Memo = field(default_factory=lambda: Memo(), repr=False)
+
+    @property
+    def origin(self) -> np.ndarray:
+        """(3,) [m] where outputs start: the reference COM's first position (placed on the floor there)."""
+        return self.com[0]
+
+    @property
+    def output_meta(self) -> dict:
+        """Provenance every output motion of this clip carries (source file, the input's length scale)."""
+        return {"source": self.source, "length_scale": float(self.motion.meta.get("length_scale", 1.0))}
+
+    def faster_machine(self, speed: float):
+        """``machine.speed.faster_machine(self.machine, speed)``, remembered per speed factor."""
+        from .machine.speed import faster_machine
+
+        key = float(speed)
+        hit = self.memo.faster_machines.get(key)
+        if hit is None:
+            hit = self.memo.faster_machines[key] = faster_machine(self.machine, key)
+        return hit
+
+    def retarget(self, character=None, **character_numbers) -> Retarget:
+        """``apply_character(resolve_character(character, **numbers), self.body)``, remembered for the
+        built-in presets and the reference's own body (files and Character objects are built each time)."""
+        key = None
+        if character is None or (isinstance(character, str) and character in _preset_names()):
+            key = (character, tuple(sorted((k, v) for k, v in character_numbers.items() if v is not None)))
+            hit = self.memo.retargets.get(key)
+            if hit is not None:
+                return hit
+        rt = apply_character(resolve_character(character, **character_numbers), self.body)
+        if key is not None:
+            self.memo.retargets[key] = rt
+        return rt
+
+
+@functools.cache
+def _preset_names() -> frozenset:
+    from .body.characters import list_presets
+
+    return frozenset(list_presets())

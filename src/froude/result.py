@@ -1,0 +1,125 @@
+"""An output of scale / accelerate (motion, machine path, targets, physics report) and how it is written."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from dataclasses import replace as _replace
+from pathlib import Path
+
+import numpy as np
+
+from .body.characters import Retarget
+from .constants import UP_AXIS
+from .core.motion import Motion
+from .metrics import Report, write_report
+from .synthesis.targets import Targets
+from .synthesis.timewarp import MachinePath
+
+
+@dataclass(frozen=True, eq=False)
+class Result:
+    """An output motion with its machine path, targets and physics report."""
+
+    motion: Motion
+    report: Report
+    path: MachinePath | None
+    targets: Targets | None
+    retarget: Retarget
+    method: str
+    speed_factor: float
+    notes: tuple[str, ...] = field(default=())
+    plan: object = None
+    extras: dict = field(default_factory=dict)  # merged into report.extras (e.g. the speed plan)
+
+    def summary_rows(self) -> list[tuple[str, str]]:
+        """(label, text) rows of the CLI's result table; a figure that cannot be measured reads "n/a"."""
+        r = self.report
+        f = _shown
+        rows = [
+            ("character", f"{self.retarget.character.name} (L = {self.retarget.L:.3f}, M = {self.retarget.M:.3f})"),
+            ("method", self.method),
+        ]
+        if r.extras.get("modelled"):
+            rows.append(("modelled", r.extras["modelled"]))
+        rows += [
+            ("speed", f"{f(r.mean_speed_m_s, '.3f')} m/s (x{self.speed_factor:g})"),
+            ("Froude number U", f"{f(r.froude_U, '.3f')}"),
+            ("step frequency", f"{f(r.step_frequency_hz, '.3f')} Hz"),
+            ("stance / flight", f"{f(_mean(r.stance_times_s), '.3f')} s / {f(_mean(r.flight_times_s), '.3f')} s"),
+            ("flight gravity", f"{f(r.flight_gravity_m_s2, '.2f')} m/s^2"),
+            ("COM tracking", f"RMS {f(r.com_tracking_rms_mm, '.2f')} mm, max {f(r.com_tracking_max_mm, '.2f')} mm"),
+            ("foot skate / penetration", f"{f(r.foot_skate_mm, '.2f')} mm / {f(r.penetration_mm, '.2f')} mm "
+             f"(ball and tip near the floor: {f(r.foot_skate_floor_mm, '.2f')} mm)"),
+            ("joint jump", f"{f(r.max_joint_jump_deg, '.1f')} deg (reference {f(r.reference_max_joint_jump_deg, '.1f')})"),
+        ]
+        return rows
+
+
+def _shown(v, spec: str) -> str:
+    """A figure for a table: formatted, or "n/a" when it could not be measured (None, NaN, infinite)."""
+    return "n/a" if v is None or not math.isfinite(v) else format(v, spec)
+
+
+def _mean(x) -> float:
+    return float(np.mean(x)) if len(x) else float("nan")
+
+
+def report_path(out_path) -> Path:
+    p = Path(out_path)
+    return p.with_name(p.stem + ".report.json")
+
+
+def in_place_motion(result: Result) -> Motion:
+    """The output with its root travel removed (a treadmill-like loop for engines that move the character
+    themselves): the root is moved back by the COM's forward progression, taken straight between the
+    machine's touchdowns (constant for a steady output, step by step for an acceleration), so the body
+    keeps its bob and sway within each step and the stance foot slides back at the running speed."""
+    motion = result.motion
+    t = np.arange(motion.n_frames) * motion.frame_time
+    fwd = result.path.frame[0] if result.path is not None else _travel_direction(motion, result)
+    x = result.path.com @ fwd if result.path is not None else result.retarget.body.com(motion) @ fwd
+    knots = t[[0, -1]] if result.path is None else np.concatenate(
+        [[t[0]], result.path.t_touchdown[(result.path.t_touchdown > t[0]) & (result.path.t_touchdown < t[-1])], [t[-1]]])
+    travel = np.interp(t, knots, np.interp(knots, t, x))
+    return _replace(motion, root_positions=motion.root_positions - np.outer(travel - travel[0], fwd))
+
+
+def _travel_direction(motion: Motion, result: Result) -> np.ndarray:
+    com = result.retarget.body.com(motion)
+    d = com[-1] - com[0]
+    d[UP_AXIS] = 0.0
+    n = np.linalg.norm(d)
+    return d / n if n > 0 else np.eye(3)[0]
+
+
+def write_result(result: Result, out_path, data=None, in_place: bool | None = None,
+                 **bvh_options) -> tuple[Path, ...]:
+    """Write OUT (.bvh, .glb or .gltf: ``froude.api.save`` decides by suffix) and OUT.report.json, and
+    the per-frame table to ``data`` (.csv/.parquet/.npz) when given: all or none. Returns the paths.
+    bvh_options: ``save_bvh``'s (length_scale, up, rotations_only; default: the input's conventions).
+
+    in_place: write the motion without root travel (``in_place_motion``); None: as the input was (an
+    in-place take gives in-place outputs). The report is always that of the travelling motion (its speed,
+    skate and gravity are physical there) and says which was written.
+    """
+    from .api import save
+    from .io.atomic import atomic_group
+
+    out_path = Path(out_path)
+    rp = report_path(out_path)
+    if in_place is None:
+        in_place = bool(result.report.extras.get("input_in_place")) if result.report is not None else False
+    if result.report is not None:
+        result.report.extras["written"] = "in place (root travel removed)" if in_place else "with root travel"
+    with atomic_group():  # every file of the result or none
+        save(in_place_motion(result) if in_place else result.motion, out_path, **bvh_options)
+        write_report(result.report, rp)
+        if data is None:
+            return out_path, rp
+        from .io.framedata import frame_table, write_frame_data
+
+        table = frame_table(result.motion, result.retarget.body, machine_path=result.path)
+        return out_path, rp, write_frame_data(table, data)
+
+
+

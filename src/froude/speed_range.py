@@ -1,0 +1,138 @@
+"""Which speeds a prepared clip reaches for a character with every physics bar met, and the planner's
+refusals said in the user's terms (m/s, ×, steps)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from .pipeline import Prepared
+
+
+@dataclass(frozen=True)
+class SpeedRange:
+    """The speeds a prepared clip reaches for one character with every physics bar met.
+
+    lo, hi: speed factors on the character's dynamically scaled speed [-]; lo_m_s, hi_m_s: the same in
+    m/s; base_m_s: the character's speed at factor 1 [m/s] (the clip's mean speed for its own body).
+    probes: ((factor, met: bool, reason), ...) every output tried, in order.
+    """
+
+    lo: float
+    hi: float
+    lo_m_s: float
+    hi_m_s: float
+    base_m_s: float
+    probes: tuple = ()
+    empty: bool = False  # True when not even x1 meets every bar
+
+    def describe(self) -> str:
+        if self.empty:
+            return f"none (x1 = {self.base_m_s:.2f} m/s already misses a bar)"
+        return (f"x{self.lo:.2f}-{self.hi:.2f} ({self.lo_m_s:.2f}-{self.hi_m_s:.2f} m/s; "
+                f"x1 = {self.base_m_s:.2f} m/s)")
+
+
+#: The factors reachable_speed_range searches between, and how finely [-].
+SPEED_SEARCH_RANGE = (0.3, 3.0)
+SPEED_SEARCH_TOL = 0.03
+
+
+def _speed_ok(prep: Prepared, character, s: float, numbers: dict) -> tuple[bool, str]:
+    """Whether a 4-stride output (scale's default) at speed factor s meets every physics bar, and why not."""
+    from .errors import FitError
+    from .pipeline import plan_scale
+
+    try:
+        rep = plan_scale(prep, character, speed=s, strides=4, **numbers).finish().report
+    except FitError as e:
+        return False, str(e)
+    fails = rep.check_bars()
+    return not fails, "; ".join(fails)
+
+
+def reachable_speed_range(prep: Prepared, character=None, **character_numbers) -> SpeedRange:
+    """The range of ``scale`` speed factors whose outputs meet every physics bar, for one character.
+
+    Bisection on real outputs (4 strides each, the same synthesis and IK as ``scale``) between 1 and the
+    ends of SPEED_SEARCH_RANGE, to SPEED_SEARCH_TOL; the ends returned were themselves produced and
+    checked. About a dozen short outputs (a few seconds); remembered per character on ``prep``. Assumes the
+    reachable speeds form one interval around x1 (true on the shared clips: faster outputs fail by a knee
+    that pops or a cycle that does not exist, slower ones by nothing down to x0.3).
+    For the studio's speed slider and for ``scale``'s refusals.
+    """
+    key = ("speed_range", character if isinstance(character, (str, type(None))) else id(character),
+           tuple(sorted((k, v) for k, v in character_numbers.items() if v is not None)))
+    hit = prep.memo.speed_ranges.get(key)
+    if hit is not None:
+        return hit
+    rt = prep.retarget(character, **character_numbers)
+    m = prep.machine.scaled(rt.L, rt.M)
+    base = m.mean_speed * m.speed_unit
+    probes = []
+
+    def ok(s):
+        good, why = _speed_ok(prep, character, s, character_numbers)
+        probes.append((float(s), good, why))
+        return good
+
+    if not ok(1.0):
+        lo = hi = 1.0  # not even the clip's own speed meets the bars: nothing is reachable (empty range)
+    else:
+        ends = []
+        for far in SPEED_SEARCH_RANGE:
+            good, bad = 1.0, far
+            if ok(far):
+                ends.append(far)
+                continue
+            while abs(bad - good) > SPEED_SEARCH_TOL:
+                mid = 0.5 * (good + bad)
+                if ok(mid):
+                    good = mid
+                else:
+                    bad = mid
+            ends.append(good)
+        lo, hi = ends
+    out = SpeedRange(lo=lo, hi=hi, lo_m_s=lo * base, hi_m_s=hi * base, base_m_s=base, probes=tuple(probes),
+                     empty=not probes[0][1])
+    prep.memo.speed_ranges[key] = out
+    return out
+
+
+def plan_refusal(err, start_m_s: float, goal_m_s: float, v_unit: float, steps, within) -> str:
+    """The planner's refusal (``PlanError`` with its U facts) said in the user's terms: m/s, ×, steps, s.
+
+    start_m_s / goal_m_s: the apex speeds [m/s] the change goes between; v_unit: √(g l0) of the
+    character [m/s], which turns the planner's dimensionless U into m/s. The planner's own words (in U)
+    stay on the exception's ``__cause__`` for debugging.
+    """
+    head = f"cannot change speed from {start_m_s:.2f} to {goal_m_s:.2f} m/s (x{goal_m_s / start_m_s:.2f})"
+    sus = getattr(err, "U_sustainable", None)
+    if sus is not None and not sus[0] <= err.U_goal <= sus[1]:
+        lo, hi = sus[0] * v_unit, sus[1] * v_unit
+        return (f"{head}: the simple machine runs steadily only between {lo:.2f} and {hi:.2f} m/s "
+                f"(x{lo / start_m_s:.2f}-{hi / start_m_s:.2f}); choose a goal in that range")
+    in_steps = f"in {steps} step{'' if steps == 1 else 's'}"
+    if getattr(err, "steps_needed", None):
+        return f"{head} {in_steps}: too abrupt; give at least {err.steps_needed} steps"
+    if within is not None:
+        return f"{head} within {within:g} s: too abrupt; allow more time"
+    one = getattr(err, "U_one_step", None)
+    reach = "" if one is None else f" (one step from the start reaches {one * v_unit:.2f} m/s)"
+    return f"{head} {in_steps}{reach}: try more steps or a goal nearer x1"
+
+
+def plan_report(plan, m, start_speed: float, target: float) -> dict:
+    """A speed-change plan as the report's ``extras["plan"]``: per apex speed [m/s] and U, time [s],
+    touchdown angle [deg], control b and phase. m: the character's scaled SimpleMachine (its units);
+    start_speed / target: the change's apex speeds [m/s]."""
+    import numpy as np
+
+    return {
+        "start_speed_m_s": start_speed, "target_speed_m_s": target,
+        "apex_speed_m_s": (plan.U * m.speed_unit).tolist(), "apex_U": plan.U.tolist(),
+        "apex_time_s": (plan.t_apex * m.time_unit).tolist(),
+        "theta0_deg": np.degrees(plan.theta0).tolist(), "b": plan.b.tolist(),
+        "phase": ["lead" if p == 0 else "change" if p == 1 else "hold" for p in plan.phase],
+        "mode": plan.mode, "policy": plan.policy,
+    }

@@ -1,0 +1,609 @@
+"""From a machine trajectory back to a whole body: the reference stride cycle, time warping and IK targets.
+
+The reference clip (1.5-2 strides) is turned into one seamless stride cycle: every frame gets a stride
+phase ψ from its foot events (touchdown of foot A at ψ = 0, liftoff of A, touchdown of B, liftoff of B,
+touchdown of A at ψ = 1), and each quantity of the cycle at phase φ is the weighted mean of all the
+clip's occurrences of that phase (φ, φ + 1, …), with a linear loop-closure correction so that the end
+joins the start exactly. Output frames are mapped to phases stance→stance and flight→flight with the
+machine's own durations (the paper's time warp), so any number of strides can be synthesised.
+
+Coordinates of the cycle are expressed in the *heading frame* (forward, up, lateral) so that the machine,
+which lives in the sagittal plane, can be placed back in the world.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core import quat
+from ..body.model import BodyModel
+from ..constants import UP, UP_AXIS
+from ..errors import FitError
+from ..body.gait import Gait
+from ..core.motion import Motion
+
+#: Stride-phase samples of the cycle (per stride). 240 keeps interpolation error far below a millimetre.
+CYCLE_SAMPLES = 240
+#: A loaded foot marker is held still while within this fraction of the leg length of its lowest point.
+SLIDE_BAND_L = 0.022
+
+
+def heading_frame(heading: np.ndarray) -> np.ndarray:
+    """(3, 3) rows = forward, up, lateral unit vectors (world) for a horizontal travel direction."""
+    fwd = np.asarray(heading, float).copy()
+    fwd[UP_AXIS] = 0.0
+    fwd /= np.linalg.norm(fwd)
+    lat = np.cross(fwd, UP)
+    return np.stack([fwd, UP, lat])
+
+
+def min_jerk(u: np.ndarray) -> np.ndarray:
+    """Minimum-jerk progress 10u³ − 15u⁴ + 6u⁵ on [0, 1] (zero velocity and acceleration at both ends)."""
+    u = np.clip(u, 0.0, 1.0)
+    return u**3 * (10.0 - 15.0 * u + 6.0 * u**2)
+
+
+@dataclass(frozen=True)
+class FootEvent:
+    """A foot event in reference frames (fractional allowed): kind 'td' (touchdown) or 'lo' (liftoff)."""
+
+    frame: float
+    foot: int
+    kind: str
+
+
+def events_from_gait(gait: Gait) -> list[FootEvent]:
+    """Touchdowns and liftoffs of a gait, in time order (edges of partial stances omitted)."""
+    F = len(gait.contact)
+    ev = []
+    for s in gait.stances:
+        if s.start > 0:
+            ev.append(FootEvent(float(s.start), s.foot, "td"))
+        if s.stop < F:
+            ev.append(FootEvent(float(s.stop), s.foot, "lo"))
+    return sorted(ev, key=lambda e: e.frame)
+
+
+@dataclass(frozen=True)
+class ReferenceCycle:
+    """One seamless stride of the reference, sampled at K = CYCLE_SAMPLES stride phases φ = k / K.
+
+    first_foot: foot A (0 left, 1 right) whose touchdown is φ = 0; foot B = 1 − A.
+    phase_events: (4,) φ of [touchdown A, liftoff A, touchdown B, liftoff B] = [0, φ1, φ2, φ3] (the
+        machine's force-based events).
+    contact_phase: (2, 2) stride phases [on, off] of each foot's ground contact as the markers see it
+        (left, right); slightly wider than the force-based stance, unwrapped so that on < off.
+    durations: (4,) reference durations [s] of stance A, flight after A, stance B, flight after B.
+    frame: (3, 3) heading frame rows (forward, up, lateral) in world coordinates.
+    rotations: (K, J, 4) local joint rotations (root orientation in world).
+    root_from_com: (K, 3) root − COM [m], heading frame.
+    com_height: (K,) COM height above the ground [m]; com_forward: (K,) COM forward position minus
+        uniform motion at the mean speed [m]; com_lateral: (K,) lateral COM sway about the mean line [m].
+    marker_rel: (K, 2, 3, 3) foot markers relative to each foot's anchor [m], heading frame (the anchor is
+        the stance's contact point on the ground, or in swing a minimum-jerk blend of the previous and next
+        contact points), with sliding of loaded markers removed.
+    marker_from_com: (K, 2, 3, 3) foot markers relative to the COM (forward, lateral) and above the ground
+        (up) [m], heading frame: how the swinging foot moves with the body.
+    contact_lateral: (2,) lateral offset of each foot's contacts from the COM line [m].
+    speed: mean forward speed [m/s]; stride_time [s]; leg_length [m]; ground [m].
+    max_joint_jump_deg: the reference clip's own largest frame-to-frame joint rotation [deg].
+    """
+
+    first_foot: int
+    phase_events: np.ndarray
+    contact_phase: np.ndarray
+    durations: np.ndarray
+    frame: np.ndarray
+    rotations: np.ndarray
+    root_from_com: np.ndarray
+    com_height: np.ndarray
+    com_forward: np.ndarray
+    com_lateral: np.ndarray
+    marker_rel: np.ndarray
+    marker_from_com: np.ndarray
+    contact_lateral: np.ndarray
+    speed: float
+    stride_time: float
+    leg_length: float
+    ground: float
+    max_joint_jump_deg: float
+
+    @property
+    def n_samples(self) -> int:
+        return self.rotations.shape[0]
+
+
+def _phase_of_events(events: list[FootEvent], first_foot: int, fractions: np.ndarray) -> np.ndarray:
+    """Unwrapped stride phase ψ of each event (ψ increases by 1 per stride; first A touchdown = 0)."""
+    base = {(first_foot, "td"): 0.0, (first_foot, "lo"): fractions[0],
+            (1 - first_foot, "td"): fractions[1], (1 - first_foot, "lo"): fractions[2]}
+    psi = []
+    for e in events:
+        p = base[(e.foot, e.kind)]
+        if psi:
+            prev = psi[-1]
+            p = p + np.ceil(prev - p + 1e-9)  # smallest value ≡ p (mod 1) after prev
+        psi.append(p)
+    psi = np.array(psi)
+    first_a_td = next(i for i, e in enumerate(events) if e.foot == first_foot and e.kind == "td")
+    return psi - np.floor(psi[first_a_td] + 1e-9)
+
+
+def _durations(events: list[FootEvent], first_foot: int, frame_time: float) -> np.ndarray:
+    """Mean reference durations [s] of (stance A, flight after A, stance B, flight after B)."""
+    sums = {k: [] for k in range(4)}
+    for e0, e1 in zip(events[:-1], events[1:]):
+        dt = (e1.frame - e0.frame) * frame_time
+        if e0.kind == "td" and e1.kind == "lo" and e0.foot == e1.foot:
+            sums[0 if e0.foot == first_foot else 2].append(dt)
+        elif e0.kind == "lo" and e1.kind == "td" and e0.foot != e1.foot:
+            sums[1 if e0.foot == first_foot else 3].append(dt)
+    out = np.full(4, np.nan)
+    for k, v in sums.items():
+        if v:
+            out[k] = np.mean(v)
+    # a phase seen only for one foot stands in for the other foot's
+    for k, twin in ((0, 2), (1, 3), (2, 0), (3, 1)):
+        if np.isnan(out[k]):
+            out[k] = out[twin]
+    if np.any(np.isnan(out)) or np.any(out <= 0):
+        raise FitError("cannot find a stance and a flight phase to build a stride cycle from")
+    return out
+
+
+def extract_cycle(
+    motion: Motion,
+    body: BodyModel,
+    gait: Gait,
+    com: np.ndarray,
+    markers: np.ndarray,
+    events: list[FootEvent] | None = None,
+    n_samples: int = CYCLE_SAMPLES,
+) -> ReferenceCycle:
+    """Build the seamless reference stride cycle of a running clip.
+
+    com: (F, 3) [m]; markers: (F, 2, 3, 3) [m]; events: foot events (default: from the gait; the fit's
+    force-refined events are more precise).
+    """
+    F = motion.n_frames
+    dt = motion.frame_time
+    if events is None:
+        events = events_from_gait(gait)
+    tds = [e for e in events if e.kind == "td"]
+    if len(tds) < 2 or len({e.foot for e in tds}) < 2:
+        raise FitError("a stride cycle needs touchdowns of both feet in the clip")
+    first_foot = tds[0].foot
+    dur = _durations(events, first_foot, dt)
+    T = float(dur.sum())
+    fr = np.cumsum(dur)[:3] / T  # phases of liftoff A, touchdown B, liftoff B
+    phase_events = np.concatenate([[0.0], fr])
+    ev_frames = np.array([e.frame for e in events])
+    ev_psi = _phase_of_events(events, first_foot, fr)
+
+    # Phase of every frame: linear between events, extrapolated at the nominal rate beyond them
+    # (never past the neighbouring event's phase).
+    frames = np.arange(F, dtype=float)
+    psi = np.interp(frames, ev_frames, ev_psi)
+    rate = 1.0 / (T / dt)  # phase per frame at nominal timing
+    before = frames < ev_frames[0]
+    psi[before] = ev_psi[0] - (ev_frames[0] - frames[before]) * rate
+    after = frames > ev_frames[-1]
+    psi[after] = ev_psi[-1] + (frames[after] - ev_frames[-1]) * rate
+
+    # Heading frame, mean speed, COM line
+    disp = com[-1] - com[0]
+    heading = disp.copy()
+    heading[UP_AXIS] = 0.0
+    Rh = heading_frame(heading)
+    com_h = com @ Rh.T  # (F, 3) forward, up, lateral
+    t = frames * dt
+    speed = float(np.polyfit(t, com_h[:, 0], 1)[0])
+    lat_line = np.polyval(np.polyfit(t, com_h[:, 2], 1), t)
+    stance_ground = np.full((F, 2), np.nan)
+    for s in gait.stances:
+        stance_ground[s.start : s.stop, s.foot] = s.ground
+
+    # Per-frame anchors of each foot: stance contact point or a min-jerk blend between contacts.
+    stride_vec = speed * T * Rh[0]  # one stride along the heading [m]
+    anchors, anchor_ok = _anchors(gait, psi, stride_vec, F)
+    rel = np.einsum("ij,fpkj->fpki", Rh, markers - anchors[:, :, None, :])  # heading frame
+    root_from_com = (motion.root_positions - com) @ Rh.T
+    from_com = np.einsum("ij,fpkj->fpki", Rh, markers - com[:, None, None, :])
+    from_com[..., 1] = markers[..., UP_AXIS] - np.nanmedian(stance_ground)
+    contact_lat = np.zeros(2)
+    for foot in range(2):
+        c = [s.contact_point @ Rh[2] - np.interp((s.start + s.stop) / 2 * dt, t, lat_line)
+             for s in gait.stances if s.foot == foot]
+        contact_lat[foot] = np.mean(c) if c else 0.0
+
+    # Sample every phase of one stride at every occurrence in the clip and average.
+    K = n_samples
+    grid = np.arange(K + 1) / K  # include φ = 1 for the loop closure
+    n_lo, n_hi = int(np.floor(psi.min())) - 1, int(np.ceil(psi.max())) + 1
+    taper = max(1.0, 0.04 / dt)  # frames over which occurrences near the clip's edges fade in
+    occ_frames, occ_w = [], []
+    for n in range(n_lo, n_hi + 1):
+        target = grid + n
+        inside = (target >= psi[0]) & (target <= psi[-1])
+        f = np.interp(target, psi, frames)
+        w = np.clip(np.minimum(f, F - 1 - f) / taper, 0.0, 1.0) * inside
+        if np.any(w > 0):
+            occ_frames.append(f)
+            occ_w.append(w)
+    occ_frames = np.array(occ_frames)  # (N, K+1)
+    occ_w = np.array(occ_w)
+    if np.any(occ_w.sum(axis=0) <= 0):
+        raise FitError("the clip does not cover a whole stride: every phase must be seen at least once")
+
+    def lin(x, f):  # linear interpolation of per-frame data x (F, ...) at fractional frames f
+        i0 = np.clip(np.floor(f).astype(int), 0, F - 2)
+        w = (f - i0).reshape(f.shape + (1,) * (x.ndim - 1))
+        return x[i0] * (1 - w) + x[i0 + 1] * w
+
+    def average(x):  # weighted mean over occurrences of linear data (F, ...) -> (K+1, ...)
+        vals = np.stack([lin(x, f) for f in occ_frames])
+        w = occ_w.reshape(occ_w.shape + (1,) * (vals.ndim - 2))
+        return np.sum(vals * w, axis=0) / np.sum(w, axis=0)
+
+    rots = quat.make_continuous(motion.rotations)
+    q_occ = np.stack([_slerp_frames(rots, f) for f in occ_frames])  # (N, K+1, J, 4)
+    ref = q_occ[np.argmax(occ_w, axis=0), np.arange(K + 1)]  # sign reference per sample
+    sign = np.where(np.sum(q_occ * ref[None], axis=-1) < 0, -1.0, 1.0)
+    q_avg = quat.normalize(np.sum(q_occ * sign[..., None] * occ_w[:, :, None, None], axis=0))
+    rotations = _close_loop_quat(q_avg)
+
+    com_height = _close_loop_linear(average(com_h[:, 1] - np.nanmedian(stance_ground)))
+    uniform = speed * t
+    com_forward = _close_loop_linear(average(com_h[:, 0] - uniform))
+    com_lateral = _close_loop_linear(average(com_h[:, 2] - lat_line))
+    root_rel = _close_loop_linear(average(root_from_com))
+
+    # Markers: only occurrences whose anchors are known count.
+    rel_vals = np.stack([lin(rel, f) for f in occ_frames])  # (N, K+1, 2, 3, 3)
+    ok_vals = np.stack([lin(anchor_ok.astype(float), f) for f in occ_frames]) > 0.999  # (N, K+1, 2)
+    w = occ_w[:, :, None] * ok_vals
+    wsum = w.sum(axis=0)
+    if np.any(wsum <= 0):
+        # a foot phase never seen with both neighbouring contacts: fall back to every occurrence
+        w = np.where(wsum[None] <= 0, occ_w[:, :, None], w)
+        wsum = w.sum(axis=0)
+    marker_rel = np.sum(rel_vals * w[..., None, None], axis=0) / wsum[..., None, None]
+    marker_rel = _close_loop_linear(marker_rel)
+    # 0.03 L: a little above the 0.02 L (and its hysteresis band) at which the physics report calls a
+    # marker loaded, so everything the report checks is held
+    contact_tol = 0.03 * body.leg_length
+    contact_phase = _contact_phases(marker_rel, phase_events, first_foot, contact_tol)
+    stance_mask = _contact_mask(np.arange(K) / K, contact_phase)
+    # band 0.03 L: wider than the 0.02 L within which the physics report watches a marker slide, so a tip
+    # that lifts to just under 0.02 L and comes down again is held all the while
+    marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=contact_tol, band=SLIDE_BAND_L * body.leg_length)
+    marker_from_com = _close_loop_linear(average(from_com))
+
+    from ..metrics import max_joint_jump_deg
+
+    return ReferenceCycle(
+        first_foot=first_foot, phase_events=phase_events, contact_phase=contact_phase, durations=dur, frame=Rh,
+        rotations=rotations, root_from_com=root_rel, com_height=com_height, com_forward=com_forward,
+        com_lateral=com_lateral, marker_rel=marker_rel, marker_from_com=marker_from_com,
+        contact_lateral=contact_lat, speed=speed,
+        stride_time=T, leg_length=body.leg_length, ground=float(np.nanmedian(stance_ground)),
+        max_joint_jump_deg=max_joint_jump_deg(motion),
+    )
+
+
+def _slerp_frames(rots: np.ndarray, f: np.ndarray) -> np.ndarray:
+    F = rots.shape[0]
+    i0 = np.clip(np.floor(f).astype(int), 0, F - 2)
+    w = np.broadcast_to((f - i0)[:, None], (len(f), rots.shape[1]))
+    return quat.slerp(rots[i0], rots[i0 + 1], w)
+
+
+def _close_loop_linear(x: np.ndarray) -> np.ndarray:
+    """(K+1, …) samples over φ ∈ [0, 1] → (K, …) periodic samples: the end mismatch spread linearly."""
+    K = x.shape[0] - 1
+    ramp = (np.arange(K + 1) / K).reshape((K + 1,) + (1,) * (x.ndim - 1))
+    return (x - ramp * (x[-1] - x[0]))[:K]
+
+
+def _close_loop_quat(q: np.ndarray) -> np.ndarray:
+    """(K+1, J, 4) → (K, J, 4) periodic: the rotation from end to start spread linearly over the stride."""
+    K = q.shape[0] - 1
+    delta = quat.to_rotvec(quat.mul(quat.conj(q[-1]), q[0]))  # end -> start, local
+    ramp = (np.arange(K + 1) / K)[:, None, None]
+    return quat.normalize(quat.mul(q, quat.from_rotvec(ramp * delta[None])))[:K]
+
+
+def _contact_phases(marker_rel: np.ndarray, phase_events: np.ndarray, first_foot: int, contact_tol: float,
+                    max_extension: float = 0.15) -> np.ndarray:
+    """(2, 2) [on, off] stride phases of each foot's ground contact.
+
+    The machine's force-based stance, extended before touchdown and after liftoff for as long as some
+    marker of the foot stays within ``contact_tol`` of the ground in the cycle (the force crosses its
+    threshold a little after the foot lands and before the toe leaves; the foot must stay pinned for all
+    of that). marker_rel: (K, 2, 3, 3) cycle marker offsets (heading frame, heights above the ground).
+    Extensions are capped at ``max_extension`` of a stride. Unwrapped: on < off.
+    """
+    K = marker_rel.shape[0]
+    low = marker_rel[..., 1].min(axis=2) <= contact_tol  # (K, 2)
+    td = {first_foot: 0.0, 1 - first_foot: phase_events[2]}
+    lo = {first_foot: phase_events[1], 1 - first_foot: phase_events[3]}
+    cap = int(max_extension * K)
+    out = np.zeros((2, 2))
+    for foot in range(2):
+        i_on = int(np.floor(td[foot] * K))
+        i_off = int(np.ceil(lo[foot] * K))
+        n_before = 0
+        while n_before < cap and low[(i_on - n_before - 1) % K, foot]:
+            n_before += 1
+        n_after = 0
+        while n_after < cap and low[(i_off + n_after) % K, foot]:
+            n_after += 1
+        out[foot] = (td[foot] - n_before / K, lo[foot] + n_after / K)
+    return out
+
+
+def _contact_mask(phi: np.ndarray, contact_phase: np.ndarray) -> np.ndarray:
+    """(…, 2) bool marker contact of each foot at stride phases phi (…)."""
+    p = np.mod(phi, 1.0)[..., None]
+    on, off = contact_phase[:, 0], contact_phase[:, 1]
+    return (np.mod(p - on, 1.0) < (off - on))
+
+
+def _anchors(gait: Gait, psi: np.ndarray, stride: np.ndarray, F: int):
+    """Anchor point of each foot per frame (F, 2, 3) [m] and whether it is known (F, 2).
+
+    In stance the anchor is the stance's contact point (on its ground); in swing it moves from the
+    previous contact to the next one with min-jerk progress in stride phase. A swing cut by the clip's
+    edge gets a virtual contact one stride (``stride`` (3,) [m], horizontal) before the first or after
+    the last contact of that foot, one stride phase earlier or later: the cycle is periodic.
+    """
+    anchors = np.zeros((F, 2, 3))
+    ok = np.zeros((F, 2), bool)
+    frames = np.arange(F)
+    for foot in range(2):
+        st = [s for s in gait.stances if s.foot == foot]
+        if not st:
+            continue
+        pts, psi_on, psi_off = [], [], []
+        for s in st:
+            c = s.contact_point.copy()
+            c[UP_AXIS] = s.ground
+            pts.append(c)
+            anchors[s.start : s.stop, foot] = c
+            ok[s.start : s.stop, foot] = True
+            psi_on.append(psi[s.start])
+            psi_off.append(psi[min(s.stop, F - 1)])
+        # virtual neighbours (a stance cut at the edge has an unknown start or end: use its known end)
+        pts = [pts[0] - stride] + pts + [pts[-1] + stride]
+        psi_off = [psi_off[0] - 1.0] + psi_off + [psi_off[-1] + 1.0]
+        psi_on = [psi_on[0] - 1.0] + psi_on + [psi_on[-1] + 1.0]
+        bounds = [(-10**9, 0)] + [(s.start, s.stop) for s in st] + [(F + 10**9, F + 10**9)]
+        for j in range(len(bounds) - 1):
+            a, b = bounds[j][1], bounds[j + 1][0]
+            sel = (frames >= max(a, 0)) & (frames < min(b, F))
+            if not sel.any():
+                continue
+            p0, p1 = psi_off[j], psi_on[j + 1]
+            u = (psi[sel] - p0) / max(p1 - p0, 1e-9)
+            w = min_jerk(u)[:, None]
+            anchors[sel, foot] = pts[j] * (1 - w) + pts[j + 1] * w
+            ok[sel, foot] = True
+    return anchors, ok
+
+
+#: Per-sample relaxation of an unloaded marker's own de-skating correction toward the foot's common one.
+RELAX = 0.2
+#: Fraction of a tilt's rise a marker keeps from one cycle sample to the next once the tilt is over.
+TILT_RELAX = 0.5
+
+
+def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, band: float) -> np.ndarray:
+    """Remove the reference's foot sliding in stance by translating each foot rigidly.
+
+    rel: (K, 2, 3, 3) marker offsets from the anchor (heading frame: forward, up, lateral).
+    A marker that reaches within contact_tol of the ground in a stance is loaded while it is within
+    ``band`` of its own lowest point of that stance (joint centres sit a sole's thickness above the
+    floor). The three markers of
+    a foot move together by one horizontal correction δ(φ) (so the foot keeps the reference's shape and
+    orientation, which IK can then meet exactly): from one sample to the next δ cancels the mean motion of
+    the markers loaded at both, so loaded points stay put and δ stays continuous. After the
+    stance δ fades out over the swing (min-jerk), so the cycle still closes. Heights are clamped to ≥ 0.
+    """
+    out = rel.copy()
+    K = rel.shape[0]
+    firm = np.zeros(rel.shape[:3])  # (K, 2, 3) how firmly each marker is held (for the bones)
+    in_place = np.zeros(rel.shape[:3], bool)  # (K, 2, 3) markers held in place (loaded in a stance)
+    for foot in range(2):
+        idx = np.flatnonzero(stance[:, foot])
+        if idx.size == 0:
+            continue
+        # the stance may wrap around φ = 0: order its samples in time
+        if stance[0, foot] and stance[-1, foot]:
+            gap = np.flatnonzero(np.diff(idx) > 1)
+            if gap.size:
+                idx = np.concatenate([idx[gap[0] + 1 :], idx[: gap[0] + 1]])
+        h = rel[idx, foot][:, :, [0, 2]]  # (n, 3 markers, 2) horizontal offsets
+        height = rel[idx, foot, :, 1]  # (n, 3) above the ground
+        h_min = height.min(axis=0)
+        # a marker bears load while near its own lowest point of the stance (joint centres sit a sole's
+        # thickness above the floor) and only if it reaches the floor at all
+        reaches = h_min <= contact_tol
+        loaded = (height <= h_min + band) & reaches
+        # δ changes by minus the (weighted) mean motion of the markers loaded at both neighbouring samples,
+        # so the loaded points stay put and δ is continuous whatever markers load and unload (a
+        # re-averaging of held positions would jump); markers pressed deeper (nearer their lowest point)
+        # count more, so the point that carries the foot stays put and a lightly touching one gives way
+        depth = np.clip(1.0 - (height - h_min) / band, 0.0, 1.0) ** 4
+        firm[idx, foot] += depth * reaches
+        in_place[idx, foot] = loaded
+        wgt = (loaded[1:] & loaded[:-1]) * 0.5 * (depth[1:] + depth[:-1])  # (n-1, 3)
+        step = h[1:] - h[:-1]  # (n-1, 3, 2)
+        w_sum = wgt.sum(axis=1, keepdims=True)
+        mean_step = np.where(w_sum > 0, (step * wgt[..., None]).sum(axis=1) / np.maximum(w_sum, 1e-12), 0.0)
+        delta = np.concatenate([np.zeros((1, 2)), -np.cumsum(mean_step, axis=0)])  # common (rigid) part
+        # Each marker then gets its own correction: while it stays loaded it cancels its own motion exactly
+        # (two loaded points that move relative to each other both stay put; IK bends the toe joint to
+        # match); while unloaded it relaxes back to the common one, so the foot keeps its shape in the air.
+        # A released marker relaxes only once it is clearly off the floor (above band, fully at 2 bands): a
+        # tip that yawed with the foot and was held would otherwise swing back sideways while still within
+        # the height at which the physics report watches it slide.
+        # Each sample is given its bone lengths back (_rigid_foot) before the next one holds its points, so
+        # what is held is a pose the foot can take.
+        own = np.zeros((idx.size, 3, 2))
+        lift = np.zeros((idx.size, 3))  # height changes of the bones' tilting
+        both = loaded[1:] & loaded[:-1]
+        rate = RELAX * np.clip((height - h_min - band) / band, 0.0, 1.0)  # (n, 3)
+        bones = _bone_lengths(rel[:, foot])
+        f_firm, f_held = firm[idx, foot], in_place[idx, foot]
+        for i in range(idx.size):  # ~50 samples of one stance
+            if i > 0:
+                held = own[i - 1] - step[i - 1]
+                relaxed = own[i - 1] + rate[i][:, None] * (delta[i] - own[i - 1])
+                own[i] = np.where(both[i - 1][:, None], held, relaxed)
+            pose = rel[idx[i], foot].copy()  # (3 markers, 3)
+            pose[:, [0, 2]] += own[i]
+            if i > 0:  # a marker a tilt raised comes back down over a few samples, not at once
+                pose[:, 1] += TILT_RELAX * np.maximum(lift[i - 1], 0.0)
+            rigid = _rigid_foot(pose[None], bones, f_firm[i][None], f_held[i][None])[0]
+            own[i] = rigid[:, [0, 2]] - rel[idx[i], foot][:, [0, 2]]
+            lift[i] = rigid[:, 1] - rel[idx[i], foot, :, 1]
+        d = delta[-1]
+        out[idx, foot, :, 0] += own[..., 0]
+        out[idx, foot, :, 1] += lift
+        out[idx, foot, :, 2] += own[..., 1]
+        rest = own[-1] - d  # what remains of the markers' own corrections at the end of the stance
+        swing = np.flatnonzero(~stance[:, foot])
+        if swing.size:
+            start = (idx[-1] + 1) % K
+            order = (np.arange(swing.size) + np.searchsorted(swing, start)) % swing.size
+            sw = swing[order]
+            fade = 1.0 - min_jerk(np.linspace(0, 1, sw.size))
+            corr = (d[None, :] + rest)[None] * fade[:, None, None]  # (n_sw, 3, 2)
+            out[sw, foot, :, 0] += corr[..., 0]
+            out[sw, foot, :, 1] += lift[-1][None, :] * fade[:, None]  # a tilt's rise fades with them
+            out[sw, foot, :, 2] += corr[..., 1]
+    out[..., 1] = np.maximum(out[..., 1], 0.0)
+    return _keep_feet_rigid(out, rel, firm, in_place)
+
+
+#: Bones of the foot between its markers (ankle-ball: the foot; ball-tip: the toes): their lengths are fixed.
+FOOT_BONES = ((1, 2), (0, 1))
+#: Sweeps of the bone-length projection (each restores both bones; a few settle the chain to < 0.1 mm).
+RIGID_SWEEPS = 4
+#: Firmness of a marker off the floor (the bones' ends then share a correction equally), and of one held in
+#: place horizontally (it does not give way to one that is not).
+RIGID_MIN_FIRM = 1e-3
+RIGID_HELD_FIRM = 1e6
+
+
+def _bone_lengths(rel_foot: np.ndarray) -> np.ndarray:
+    """(3, 3) distances between one foot's markers [m] (median over the cycle), from rel_foot (K, 3, 3)."""
+    return np.median(np.linalg.norm(rel_foot[:, :, None, :] - rel_foot[:, None, :, :], axis=-1), axis=0)
+
+
+def _keep_feet_rigid(out: np.ndarray, rel: np.ndarray, firm: np.ndarray, held: np.ndarray) -> np.ndarray:
+    """_rigid_foot on every sample of both feet of a cycle's markers out (K, 2, 3, 3); rel: before de-skating."""
+    out = out.copy()
+    for foot in range(2):
+        out[:, foot] = _rigid_foot(out[:, foot], _bone_lengths(rel[:, foot]), firm[:, foot], held[:, foot])
+    out[..., 1] = np.maximum(out[..., 1], 0.0)
+    return out
+
+
+def _rigid_foot(pose: np.ndarray, length: np.ndarray, firm: np.ndarray, held: np.ndarray) -> np.ndarray:
+    """One foot's markers (N, 3, 3) (heading frame: forward, up, lateral) with their bone lengths restored.
+
+    Holding each loaded marker where it is while the reference foot rolls would keep a rising ball in its
+    place instead of swinging it back round the tip: the ball-tip distance shrank by up to 14 % (09_08), and
+    IK, unable to meet such targets, split the difference and slid the held tip 5-7 mm on a giant. So each
+    bone (FOOT_BONES, lengths ``length`` (3, 3)) gets its length back. A bone with both ends held in place
+    (held: (N, 3)) keeps them where they are and tilts: its less firm end moves up or down (firm: (N, 3),
+    how near each is to its lowest point of the stance), which is not sliding (the toes flex
+    about the ball, or the ball rolls over the tip). Otherwise the bone slides along itself horizontally, a
+    held end not at all and otherwise the firmer end less; heights stay (they decide what is on the ground).
+    """
+    hor = pose[..., [0, 2]].copy()  # (N, 3, 2)
+    height = pose[..., 1].copy()  # (N, 3)
+    firm = RIGID_MIN_FIRM + firm
+    for _ in range(RIGID_SWEEPS):
+        for i, j in FOOT_BONES:
+            d = length[i, j]
+            v = hor[:, j] - hor[:, i]
+            n = np.linalg.norm(v, axis=-1)
+            tilt = held[:, i] & held[:, j] & (n <= d)
+            rise = np.sqrt(np.maximum(d**2 - n**2, 0.0)) * np.where(height[:, j] >= height[:, i], 1.0, -1.0)
+            j_moves = firm[:, j] <= firm[:, i]
+            height[:, j] = np.where(tilt & j_moves, height[:, i] + rise, height[:, j])
+            height[:, i] = np.where(tilt & ~j_moves, height[:, j] - rise, height[:, i])
+            want = np.sqrt(np.maximum(d**2 - (height[:, j] - height[:, i]) ** 2, 0.0))  # horizontal length
+            u = v / np.maximum(n, 1e-12)[:, None]
+            change = np.where(tilt, 0.0, want - n)[:, None] * u  # j moves by +a·change, i by -(1-a)·change
+            fi = np.where(held[:, i], RIGID_HELD_FIRM, firm[:, i])
+            fj = np.where(held[:, j], RIGID_HELD_FIRM, firm[:, j])
+            b = (fi / (fi + fj))[:, None]
+            hor[:, j] += b * change
+            hor[:, i] -= (1.0 - b) * change
+    out = pose.copy()
+    out[..., 0], out[..., 1], out[..., 2] = hor[..., 0], height, hor[..., 1]
+    return out
+
+
+def nlerp_rows(q: np.ndarray, i0: np.ndarray, i1: np.ndarray, w: np.ndarray, chunk: int = 32768) -> np.ndarray:
+    """(T, J, 4) normalised linear interpolation between rows i0 and i1 (T,) of q (N, J, 4) at weights w (T,).
+
+    In chunks, so that the temporaries of a long output (an hour is 432 000 frames) stay small.
+    """
+    out = np.empty((len(w),) + q.shape[1:])
+    for a in range(0, len(w), chunk):
+        sl = slice(a, a + chunk)
+        q0, q1 = q[i0[sl]], q[i1[sl]]
+        w_ = w[sl, None, None]
+        sign = np.where(np.sum(q0 * q1, axis=-1, keepdims=True) < 0, -1.0, 1.0)
+        out[sl] = quat.normalize(q0 * (1.0 - w_) + q1 * (sign * w_))
+    return out
+
+
+def sample_cycle(cycle: ReferenceCycle, phi: np.ndarray, rotations: bool = True):
+    """Cycle quantities at stride phases phi (T,): rotations (T, J, 4) (None if not asked) and a dict of
+    linear arrays. Rotations use normalised linear interpolation: neighbouring cycle samples are a few
+    degrees apart at most, where nlerp and slerp differ by < 1e-4 rad, at a third of the cost.
+    """
+    K = cycle.n_samples
+    x = np.mod(phi, 1.0) * K
+    i0 = np.floor(x).astype(int) % K
+    i1 = (i0 + 1) % K
+    w = x - np.floor(x)
+    rot = None
+    if rotations:
+        rot = nlerp_rows(cycle.rotations, i0, i1, w)
+
+    def lin(a):
+        ww = w.reshape((-1,) + (1,) * (a.ndim - 1))
+        return a[i0] * (1 - ww) + a[i1] * ww
+
+    return rot, {
+        "root_from_com": lin(cycle.root_from_com),
+        "com_height": lin(cycle.com_height),
+        "com_forward": lin(cycle.com_forward),
+        "com_lateral": lin(cycle.com_lateral),
+        "marker_rel": lin(cycle.marker_rel),
+        "marker_from_com": lin(cycle.marker_from_com),
+    }
+
+
+def fit_events(machine, motion: Motion):
+    """The fit's force-refined touchdown/liftoff times as foot events (None: use the gait's)."""
+    ev = []
+    for s in getattr(machine, "stances", ()):
+        foot = 0 if s.get("foot") in (0, "left") else 1
+        for key, kind in (("t_touchdown_s", "td"), ("t_liftoff_s", "lo")):
+            t = s.get(key)
+            if t is not None and np.isfinite(t) and 0 < t < motion.duration:
+                ev.append(FootEvent(t / motion.frame_time, foot, kind))
+    ev.sort(key=lambda e: e.frame)
+    # events must alternate td/lo per foot and the feet alternate; otherwise trust the gait
+    for a, b in zip(ev[:-1], ev[1:]):
+        if a.kind == b.kind:
+            return None
+    return ev or None

@@ -1,0 +1,266 @@
+"""IK targets (§6): the time-warped reference pose on the target skeleton, the machine's COM and the foot
+marker targets with their weights (loaded markers held, swinging feet only guided).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..body.characters import Retarget
+from ..body.model import BodyModel
+from ..constants import UP_AXIS
+from ..core.motion import Motion
+from .cycle import ReferenceCycle, min_jerk, sample_cycle
+from .timewarp import MachinePath
+
+#: IK weights [1/m²] for a reference-sized body (scaled by (reference leg / target leg)² for others);
+#: posture pulls at 1e-4 per rad² (the solver's default). The COM is held hardest: it carries the physics
+#: (flight gravity needs it to well under a millimetre); loaded foot markers next; swing feet only guide.
+COM_WEIGHT = 1e4
+STANCE_MARKER_WEIGHT = 1e3
+SWING_MARKER_WEIGHT = 1e-2
+#: Time [s] over which a foot's marker weight ramps between swing and stance around its events.
+WEIGHT_RAMP_S = 0.04
+#: Fraction of the stance marker weight every marker of a foot keeps around its contact (see _marker_weights).
+LANDING_WEIGHT = 0.1
+
+
+@dataclass(frozen=True, eq=False)
+class Targets:
+    """Initial motion (reference angles, root from the machine COM) and the IK targets and weights."""
+
+    initial: Motion
+    com: np.ndarray  # (T, 3) [m]
+    markers: np.ndarray  # (T, 2, 3, 3) [m]
+    marker_weight: np.ndarray  # (T, 2, 3)
+    com_weight: np.ndarray  # (T,)
+
+
+def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, reference_leg_length: float,
+                  meta: dict) -> Targets:
+    """Time-warp the reference cycle onto the machine's steps and set the COM and foot targets.
+
+    reference_leg_length: the reference body's leg length [m] (the weights are per (leg length)²);
+    meta: the output motion's provenance (source, length_scale).
+    """
+    L = retarget.L
+    Rh = path.frame
+    phi = np.mod(path.psi, 1.0)
+    rot, data = sample_cycle(cyc, phi)
+    T = len(path.times)
+    anchors, w_ground = _foot_anchors(path)
+    rel_world = np.einsum("fpki,ij->fpkj", L * data["marker_rel"], Rh)  # heading frame -> world
+    on_ground = anchors[:, :, None, :] + rel_world
+    # In mid-swing the foot moves with the body (its offset from the COM, scaled), not along a stretched
+    # ground path: a stretched path would leave the trailing foot out of the leg's reach after toe-off
+    # when running faster. Near toe-off and touchdown the ground-anchored path takes over.
+    com_rel = L * data["marker_from_com"]
+    com_rel[..., 1] = L * data["marker_rel"][..., 1]  # heights above the ground as in the anchored path
+    with_body = path.com[:, None, None, :] + np.einsum("fpki,ij->fpkj", com_rel, Rh)
+    # In mid-swing the foot keeps at least its reference height below the COM: a machine whose COM flies
+    # higher than the reference's at that phase (a faster cycle: shorter stance, longer flight) would
+    # otherwise leave the swinging foot at the reference's height above the ground, out of the leg's reach,
+    # and the IK straightens the knee and flips it (a 60-70 deg pop at x1.5).
+    below_com = path.com[:, None, None, UP_AXIS] + L * (data["marker_from_com"][..., 1]
+                                                        - data["com_height"][:, None, None])
+    with_body[..., UP_AXIS] = np.maximum(on_ground[..., UP_AXIS], below_com)
+    w = w_ground[:, :, None, None]
+    markers = w * on_ground + (1.0 - w) * with_body
+    root = path.com + (L * data["root_from_com"]) @ Rh
+    initial = Motion(retarget.skeleton, root, rot, float(path.frame_time), None, dict(meta))
+    # The reference's root-to-COM offset × L is where the root goes for a body of the reference's
+    # proportions. A character with other proportions (a troll's trunk) carries its COM elsewhere relative
+    # to the root, and when the root is a static reference joint far from the pelvis (the Bandai rig's
+    # joint_Root, metres from the body through the pelvis offset) the error is metres: the IK would start
+    # with the feet out of reach. So the initial pose is translated to put its own COM on the machine's.
+    initial = initial.with_(root_positions=root + (path.com - retarget.body.com(initial)))
+    markers = _lift_out_of_reach(initial, retarget.body, markers)
+    weight = _marker_weights(path, markers, retarget.body.leg_length) * _reach_factor(initial, retarget.body, markers)
+    weight = np.maximum(weight, SWING_MARKER_WEIGHT)
+    # Weights are per (leg length)^2, so the trade-off between a position error and a joint angle is the
+    # same for a child and a giant (errors in metres grow with size, joint angles do not).
+    per_size = (reference_leg_length / retarget.body.leg_length) ** 2
+    return Targets(initial, path.com, markers, weight * per_size, np.full(T, COM_WEIGHT * per_size))
+
+
+def _leg_reach(body: BodyModel, side: str) -> np.ndarray:
+    """(3,) straight-leg distances [m] from the hip to the ankle, the ball and the tip of one foot."""
+    r, rest = body.roles, body.skeleton.rest_positions()
+    leg = np.linalg.norm(rest[r[f"{side}_knee"]] - rest[r[f"{side}_hip"]]) + np.linalg.norm(
+        rest[r[f"{side}_ankle"]] - rest[r[f"{side}_knee"]])
+    ankle_toe = np.linalg.norm(rest[r[f"{side}_toe"]] - rest[r[f"{side}_ankle"]])
+    toe_end = np.linalg.norm(body.marker_local[0 if side == "left" else 1, 2])
+    return np.array([leg, leg + ankle_toe, leg + ankle_toe + toe_end])
+
+
+#: A foot marker target farther from the hip than its straight-leg reach less LIFT_AT_MARGINS margins of
+#: REACH_MARGIN_L × L is raised until it is not (see _lift_out_of_reach) ...
+LIFT_AT_MARGINS = 2.0
+REACH_MARGIN_L = 0.03
+#: ... by at most about this fraction of L (a soft cap: the rise needed grows without bound as the
+#: horizontal distance nears the reach; beyond the cap the target stays out of reach and _reach_factor lets
+#: it go, by then above the floor band in which the physics report watches it slide).
+LIFT_MAX_L = 0.05
+
+
+def _lift_out_of_reach(initial: Motion, body: BodyModel, markers: np.ndarray) -> np.ndarray:
+    """markers (T, 2, 3, 3) [m] with every target beyond the leg's reach raised straight up until it is
+    within it (hip from the initial pose; reach from _leg_reach less LIFT_AT_MARGINS margins; soft cap
+    LIFT_MAX_L × L).
+
+    When the body has travelled farther over a planted foot than the leg allows (an acceleration's longer
+    stance, a faster run), holding the foot's points where they are ends with the knee locked and the IK
+    failing, and releasing them lets the posture swing the toe sideways while it is still on the floor (a
+    10-15 mm scuff at lift-off, 09_01 accelerated to 1.3x). Raising them instead is what a foot does at
+    toe-off: the heel, then the ball and the tip rise where they stand, so they leave the floor without
+    sliding. A target whose horizontal distance alone is out of reach is raised by the cap and released by
+    _reach_factor.
+    """
+    hips = body.joint_positions(initial, [body.roles["left_hip"], body.roles["right_hip"]])  # (T, 2, 3)
+    out = markers.copy()
+    margin = REACH_MARGIN_L * body.leg_length
+    cap = LIFT_MAX_L * body.leg_length
+    horizontal = [a for a in range(3) if a != UP_AXIS]
+    for i, side in enumerate(("left", "right")):
+        reach = _leg_reach(body, side) - LIFT_AT_MARGINS * margin  # (3,)
+        rel = markers[:, i] - hips[:, i, None, :]  # (T, 3, 3)
+        flat = np.linalg.norm(rel[..., horizontal], axis=-1)  # (T, 3)
+        lowest = -np.sqrt(np.maximum(reach[None, :] ** 2 - flat**2, 0.0))  # lowest reachable height below the hip
+        need = np.where(flat < reach[None, :], lowest - rel[..., UP_AXIS], np.inf)  # (T, 3) rise needed [m]
+        out[:, i, :, UP_AXIS] += cap * np.tanh(np.maximum(need, 0.0) / cap)
+    return out
+
+
+def _reach_factor(initial: Motion, body: BodyModel, markers: np.ndarray) -> np.ndarray:
+    """(T, 2, 3) in [0, 1]: 1 where a marker target is within the leg's reach from the hip, fading to 0 as
+    it approaches the straight-leg limit (thigh + shank + the foot's bones to that marker), so an
+    unreachable target is released instead of wrenching the body (the foot simply leaves a little early).
+    """
+    skel = body.skeleton
+    hips = body.joint_positions(initial, [body.roles["left_hip"], body.roles["right_hip"]])  # (T, 2, 3)
+    out = np.ones(markers.shape[:3])
+    margin = 0.03 * body.leg_length
+    for i, side in enumerate(("left", "right")):
+        r = body.roles
+        hip = hips[:, i]  # (T, 3)
+        rest = skel.rest_positions()
+        leg = np.linalg.norm(rest[r[f"{side}_knee"]] - rest[r[f"{side}_hip"]]) + np.linalg.norm(
+            rest[r[f"{side}_ankle"]] - rest[r[f"{side}_knee"]])
+        ankle_toe = np.linalg.norm(rest[r[f"{side}_toe"]] - rest[r[f"{side}_ankle"]])
+        toe_end = np.linalg.norm(body.marker_local[i, 2])
+        reach = np.array([leg, leg + ankle_toe, leg + ankle_toe + toe_end]) - 0.5 * margin
+        d = np.linalg.norm(markers[:, i] - hip[:, None, :], axis=-1)  # (T, 3)
+        out[:, i] = min_jerk((reach[None, :] - d) / margin)
+    return out
+
+
+#: Fractions of a swing over which the foot target blends from the ground-anchored path to the
+#: body-relative one after toe-off (quickly: the leg is nearly straight at toe-off and cannot trail a
+#: ground path that a faster body leaves behind) and back before touchdown (slowly, to land on the contact).
+SWING_RELEASE = 0.05
+SWING_LANDING = 0.35
+
+
+def _foot_anchors(path: MachinePath) -> tuple[np.ndarray, np.ndarray]:
+    """Each foot's anchor (T, 2, 3): its contact point on the ground, a min-jerk blend between contacts in
+    swing; and the weight (T, 2) of the ground-anchored foot path (1 on the ground and at the ends of a
+    swing, 0 in mid-swing, min-jerk in between)."""
+    T = len(path.times)
+    t = path.times
+    out = np.zeros((T, 2, 3))
+    w_ground = np.ones((T, 2))
+    n = len(path.foot_of_step)
+    for foot in range(2):
+        idx = np.flatnonzero(path.foot_of_step == foot)
+        if idx.size == 0:
+            continue
+        c = path.contacts[idx]
+        td = path.contact_on[idx]
+        lo = path.contact_off[idx]
+        # virtual contacts one stride before the first and after the last (periodic extension); with a single
+        # contact of this foot, the stride comes from both feet's steps (along the heading only: the feet's
+        # lateral offsets differ)
+        # (the first stride extends backwards, the last one forwards: speeds change in an acceleration)
+        if len(c) > 1:
+            stride_a, swing_a = c[1] - c[0], td[1] - lo[0]
+            stride_b, swing_b = c[-1] - c[-2], td[-1] - lo[-2]
+        else:
+            fwd = path.frame[0]
+            step = (path.contacts[-1] - path.contacts[0]) @ fwd / max(n - 1, 1)
+            stride_a = stride_b = 2.0 * step * fwd
+            t_stride = 2.0 * (path.t_touchdown[-1] - path.t_touchdown[0]) / max(n - 1, 1)
+            swing_a = swing_b = t_stride - (lo[0] - td[0])
+        c_ext = np.concatenate([c[:1] - stride_a, c, c[-1:] + stride_b])
+        lo_ext = np.concatenate([[td[0] - swing_a], lo, [np.inf]])
+        td_ext = np.concatenate([[-np.inf], td, [lo[-1] + swing_b]])
+        # for each frame: the last touchdown at or before it (index into *_ext)
+        k = np.searchsorted(td_ext, t, side="right") - 1
+        in_stance = t < lo_ext[k]
+        out[in_stance, foot] = c_ext[k[in_stance]]
+        sw = ~in_stance
+        k_sw = k[sw]
+        t0, t1 = lo_ext[k_sw], td_ext[k_sw + 1]
+        # progress in stride phase between liftoff and next touchdown (same measure as the reference)
+        p = np.interp(t[sw], t, path.psi)
+        p0 = _psi_at(path, t0)
+        p1 = _psi_at(path, t1)
+        u = (p - p0) / np.maximum(p1 - p0, 1e-9)
+        w = min_jerk(u)[:, None]
+        out[sw, foot] = c_ext[k_sw] * (1 - w) + c_ext[k_sw + 1] * w
+        w_ground[sw, foot] = 1.0 - min_jerk(u / SWING_RELEASE) * min_jerk((1.0 - u) / SWING_LANDING)
+    return out, w_ground
+
+
+def _psi_at(path: MachinePath, times: np.ndarray) -> np.ndarray:
+    """Stride phase at arbitrary times, extrapolated linearly beyond the path."""
+    t, psi = path.times, path.psi
+    rate = (psi[-1] - psi[0]) / max(t[-1] - t[0], 1e-9)
+    out = np.interp(times, t, psi)
+    out = np.where(times < t[0], psi[0] + (times - t[0]) * rate, out)
+    return np.where(times > t[-1], psi[-1] + (times - t[-1]) * rate, out)
+
+
+def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float) -> np.ndarray:
+    """(T, 2, 3) foot marker weights: high for markers that bear load, low for the rest.
+
+    A foot on the ground is weighted by STANCE_MARKER_WEIGHT, ramped (min-jerk over WEIGHT_RAMP_S) around
+    each contact; within it each marker's weight falls smoothly from full at ≤ 0.02 L above the ground to
+    the swing weight at ≥ 0.05 L. So the loaded point is held still while the rest of the foot may pivot
+    about it (push-off on the toes when a faster or longer-legged run needs more reach than the
+    reference's foot pose gives). markers: (T, 2, 3, 3) targets [m]; leg_length [m].
+    """
+    t = path.times
+    ramp = np.zeros((len(t), 2))
+    landing = np.zeros((len(t), 2))  # the ramp on the touchdown side of each contact only
+    for foot in range(2):
+        cols = np.flatnonzero(path.foot_of_step == foot)
+        if cols.size == 0:
+            continue
+        a = path.contact_on[cols]
+        b = path.contact_off[cols]
+        # the contacts that can touch a frame: the last one starting before t + ramp, and the one before it
+        k = np.searchsorted(a - WEIGHT_RAMP_S, t, side="right") - 1
+        for kk in (k, k - 1):
+            ok = kk >= 0
+            kc = np.clip(kk, 0, cols.size - 1)
+            u = np.clip(np.minimum(t - (a[kc] - WEIGHT_RAMP_S), (b[kc] + WEIGHT_RAMP_S) - t) / WEIGHT_RAMP_S, 0.0, 1.0)
+            ramp[:, foot] = np.maximum(ramp[:, foot], np.where(ok, u, 0.0))
+            landing[:, foot] = np.maximum(landing[:, foot], np.where(ok & (t <= a[kc] + WEIGHT_RAMP_S), u, 0.0))
+    height = markers[..., UP_AXIS]  # ground at 0
+    lo, hi = 0.02 * leg_length, 0.05 * leg_length
+    loaded = min_jerk((hi - height) / (hi - lo))  # 1 at or below lo, 0 at or above hi
+    # Around a touchdown every marker of the foot keeps at least LANDING_WEIGHT of the stance weight: a
+    # landing foot follows its targets down to the contact point instead of being left by the posture pull
+    # a centimetre lower and still sweeping forward (a scuff the report sees at touchdown). Not at lift-off:
+    # there the leg is nearly straight and a pulled toe can flip the knee.
+    loaded = np.maximum(loaded, LANDING_WEIGHT * min_jerk(landing)[..., None])
+    return SWING_MARKER_WEIGHT + (STANCE_MARKER_WEIGHT - SWING_MARKER_WEIGHT) * min_jerk(ramp)[..., None] * loaded
+
+
+def stance_only(targets: Targets) -> np.ndarray:
+    """Foot marker targets that must be met (loaded markers of feet on the ground), NaN elsewhere."""
+    out = targets.markers.copy()
+    w = targets.marker_weight
+    out[w < 0.5 * w.max()] = np.nan
+    return out

@@ -210,7 +210,9 @@ def matrix_speeds(clips: Clips, only) -> list[Row]:
         if isinstance(prep, Exception):
             rows.append(Row("speeds", name, "-", "own", "error", ["prepare"], str(prep)))
             continue
-        rng = pipeline.reachable_speed_range(prep)
+        from froude.speed_range import reachable_speed_range
+
+        rng = reachable_speed_range(prep)
         for s in SPEEDS_134:
             row = run_one(clips, "speeds", name, "scale", None, s, None)
             inside = not rng.empty and rng.lo - 1e-9 <= s <= rng.hi + 1e-9

@@ -15,7 +15,7 @@ The matrices (the clips come from ../shared/data, found as tests/conftest.py fin
   run, all at 120 Hz; every physics bar, the stricter skate (``foot_skate_floor_mm`` <= 5 mm) among them.
 - ``speeds``: issue 13 acceptance 4: --speed 0.5 / 0.7 / 1.5 / 1.8 / 2.0 on every shared run: the output
   must meet every bar (joint jump <= 1.5 x the reference's) or be refused in one line with the reachable
-  range (``pipeline.reachable_speed_range``), which is what ``froude scale`` does.
+  range (``speed_range.reachable_speed_range``), which is what ``froude scale`` does.
 
 Each output goes through the same API the CLI calls (``pipeline.prepare`` once per clip, then ``scale`` /
 ``accelerate`` with the CLI's defaults: 4 strides, 8 steps). Prints one row per output that misses a bar

@@ -277,8 +277,17 @@ def extract_cycle(
     stance_mask = _contact_mask(np.arange(K) / K, contact_phase)
     # band 0.03 L: wider than the 0.02 L within which the physics report watches a marker slide, so a tip
     # that lifts to just under 0.02 L and comes down again is held all the while
-    marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=contact_tol, band=SLIDE_BAND_L * body.leg_length)
-    marker_from_com = _close_loop_linear(average(from_com))
+    # a marker is held if it comes as near the floor as the physics report's skate measure watches (its
+    # SKATE_REACH_L, 0.04 L: a folded rig's ball joint rests 0.033 L up, above the 0.03 L contact test)
+    from ..metrics import SKATE_REACH_L
+
+    raw_rel = marker_rel
+    marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=SKATE_REACH_L * body.leg_length,
+                                 band=SLIDE_BAND_L * body.leg_length)
+    # the body-relative foot path carries the same de-skating correction (it fades over the swing), so
+    # that IK targets blending from the ground path to it after lift-off do not jump by the correction
+    # (a 10 mm jump of a tip still near the floor, 02_03 at 50 Hz)
+    marker_from_com = _close_loop_linear(average(from_com)) + (marker_rel - raw_rel)
 
     from ..metrics import max_joint_jump_deg
 
@@ -423,6 +432,7 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
             gap = np.flatnonzero(np.diff(idx) > 1)
             if gap.size:
                 idx = np.concatenate([idx[gap[0] + 1 :], idx[: gap[0] + 1]])
+        idx = _with_approach(rel[:, foot], idx, stance[:, foot], contact_tol, band)
         h = rel[idx, foot][:, :, [0, 2]]  # (n, 3 markers, 2) horizontal offsets
         height = rel[idx, foot, :, 1]  # (n, 3) above the ground
         h_min = height.min(axis=0)
@@ -473,7 +483,9 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
         out[idx, foot, :, 1] += lift
         out[idx, foot, :, 2] += own[..., 1]
         rest = own[-1] - d  # what remains of the markers' own corrections at the end of the stance
-        swing = np.flatnonzero(~stance[:, foot])
+        covered = np.zeros(K, bool)
+        covered[idx] = True
+        swing = np.flatnonzero(~covered)
         if swing.size:
             start = (idx[-1] + 1) % K
             order = (np.arange(swing.size) + np.searchsorted(swing, start)) % swing.size
@@ -485,6 +497,40 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
             out[sw, foot, :, 2] += corr[..., 1]
     out[..., 1] = np.maximum(out[..., 1], 0.0)
     return _keep_feet_rigid(out, rel, firm, in_place)
+
+
+#: At most this fraction of the cycle is added before and after a stance by _with_approach.
+APPROACH_MAX = 0.08
+
+
+def _with_approach(rel_foot: np.ndarray, idx: np.ndarray, stance_foot: np.ndarray, contact_tol: float,
+                   band: float) -> np.ndarray:
+    """A stance's samples idx (ordered in time, indices into K) with the samples just before and after it in
+    which a marker that reaches the floor is already (still) within ``band`` of its lowest point.
+
+    The reference's foot comes down still moving forward and leaves still moving: mocap feet land a few
+    millimetres before the contact test calls them down. Holding them from the moment they are that low
+    (as the physics report watches them) removes the landing sweep and the lift-off scuff as well.
+    rel_foot: (K, 3, 3) marker offsets (heights above the ground); stance_foot: (K,) bool.
+    """
+    K = rel_foot.shape[0]
+    height = rel_foot[:, :, 1]  # (K, 3)
+    h_min = height[idx].min(axis=0)
+    reaches = h_min <= contact_tol
+    if not reaches.any():
+        return idx
+    low = np.any((height <= h_min + band) & reaches, axis=1)  # (K,)
+    most = int(APPROACH_MAX * K)
+    before, after = [], []
+    k = (idx[0] - 1) % K
+    while len(before) < most and low[k] and not stance_foot[k]:
+        before.append(k)
+        k = (k - 1) % K
+    k = (idx[-1] + 1) % K
+    while len(after) < most and low[k] and not stance_foot[k] and k not in before:
+        after.append(k)
+        k = (k + 1) % K
+    return np.concatenate([np.array(before[::-1], int), idx, np.array(after, int)])
 
 
 #: Bones of the foot between its markers (ankle-ball: the foot; ball-tip: the toes): their lengths are fixed.

@@ -6,7 +6,7 @@ Each worker is one process with one thread (OMP/OPENBLAS/MKL_NUM_THREADS=1 in it
 below). The clusters are started and warmed up (imports done on every worker) before the clock starts; the
 time is from the first submission to the last result, i.e. what ``froude batch`` reports as tasks/s, and
 includes each clip's prepare task and the writing of every output. Per-task work is a 12-stride output
-(≈0.3 s CPU) so Dask's per-task overhead (a few ms) does not dominate. Bar (DESIGN.md): 2 workers ≥ 1.8 × 1.
+(≈0.3 s CPU) so Dask's per-task overhead (a few ms) does not dominate. Bar (docs/architecture.md): 2 workers ≥ 1.8 × 1.
 The machine is shared: the load average is printed beside the figures.
 """
 from __future__ import annotations
@@ -172,7 +172,8 @@ def main(argv=None) -> int:
         share = m["task_cpu"] / (n * t)
         print(f"  {n} worker(s): {ran} tasks in {t:6.2f} s = {rates[n]:5.2f} tasks/s   "
               f"(task CPU {m['task_cpu']:.1f} s = {share:.0%} of {n} core(s); driver CPU {m['driver_cpu']:.1f} s; "
-              f"other programs {m['others']:.0%} of the machine; load avg before {load0:.2f}; worker OMP/OPENBLAS/MKL threads {env['OMP_NUM_THREADS']}/"
+              f"other programs {m['others']:.0%} of the machine; load avg before {load0:.2f}; "
+              f"worker OMP/OPENBLAS/MKL threads {env['OMP_NUM_THREADS']}/"
               f"{env['OPENBLAS_NUM_THREADS']}/{env['MKL_NUM_THREADS']}, BLAS pools {env['blas_threads']})")
         sys.stdout.flush()
     if 1 in rates and 2 in rates:

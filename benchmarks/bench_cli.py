@@ -4,7 +4,7 @@
     python benchmarks/bench_cli.py --runs 15
 
 Each figure is wall time of a fresh process (interpreter start, imports, work, exit), as a user waits
-for it: best and median of N runs. Bars (DESIGN.md): ``froude --help`` <= 2 x ``python -c "import numpy"``;
+for it: best and median of N runs. Bars (docs/architecture.md): ``froude --help`` <= 2 x ``python -c "import numpy"``;
 ``froude scale`` of 4 strides (CMU 09_01, the embedded sample) <= 0.8 s. Run it on an idle machine: on a
 loaded one every figure grows, the start-up ones most. Also prints the import time of the heaviest
 modules a ``froude scale`` loads (``python -X importtime``).
@@ -78,7 +78,8 @@ def main() -> None:
         scale = show("froude scale CLIP --strides 4 -o OUT", wall([*FROUDE, "scale", clip, "--strides", "4", "-o", out,
                                                                  "-q"], args.runs))
         heaviest_imports([*FROUDE, "scale", clip, "--strides", "4", "-o", out, "-q"])
-    print(f"\nfroude --help / import numpy = {helps / numpy:.2f} (bar <= 2): {'met' if helps <= 2 * numpy else 'NOT met'}")
+    verdict = "met" if helps <= 2 * numpy else "NOT met"
+    print(f"\nfroude --help / import numpy = {helps / numpy:.2f} (bar <= 2): {verdict}")
     print(f"option error {bad * 1000:.0f} ms, guard refusal {guard * 1000:.0f} ms (bar: well under 500 ms): "
           f"{'met' if max(bad, guard) < 0.5 else 'NOT met'}")
     print(f"froude scale 4 strides {scale:.3f} s (bar <= 0.8 s): {'met' if scale <= 0.8 else 'NOT met'}")

@@ -21,8 +21,6 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-import numpy as np  # noqa: E402
-
 from froude import BodyModel, load_bvh  # noqa: E402
 from froude.core.kinematics import com_jacobian, forward_kinematics, point_jacobian, points_world  # noqa: E402
 from froude.samples import sample_path  # noqa: E402

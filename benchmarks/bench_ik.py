@@ -29,9 +29,9 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 import froude  # noqa: E402
-from froude.ik import solver as ik
-from froude.core import quat  # noqa: E402
 from froude.constants import UP_AXIS  # noqa: E402
+from froude.core import quat  # noqa: E402
+from froude.ik import solver as ik
 
 
 def benchmark_problem(n_frames: int = 1500):
@@ -167,7 +167,8 @@ def main(argv=None) -> int:
     motion, body, com_t, mk_t, seams = benchmark_problem(args.frames)
     F = motion.n_frames
     tasks = [ik.ComTask(body, com_t), ik.MarkerTask.feet(body, mk_t)]
-    print(f"problem: 09_01 tiled to {F} frames, {motion.skeleton.n_joints} joints; COM +2 cm sin(2πt) up, feet +1 cm sideways")
+    print(f"problem: 09_01 tiled to {F} frames, {motion.skeleton.n_joints} joints; COM +2 cm sin(2πt) up, "
+          "feet +1 cm sideways")
 
     have_peer = not args.no_peer
     if have_peer:
@@ -185,22 +186,26 @@ def main(argv=None) -> int:
     for rep in range(args.repeats):
         t0, c0 = time.perf_counter(), time.process_time()
         res = ik.solve_ik(motion, tasks, body=body)
-        best["froude"] = [min(best["froude"][0], time.process_time() - c0), min(best["froude"][1], time.perf_counter() - t0)]
+        best["froude"] = [min(best["froude"][0], time.process_time() - c0),
+                          min(best["froude"][1], time.perf_counter() - t0)]
         if have_peer and rep < args.peer_repeats:
             active = list(res.active)
             t0, c0 = time.perf_counter(), time.process_time()
             peer = pinocchio_solve(body, motion[:n], com_t[:n], mk_t[:n], active, w_pos, w_rot,
                                    ik.DEFAULT_TOL, ik.DEFAULT_STEP_TOL, ik.DEFAULT_MAX_ITERS, ik.DEFAULT_MAX_STEP)
-            best["peer"] = [min(best["peer"][0], time.process_time() - c0), min(best["peer"][1], time.perf_counter() - t0)]
+            best["peer"] = [min(best["peer"][0], time.process_time() - c0),
+                            min(best["peer"][1], time.perf_counter() - t0)]
     load1 = os.getloadavg()[0]
     active = list(res.active)
     fr_cpu, fr_wall = F / best["froude"][0], F / best["froude"][1]
     ref_step = max_step_excluding(motion, active, seams)
     out_step = max_step_excluding(res.motion, active, seams)
-    print(f"machine  : load average {load0:.1f} before, {load1:.1f} after (2 cores); best of {args.repeats} froude runs")
+    print(f"machine  : load average {load0:.1f} before, {load1:.1f} after (2 cores); best of {args.repeats} "
+          "froude runs")
     print(f"froude   : {fr_cpu:9.0f} frames/s (CPU)  {fr_wall:9.0f} frames/s (wall)  "
           f"iterations mean {res.iterations.mean():.2f} max {res.iterations.max()}  DOF {3 + 3 * len(active)}")
-    print(f"           COM error max {res.com_error.max() * 1e3:.3f} mm (RMS {np.sqrt(np.mean(res.com_error ** 2)) * 1e3:.3f})  "
+    print(f"           COM error max {res.com_error.max() * 1e3:.3f} mm "
+          f"(RMS {np.sqrt(np.mean(res.com_error ** 2)) * 1e3:.3f})  "
           f"foot-marker error max {res.marker_error.max() * 1e3:.3f} mm  failed frames {int(res.failed.sum())}")
     print(f"           largest frame-to-frame joint change {out_step:.4f} rad vs reference {ref_step:.4f} rad "
           f"(ratio {out_step / ref_step:.3f}, seams excluded); largest posture deviation "
@@ -212,7 +217,8 @@ def main(argv=None) -> int:
     print(f"pinocchio: {pf_cpu:9.0f} frames/s (CPU)  {pf_wall:9.0f} frames/s (wall)  "
           f"iterations mean {p_iters.mean():.2f} max {p_iters.max()}  ({n} frames, per-frame loop, best of "
           f"{min(args.repeats, args.peer_repeats)})")
-    print(f"           COM error max {p_err[:, 0].max() * 1e3:.3f} mm  foot-marker error max {p_err[:, 1:].max() * 1e3:.3f} mm")
+    print(f"           COM error max {p_err[:, 0].max() * 1e3:.3f} mm  "
+          f"foot-marker error max {p_err[:, 1:].max() * 1e3:.3f} mm")
     diff = quat.angle_between(peer_motion.rotations[:, active], res.motion.rotations[:n, active]).max()
     print(f"           largest joint-angle difference froude vs pinocchio {diff:.4f} rad")
     print(f"ratio    : froude / pinocchio = {fr_cpu / pf_cpu:.1f}x (CPU)  {fr_wall / pf_wall:.1f}x (wall)")

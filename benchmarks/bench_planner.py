@@ -51,15 +51,16 @@ def main():
             table, loaded = load_or_build_table(cyc.control, grid, cache_dir=d)
             build = time.perf_counter() - t
             assert not loaded
-            load, _ = best_of(lambda: load_or_build_table(cyc.control, grid, cache_dir=d), 5)
+            load, _ = best_of(lambda grid=grid: load_or_build_table(cyc.control, grid, cache_dir=d), 5)
             print(f"table {n}^3: build (incl. save) {build:6.2f} s, cached load {load * 1e3:6.1f} ms, "
                   f"valid {table.valid.mean():.0%}")
         grid = grid_around(cyc.U, cyc.H, cyc.theta0, n=64)
         table, _ = load_or_build_table(cyc.control, grid, cache_dir=d)
         for factor in (0.5, 1.3):
-            tt, plan = best_of(lambda: plan_speed_change(cyc, factor * cyc.U, n_steps=8, table=table), 3)
-            tn, _ = best_of(lambda: plan_speed_change(cyc, factor * cyc.U, n_steps=8), 3)
-            tb, _ = best_of(lambda: plan_speed_change(cyc, factor * cyc.U, n_steps=8, energy="b"), 3)
+            goal = factor * cyc.U
+            tt, plan = best_of(lambda goal=goal: plan_speed_change(cyc, goal, n_steps=8, table=table), 3)
+            tn, _ = best_of(lambda goal=goal: plan_speed_change(cyc, goal, n_steps=8), 3)
+            tb, _ = best_of(lambda goal=goal: plan_speed_change(cyc, goal, n_steps=8, energy="b"), 3)
             print(f"plan {factor}x over 8 steps: {tt * 1e3:7.1f} ms with cached table, {tn * 1e3:7.1f} ms "
                   f"without, {tb * 1e3:7.1f} ms energy='b' (no theta0-only attempt); mode {plan.mode}, "
                   f"final U/goal = {plan.U[-1] / (factor * cyc.U):.9f}")

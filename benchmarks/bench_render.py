@@ -1,13 +1,17 @@
 """Time a 4 s MP4 render at 30 fps (09_01 slowed to 4 s) and a 2-panel GIF; prints seconds."""
 import os
+
 for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[v] = "1"
-import sys, time
+import sys
+import time
+
 import numpy as np
+
+import froude
 from froude import load_bvh
 from froude.viz.render import render_video
 
-import froude
 m = load_bvh(froude.sample_path())
 slow = m.time_warp(np.linspace(0, m.duration, 481), frame_time=1 / 120)  # 4.0 s
 jump = load_bvh(os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "mocap", "02_04.bvh"))

@@ -1,7 +1,7 @@
 """Benchmark: 64³ transition table build / cached load, and step() throughput, on one core.
 
 Run:  python benchmarks/bench_table.py
-Targets (DESIGN.md): build ≤ 5 s, cached load ≤ 0.2 s.
+Targets (docs/architecture.md): build ≤ 5 s, cached load ≤ 0.2 s.
 """
 import os
 
@@ -52,7 +52,7 @@ def main():
         U = lc.U * rng.uniform(0.9, 1.1, m)
         H = lc.H + rng.uniform(-0.01, 0.01, m)
         th = lc.theta0 + rng.uniform(-0.03, 0.03, m)
-        tb = best_of(lambda: step(U, H, th, c), 3 if m <= 10000 else 1)
+        tb = best_of(lambda U=U, H=H, th=th: step(U, H, th, c), 3 if m <= 10000 else 1)
         print(f"step batch {m:>6}:  {tb * 1e3:8.2f} ms  ({m / tb:,.0f} steps/s)")
     t = time.perf_counter()
     lc2 = find_limit_cycle(1.15, 1.0, 0.40, Control(K=15.0, a=0.02, b=0.01, c=-0.02, T_c=0.6))

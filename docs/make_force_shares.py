@@ -10,8 +10,9 @@ from froude.machine.fit import fit_machine_detailed
 
 CLIPS = ["09_01", "09_02", "09_03", "09_04", "09_05", "09_06", "09_07", "09_08", "02_03"]
 mocap = Path(sys.argv[1] if len(sys.argv) > 1 else "../shared/data/mocap")
-print("| clip | periodicity | COM RMS [cm] | stance [s] | flight [s] | speed [m/s] | K | peak Fz [BW] | COM drop [cm] "
-      "| flight residual [BW RMS] | along-leg share [%] | vertical share [%] | along-leg share² [%] | vertical share² [%] |")
+print("| clip | periodicity | COM RMS [cm] | stance [s] | flight [s] | speed [m/s] | K | peak Fz [BW] "
+      "| COM drop [cm] | flight residual [BW RMS] | along-leg share [%] | vertical share [%] "
+      "| along-leg share² [%] | vertical share² [%] |")
 print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 for c in CLIPS:
     res = fit_machine_detailed(load_bvh(mocap / f"{c}.bvh"))

@@ -41,7 +41,8 @@ def main(argv=None) -> int:
         r.save(out / f"h{h:.1f}.glb")
         r.save_data(out / f"h{h:.1f}.csv")
         print(f"{h:>6.1f} m {r.report.mean_speed_m_s:>6.2f} m/s {r.report.step_frequency_hz:>7.2f} Hz "
-              f"{100 * (r.com[:, 1].max() - r.com[:, 1].min()):>7.1f} cm {r.ground_force[:, 1].max() / weight_n:>7.2f} BW")
+              f"{100 * (r.com[:, 1].max() - r.com[:, 1].min()):>7.1f} cm "
+              f"{r.ground_force[:, 1].max() / weight_n:>7.2f} BW")
     ax_com.set_ylabel("COM height [m]")
     ax_f.set_ylabel("vertical ground force [BW]")
     ax_f.set_xlabel("time [s]")

@@ -9,7 +9,6 @@ import sys
 import bpy
 
 
-
 def _fcurves(action):
     """The action's F-curves (Blender 4.4+ keeps them in layered channelbags)."""
     if hasattr(action, "fcurves") and len(action.fcurves):

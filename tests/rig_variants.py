@@ -187,9 +187,15 @@ def six_channels(b: OracleBvh) -> OracleBvh:
     return replace(out, values=_compose(out, trans, rots))
 
 
-def every(b: OracleBvh, n: int) -> OracleBvh:
-    """Every n-th frame: the frame rate divided by n."""
-    return replace(b, values=b.values[::n], frame_time=b.frame_time * n)
+def every(b: OracleBvh, n: int, pose_frames: int = 0) -> OracleBvh:
+    """Every n-th frame: the frame rate divided by n.
+
+    pose_frames: leading rows that are not motion (the T-pose frame the CMU conversions put first): kept
+    as they are, and the motion thinned from its own first frame, as a converter writing the take at the
+    lower rate would; so the thinned take starts at the same instant as the original's motion.
+    """
+    return replace(b, values=np.concatenate([b.values[:pose_frames], b.values[pose_frames::n]]),
+                   frame_time=b.frame_time * n)
 
 
 # ---- writing ---------------------------------------------------------------------------------------------

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from froude import BodyModel, FroudeError, Skeleton, detect_gait, find_roles, load_bvh, load_joint_map
+from froude.body.model import DE_LEVA, JointMapError
 from froude.core import quat
-from froude.body.model import DE_LEVA, REQUIRED_ROLES, JointMapError
 from froude.core.motion import Motion
 
 from conftest import FIXTURES, RUNNING, clip, clip_params, oracle_fk, read_bvh_oracle

@@ -241,6 +241,21 @@ def test_keep_all_frames_keeps_the_tpose(run_cli):
     assert d["frames"] == 148 and len(d["cleaning"]) == 1
 
 
+@pytest.mark.parametrize("verb", [["scale", "--character", "child"], ["accelerate", "--to-speed", "0.5x"]])
+def test_scale_and_accelerate_honour_keep_all_frames(run_cli, tmp_path, verb):
+    """--keep-all-frames reaches the fit: the T-pose row stays in the reference the output is measured
+    against (its largest joint jump is the T-pose's 108 deg instead of the run's 26.5 deg)."""
+    import json
+
+    jumps = []
+    for extra in ([], ["--keep-all-frames"]):
+        out = tmp_path / f"{verb[0]}{len(extra)}.bvh"
+        code, _, err = run_cli(verb[0], clip("09_01"), *verb[1:], "-o", out, "-q", "--keep", *extra)
+        assert code == 0, err
+        jumps.append(json.loads(out.with_name(out.stem + ".report.json").read_text())["reference_max_joint_jump_deg"])
+    assert jumps[0] < 30 < 100 < jumps[1], jumps
+
+
 def test_leading_invalid_rows_before_the_tpose_are_dropped(tmp_path):
     header, ft, rows = _clip_parts()
     zero = " ".join(["0"] * 96)

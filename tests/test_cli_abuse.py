@@ -19,8 +19,9 @@ from pathlib import Path
 
 import pytest
 
-from conftest import clip
 from froude.samples import sample_path
+
+from conftest import clip
 
 FROUDE = [sys.executable, "-m", "froude"]
 

@@ -144,7 +144,8 @@ def _check(run_cli, args, folder: Path) -> int:
     assert not leftovers, (args, leftovers)
     if code == 0:
         texts = [out] + [p.read_text(errors="replace") for p in folder.rglob("*")
-                         if p.is_file() and p.suffix in (".bvh", ".json", ".md", ".csv", ".gltf") and p.name != "in.bvh"]
+                         if p.is_file() and p.suffix in (".bvh", ".json", ".md", ".csv", ".gltf")
+                         and p.name != "in.bvh"]
         for t in texts:
             m = NON_FINITE.search(t)
             assert m is None, (args, t[max(0, m.start() - 80):m.end() + 80])

@@ -18,9 +18,10 @@ import numpy as np
 import pytest
 
 import froude
-from conftest import clip
-from froude.io.framedata import peak_vertical_force_bw, read_frame_data
 from froude.core.kinematics import fk
+from froude.io.framedata import peak_vertical_force_bw, read_frame_data
+
+from conftest import clip
 
 pytest.importorskip("pygltflib")
 
@@ -67,7 +68,8 @@ def outputs():
 def test_glb_outputs_pass_the_khronos_validator(outputs, tmp_path):
     files = []
     for name, res in outputs.items():
-        files += [res.save(tmp_path / f"{name}.glb")[0], froude.save(res.motion, tmp_path / f"{name}_bones.gltf", mesh=False)]
+        files += [res.save(tmp_path / f"{name}.glb")[0],
+                  froude.save(res.motion, tmp_path / f"{name}_bones.gltf", mesh=False)]
     for name in ("09_01", "dataset-1_run_tired_001"):  # input clips converted as they are (6-channel Bandai joints)
         files.append(froude.save(froude.load(clip(name)), tmp_path / f"{name}.glb"))
     verdicts = validate(*files)
@@ -170,9 +172,11 @@ def test_frame_data_of_an_input_clip_matches_the_fit(tmp_path):
     fitted = froude.fit(clip("09_03"))
     d = read_frame_data(fitted.save_data(tmp_path / "in.npz"))
     fit = fitted.prepared.fit
-    np.testing.assert_allclose(np.stack([d[f"com_force_{a}_N"] for a in "xyz"], axis=1), fit.f_world, rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(np.stack([d[f"com_force_{a}_N"] for a in "xyz"], axis=1), fit.f_world, rtol=1e-9,
+                               atol=1e-6)
     np.testing.assert_allclose(fitted.ground_force, fit.f_world, rtol=1e-9, atol=1e-6)
-    assert peak_vertical_force_bw(d, fitted.body.total_mass) == pytest.approx(fitted.report.peak_vertical_force_bw, rel=1e-9)
+    assert peak_vertical_force_bw(d, fitted.body.total_mass) == pytest.approx(fitted.report.peak_vertical_force_bw,
+                                                                               rel=1e-9)
     assert "machine_force_x_N" not in d
 
 
@@ -238,15 +242,16 @@ def test_cli_glb_and_data_outputs(tmp_path, run_cli):
     mcom = np.stack([d[f"machine_com_{a}_m"] for a in "xyz"], axis=1)
     assert 1000 * np.linalg.norm(com - mcom, axis=1).max() == pytest.approx(rep["com_tracking_max_mm"], abs=0.01)
     assert peak_vertical_force_bw(d, rep["mass_kg"]) == pytest.approx(rep["peak_vertical_force_bw"], rel=1e-6)
-    code, _, err = run_cli("accelerate", clip("09_01"), "--to-speed", "1.2x", "--steps", 4, "-o", tmp_path / "fast.gltf",
-                           "--data", tmp_path / "fast.parquet", "-q")
+    code, _, err = run_cli("accelerate", clip("09_01"), "--to-speed", "1.2x", "--steps", 4, "-o",
+                           tmp_path / "fast.gltf", "--data", tmp_path / "fast.parquet", "-q")
     assert code == 0, err
     assert {p.name for p in tmp_path.iterdir()} == {"child.glb", "child.report.json", "child.csv", "fast.gltf",
                                                      "fast.report.json", "fast.parquet"}
     assert all(v["errors"] == 0 for v in validate(out, tmp_path / "fast.gltf"))
     # a bad --data suffix is refused before any work, nothing written
     code, _, err = run_cli("scale", clip("09_01"), "-o", tmp_path / "x.glb", "--data", tmp_path / "x.xlsx")
-    assert code == 2 and "--data output must be a .csv or .parquet or .npz" in err and len(err.strip().splitlines()) == 1
+    assert code == 2 and "--data output must be a .csv or .parquet or .npz" in err
+    assert len(err.strip().splitlines()) == 1
     assert not (tmp_path / "x.glb").exists()
 
 

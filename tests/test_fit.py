@@ -3,12 +3,10 @@ import json
 import math
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from froude.body.model import BodyModel
 from froude.constants import GRAVITY
 from froude.errors import NotARunningMotion
 from froude.io.bvh import load_bvh
@@ -68,7 +66,8 @@ def test_physiological_sanity(fits, name):
     assert 0.5 < sh["vertical"] < 1 and 0.5 < sh["leg"] < 1
 
 
-@pytest.mark.parametrize("name", clip_params(["02_04"]))  # walks (02_01, 07_01) get the walking machine: test_walking.py
+# walks (02_01, 07_01) get the walking machine: test_walking.py
+@pytest.mark.parametrize("name", clip_params(["02_04"]))
 def test_non_running_refused(name, tmp_path):
     out = tmp_path / "m.json"
     p = subprocess.run([sys.executable, "-m", "froude", "fit", str(clip(name)), "-o", str(out)],

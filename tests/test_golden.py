@@ -33,7 +33,8 @@ def test_outputs_match_golden(clip):
     worst = []
     for key in keys:
         want, got = _saved(key), now[key]
-        assert int(got["n_frames"]) == int(want["n_frames"]), f"{key}: {got['n_frames']} frames, golden {want['n_frames']}"
+        assert int(got["n_frames"]) == int(want["n_frames"]), (
+            f"{key}: {got['n_frames']} frames, golden {want['n_frames']}")
         d = max(np.abs(got["root"] - want["root"]).max(), np.abs(got["sparse"] - want["sparse"]).max())
         worst.append((d, key))
     d, key = max(worst)

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 import froude
-from froude.ik import solver as ik
-from froude.core import quat
 from froude.constants import UP_AXIS
-from froude.errors import IkError
+from froude.core import quat
 from froude.core.kinematics import apply_dof_increment
+from froude.errors import IkError
+from froude.ik import solver as ik
 
 from conftest import clip as real_clip
 
@@ -108,8 +108,9 @@ def test_task_jacobians_match_finite_differences(clip, body):
             h = 1e-6
             dq = np.zeros((m.n_frames, n))
             dq[:, col] = h
-            plus = m.with_(**dict(zip(("root_positions", "rotations"), apply_dof_increment(m.root_positions, m.rotations, dq))))
-            minus = m.with_(**dict(zip(("root_positions", "rotations"), apply_dof_increment(m.root_positions, m.rotations, -dq))))
+            names = ("root_positions", "rotations")
+            plus = m.with_(**dict(zip(names, apply_dof_increment(m.root_positions, m.rotations, dq))))
+            minus = m.with_(**dict(zip(names, apply_dof_increment(m.root_positions, m.rotations, -dq))))
             fd = -(t.error(plus) - t.error(minus)).reshape(m.n_frames, -1) / (2 * h)
             assert np.abs(fd - Jt[:, :, col]).max() < 1e-6
 

@@ -6,8 +6,7 @@ import pytest
 
 from froude.constants import GRAVITY
 from froude.errors import FitError
-from froude.machine.cycle import (PARAMETERS, find_limit_cycle, step_jacobian,
-                                  step_map_eigenvalues)
+from froude.machine.cycle import PARAMETERS, find_limit_cycle, step_jacobian, step_map_eigenvalues
 from froude.machine.dynamics import Control, step
 
 SEY_K = 20000.0 / (80.0 * GRAVITY)

@@ -9,8 +9,7 @@ from scipy.optimize import brentq
 from froude.constants import GRAVITY
 from froude.errors import FitError, PlanError
 from froude.machine.control_fit import control_from_si, fit_leg_control
-from froude.machine.dynamics import (APEX_BELOW_TOUCHDOWN, BAD_INPUT, OK, Control, energy,
-                                     simulate, step, time_scale)
+from froude.machine.dynamics import APEX_BELOW_TOUCHDOWN, BAD_INPUT, OK, Control, energy, simulate, step, time_scale
 
 # Seyfarth et al. 2002 standard setting: m = 80 kg, l0 = 1 m, k = 20 kN/m, 22° from vertical, 5 m/s.
 SEY_K = 20000.0 * 1.0 / (80.0 * GRAVITY)

@@ -8,8 +8,15 @@ from scipy.integrate import solve_ivp
 
 from froude.errors import PlanError
 from froude.machine.dynamics import Control, step
-from froude.machine.table import (TABLE_VERSION, TableGrid, TransitionTable, build_table,
-                                  grid_around, load_or_build_table, table_key)
+from froude.machine.table import (
+    TABLE_VERSION,
+    TableGrid,
+    TransitionTable,
+    build_table,
+    grid_around,
+    load_or_build_table,
+    table_key,
+)
 
 CTL = Control(K=15.22, a=0.021, b=0.0157, c=-0.0142, T_c=0.6)
 CYCLE = (1.15, 1.0, 0.40)

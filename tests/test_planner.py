@@ -10,8 +10,15 @@ from froude.io.bvh import load_bvh
 from froude.machine.cycle import find_limit_cycle
 from froude.machine.dynamics import Control, step
 from froude.machine.fit import fit_machine
-from froude.machine.planner import (Comfort, SpeedPlan, one_step_range, plan_speed_change,
-                                    plan_speed_profile, speed_fraction_at, target_cycle)
+from froude.machine.planner import (
+    Comfort,
+    SpeedPlan,
+    one_step_range,
+    plan_speed_change,
+    plan_speed_profile,
+    speed_fraction_at,
+    target_cycle,
+)
 from froude.machine.table import build_table, grid_around
 
 from conftest import RUNNING, clip, clip_params
@@ -36,8 +43,9 @@ def cycles():
     return out
 
 
-def check_plan(plan: SpeedPlan, cycle, goal, comfort=Comfort()):
+def check_plan(plan: SpeedPlan, cycle, goal, comfort=None):
     """Every property the synthesis relies on; returns nothing, asserts."""
+    comfort = Comfort() if comfort is None else comfort
     assert plan.feasible, plan.notes
     arrays = [plan.theta0, plan.b, plan.U, plan.H, plan.t_apex, plan.x_apex, plan.x_contact,
               plan.t_fall, plan.t_stance, plan.t_rise, plan.t_flight, plan.step_length, plan.peak_force]

@@ -3,7 +3,6 @@ back, and the CLI's handling of bad requests (exit 2, one line, no file left beh
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,13 +10,12 @@ import pytest
 pytest.importorskip("matplotlib")
 imageio = pytest.importorskip("imageio")
 
-from froude.body.model import BodyModel  # noqa: E402
 from froude.apps.cli import main  # noqa: E402
+from froude.body.model import BodyModel  # noqa: E402
 from froude.io.bvh import load_bvh  # noqa: E402
 from froude.viz.render import LEFT, RIGHT, build_rig, render_filmstrip, render_video  # noqa: E402
 
 from conftest import clip  # noqa: E402
-
 
 
 @pytest.fixture(scope="module")

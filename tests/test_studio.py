@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from froude import pipeline
-from froude.errors import FroudeError
-from froude.core.kinematics import fk
-from froude.samples import sample_path
 from froude.apps.studio.session import Params, Session
 from froude.apps.studio.tracks import bone_segments, motion_hash, spring_legs, trail_segments
+from froude.core.kinematics import fk
+from froude.errors import FroudeError
+from froude.samples import sample_path
 
 
 @pytest.fixture(scope="module")
@@ -204,8 +204,8 @@ class _Catch:
 
 def test_bvh_export_options(session, tmp_path):
     pytest.importorskip("viser")
-    from froude.io.bvh import load_bvh
     from froude.apps.studio.app import Studio
+    from froude.io.bvh import load_bvh
 
     studio = Studio(session.prep, port=_free_port())
     try:
@@ -250,11 +250,12 @@ def test_open_clip_from_the_page_is_checked(session, monkeypatch):
     pytest.importorskip("viser")
     from types import SimpleNamespace
 
-    from conftest import clip
     from viser import UploadedFile
 
     from froude.apps.studio import app
     from froude.apps.studio.app import Studio
+
+    from conftest import clip
 
     studio = Studio(session.prep, port=_free_port())
     try:
@@ -296,8 +297,9 @@ def test_two_tabs_hold_two_sessions(session):
 
 
 def test_view_cli_refuses_bad_clips_in_one_line(tmp_path, capsys):
-    from conftest import clip
     from froude.apps.cli import main as cli_main
+
+    from conftest import clip
 
     assert cli_main(["view", str(tmp_path / "missing.bvh"), "--port", "0"]) == 2
     assert cli_main(["view", str(clip("02_01")), "--port", "0"]) == 2  # walking, not running

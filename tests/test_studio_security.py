@@ -14,10 +14,10 @@ import msgspec
 import pytest
 
 from froude import pipeline
-from froude.errors import FroudeError
-from froude.samples import sample_path
 from froude.apps.studio.guard import allowed_hosts, handshake_refusal, is_loopback
 from froude.apps.studio.session import LIMITS, Params
+from froude.errors import FroudeError
+from froude.samples import sample_path
 
 viser = pytest.importorskip("viser")
 zstandard = pytest.importorskip("zstandard")
@@ -179,7 +179,7 @@ def test_crafted_control_values_are_refused_and_the_result_stays(studio, tmp_pat
             c.send("GuiUpdateMessage", uuid=handle._impl.uuid, updates={"value": value})
             if words is None:  # an export option: checked when the download is asked for (its own test)
                 continue
-            assert _wait(lambda: words in tab.message), (value, tab.message)
+            assert _wait(lambda words=words: words in tab.message), (value, tab.message)
             assert time.perf_counter() - t0 < 5.0  # refused at once, nothing computed
             assert tab.good is good and tab.shown is good
             c.drain(0.5)
@@ -197,7 +197,6 @@ def test_crafted_control_values_are_refused_and_the_result_stays(studio, tmp_pat
 
 def test_view_refuses_out_of_range_start_values(capsys):
     from froude.apps.cli import main as cli_main
-
     from froude.apps.cli.view import VIEW_SPEED_RANGE, VIEW_STRIDES
 
     assert VIEW_SPEED_RANGE == (LIMITS["speed"].lo, LIMITS["speed"].hi)  # the CLI's ranges are the page's

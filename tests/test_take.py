@@ -45,8 +45,8 @@ def test_identity_cadence_and_speed(name):
 #: (clip, fps) -> the bar missed at identity, measured; the test expects exactly that miss (and fails when it
 #: goes away, so that it comes off the list).
 LOW_RATE_MISSES = {
-    ("02_03", 25): "foot skate (ball and tip near the floor) 8.46 mm (<= 5): a tip target that jumps at lift-off",
-    ("02_03", 50): "foot skate (ball and tip near the floor) 11.26 mm (<= 5): a tip target that jumps at lift-off",
+    ("02_03", 25): "foot skate (ball and tip near the floor) 10.09 mm (<= 5): a tip target that jumps at lift-off",
+    ("02_03", 50): "foot skate (ball and tip near the floor) 11.53 mm (<= 5): a tip target that jumps at lift-off",
 }
 
 
@@ -225,14 +225,15 @@ def _one_stride_loop(motion):
     return replace(motion, root_positions=root, rotations=rot, translations=None)
 
 
-@pytest.mark.parametrize("name", clip_params(RUNNING))
+@pytest.mark.parametrize("name", clip_params(RUNNING) + clip_params(
+    [n for n in BANDAI_RUNS if n != "dataset-1_dash_normal_001"]))  # the loop: test_bandai_one_stride_loop
 def test_in_place_speed_found_from_the_feet(name):
     motion = load_bvh(clip(name))
     prep = pipeline.prepare(_in_place(motion))
     assert any("in-place take" in n for n in prep.notes)
-    # the planted ball's centre creeps forward as the foot rolls: 0.6-4.7 % low on these clips (09_06 4.7,
-    # 02_03 3.3, the others below 2 %); acceptance 2 asks 3 %: met on 7 of 9
-    assert prep.summary.mean_speed == pytest.approx(_summary(motion).mean_speed, rel=0.05)
+    # acceptance 2 asks 3 %: the speed of each contact's planted third, a median over contacts (measured
+    # -1.1 % to +0.5 % on the 9 runs; the median over every resting frame read 0.6-4.7 % low)
+    assert prep.summary.mean_speed == pytest.approx(_summary(motion).mean_speed, rel=0.03)
 
 
 def test_in_place_run_through_fit_scale_accelerate(run_cli, tmp_path):

@@ -12,14 +12,15 @@ import math
 import numpy as np
 import pytest
 
-from conftest import BANDAI_WALKS, WALKING, clip, clip_params
 from froude.errors import FitError
 from froude.io.bvh import load_bvh
 from froude.io.jsonable import jsonable
 from froude.machine.dynamics import Control
 from froude.machine.walk_fit import fit_walking_detailed, force_landmarks, stance_leg_length
 from froude.machine.walk_model import WalkingMachine, load_walking_machine
-from froude.machine.walking import (NO_DOUBLE_SUPPORT, OK, REASONS, WalkState, simulate_walk, walk_step)
+from froude.machine.walking import NO_DOUBLE_SUPPORT, OK, REASONS, WalkState, simulate_walk, walk_step
+
+from conftest import BANDAI_WALKS, WALKING, clip, clip_params
 
 GEYER = Control(K=25.0, a=0.0, b=0.0, c=0.0, T_c=2.0)
 TH = math.radians(21.0)

@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import FroudeError
 from .core.motion import Motion
+from .errors import FroudeError
 
 __all__ = ["Result", "accelerate", "fit", "ground_reaction_force", "load", "save", "scale"]
 
@@ -234,7 +234,8 @@ def scale(
     "giant", "small", "troll"), a character YAML or a target BVH skeleton (None: the reference's body);
     height [m], character_mass [kg], leg/arm/head/trunk_scale (factors on the reference's bones) on top;
     speed: factor on the character's dynamically scaled speed, or froude's speed syntax as text ("0.8x",
-    "3.5m/s", as on the command line); target_speed: an absolute speed [m/s] instead; strides (two steps each) or duration [s]; fps: output frame rate [Hz] (default: the clip's);
+    "3.5m/s", as on the command line); target_speed: an absolute speed [m/s] instead; strides (two steps each) or
+    duration [s]; fps: output frame rate [Hz] (default: the clip's);
     method: "physical" or "naive" (angles copied, root × L); reference_mass: the performer's mass [kg];
     length_scale: metres per BVH file unit of the clip (default: detected).
     """

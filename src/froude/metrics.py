@@ -10,16 +10,16 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from .core import quat
+from .body.gait import Gait, detect_gait, summarize
 from .body.model import BodyModel
 from .constants import GRAVITY, UP_AXIS
-from .body.gait import Gait, detect_gait, summarize
-from .io.jsonable import dumps, jsonable
+from .core import quat
 from .core.motion import Motion
+from .io.jsonable import dumps, jsonable
 
 _HORIZONTAL = [a for a in range(3) if a != UP_AXIS]
 
-#: The project's physics bars (DESIGN.md "Quality bars").
+#: The project's physics bars (docs/architecture.md, "Quality bars").
 BARS = {
     "flight_gravity_rel_tol": 0.03,
     "com_tracking_rms_mm": 5.0,
@@ -71,8 +71,8 @@ class Report:
     flight_gravity_per_phase: list
     flight_horizontal_accel_m_s2: float
     foot_skate_mm: float
-    #: the stricter skate measure (issue 13, DESIGN.md quality bars): ball and tip, whole stance including
-    #: touchdown and lift-off, while within 2 % of L of the floor: one of the bars (check_bars).
+    #: the stricter skate measure (issue 13, docs/architecture.md quality bars): ball and tip, whole stance
+    #: including touchdown and lift-off, while within 2 % of L of the floor: one of the bars (check_bars).
     foot_skate_floor_mm: float
     penetration_mm: float
     float_mm: float
@@ -123,7 +123,8 @@ class Report:
             lim = BARS["joint_jump_ratio"] * self.reference_max_joint_jump_deg
             if not self.max_joint_jump_deg <= lim:
                 fails.append(
-                    f"joint jump {self.max_joint_jump_deg:.2f} deg (<= 1.5 x reference {self.reference_max_joint_jump_deg:.2f})"
+                    f"joint jump {self.max_joint_jump_deg:.2f} deg "
+                    f"(<= 1.5 x reference {self.reference_max_joint_jump_deg:.2f})"
                 )
         return fails
 
@@ -133,7 +134,8 @@ class Report:
 FLIGHT_MIN_FRAMES = 3
 
 
-def flight_gravity(com: np.ndarray, frame_time: float, flights, min_frames: int = FLIGHT_MIN_FRAMES) -> tuple[float, list[float], float]:
+def flight_gravity(com: np.ndarray, frame_time: float, flights,
+                   min_frames: int = FLIGHT_MIN_FRAMES) -> tuple[float, list[float], float]:
     """Gravity seen in flight: one parabola curvature shared by the COM height of every flight phase.
 
     com: (F, 3) [m]; flights: [(start, stop), ...] frame intervals. Returns g [m/s^2] (9.81 for physical
@@ -189,7 +191,7 @@ def airborne_phases(markers: np.ndarray, gait: Gait, leg_length: float) -> list[
     is 3-4 frames in the air. markers: (F, 2, 3, 3) [m]."""
     h = markers[..., UP_AXIS].min(axis=2)  # (F, 2)
     air = np.all(h > np.percentile(h, 5, axis=0) + AIRBORNE_BAND_L * leg_length, axis=1)
-    out = []
+    out: list[tuple[int, int]] = []
     for a, b in gait.flights:
         while b - a < FLIGHT_MIN_FRAMES:  # only as far as a parabola needs: contact frames bias it
             if b < len(air) and air[b] and (b - a) % 2 == 0 or not (a > 0 and air[a - 1]):
@@ -306,7 +308,7 @@ def physics_report(
     reference_max_joint_jump_deg: float | None = None,
     com_and_markers: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Report:
-    """The physics report of DESIGN.md for any motion; tracking figures when targets are given.
+    """The physics report (docs/architecture.md) for any motion; tracking figures when targets are given.
 
     ground_height: the floor's height [m] (outputs know it); None estimates it per stance.
     machine_com: (F, 3) the simple machine's COM path [m]; marker_targets: (F, 2, 3, 3) [m], NaN where
@@ -346,7 +348,8 @@ def physics_report(
         step_frequency_hz=summ.step_frequency, step_length_m=summ.step_length,
         stance_times_s=summ.stance_times.tolist(), flight_times_s=summ.flight_times.tolist(),
         com_vertical_excursion_m=summ.com_vertical_excursion, flight_gravity_m_s2=g_fl,
-        flight_gravity_per_phase=g_list, flight_horizontal_accel_m_s2=acc_h, foot_skate_mm=skate, foot_skate_floor_mm=skate_floor,
+        flight_gravity_per_phase=g_list, flight_horizontal_accel_m_s2=acc_h, foot_skate_mm=skate,
+        foot_skate_floor_mm=skate_floor,
         penetration_mm=penetration, float_mm=float_mm, peak_vertical_force_bw=peak_bw,
         leg_stiffness_n_m=k_leg, leg_stiffness_K=K, max_joint_jump_deg=max_joint_jump_deg(motion),
     )

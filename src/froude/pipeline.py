@@ -24,8 +24,8 @@ from .body.take import modelled_part, running_take, select_range
 from .core.motion import Motion
 from .errors import FroudeError, PlanError
 from .metrics import physics_report
-from .prepared import Prepared
 from .naive import naive_clip
+from .prepared import Prepared
 from .result import Result, report_path, write_result
 from .synthesis.cycle import extract_cycle, fit_events
 from .synthesis.targets import build_targets, stance_only
@@ -78,7 +78,7 @@ class ScalePlan:
     """
 
     prep: Prepared
-    path: MachinePath
+    path: MachinePath | None  # None for the naive method (no machine)
     retarget: Retarget
     speed: float
     notes: tuple
@@ -89,6 +89,7 @@ class ScalePlan:
     def finish(self, report: bool = True) -> Result:
         if self.naive is not None:
             return self.naive
+        assert self.path is not None  # a physical plan has its machine path
         return finish(self.prep, self.path, self.retarget, self.speed, list(self.notes), self.method,
                       periodic=self.periodic, report=report)
 
@@ -205,7 +206,11 @@ def accelerate(
     start_speed = m.U * v_unit  # apex speed of the cycle [m/s]
     if (to_speed is None) == (to_factor is None):
         raise FroudeError("give exactly one goal: a target speed [m/s] or a factor of the start speed")
-    target = to_speed if to_speed is not None else to_factor * start_speed
+    if to_speed is not None:
+        target = to_speed
+    else:
+        assert to_factor is not None  # exactly one goal, checked above
+        target = to_factor * start_speed
     if not (np.isfinite(target) and target > 0):
         raise FroudeError(f"target speed must be > 0 m/s, got {target:g} (to stop, end the motion instead)")
     if steps is not None and within is None and not (isinstance(steps, int) and steps >= 1):
@@ -271,9 +276,11 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
 
 
 def add_report(prep: Prepared, res: Result) -> Result:
-    """The result with its physics report (DESIGN.md) computed: tracking against the machine, the loaded
+    """The result with its physics report (docs/architecture.md) computed: tracking against the machine, the loaded
     foot targets and the time-warped reference pose. (Separate so that a viewer can show the motion first.)
     """
+    if res.path is None or res.targets is None:
+        raise FroudeError("add_report takes a physical result (a machine path and IK targets)")
     report = physics_report(
         res.motion, res.retarget.body, ground_height=0.0, machine_com=res.path.com,
         marker_targets=stance_only(res.targets), reference_pose=res.targets.initial,

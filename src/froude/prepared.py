@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -12,6 +13,10 @@ from .body.gait import Gait, GaitSummary
 from .body.model import BodyModel
 from .core.motion import Motion
 from .synthesis.cycle import ReferenceCycle
+
+if TYPE_CHECKING:
+    from .machine.fit import FitResult
+    from .machine.model import SimpleMachine
 
 
 @dataclass(eq=False)
@@ -39,10 +44,10 @@ class Prepared:
     markers: np.ndarray
     gait: Gait
     summary: GaitSummary
-    machine: object  # froude.machine.model.SimpleMachine
+    machine: SimpleMachine
     cycle: ReferenceCycle
     source: str = ""
-    fit: object = None  # froude.machine.fit.FitResult: everything the fit measured (plots, tables)
+    fit: FitResult | None = None  # everything the fit measured (plots, tables)
     #: What the machine stands for ("0.00-2.40 s of the take: 3.150 m/s, 2.930 steps/s") and notes about
     #: the take (its speed changes: which part is modelled, how to choose another).
     modelled: str = ""

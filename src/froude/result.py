@@ -11,6 +11,7 @@ import numpy as np
 from .body.characters import Retarget
 from .constants import UP_AXIS
 from .core.motion import Motion
+from .errors import FroudeError
 from .metrics import Report, write_report
 from .synthesis.targets import Targets
 from .synthesis.timewarp import MachinePath
@@ -21,7 +22,7 @@ class Result:
     """An output motion with its machine path, targets and physics report."""
 
     motion: Motion
-    report: Report
+    report: Report | None  # None until computed (``pipeline.add_report``; ``report=False`` defers it)
     path: MachinePath | None
     targets: Targets | None
     retarget: Retarget
@@ -34,6 +35,7 @@ class Result:
     def summary_rows(self) -> list[tuple[str, str]]:
         """(label, text) rows of the CLI's result table; a figure that cannot be measured reads "n/a"."""
         r = self.report
+        assert r is not None, "summary_rows needs the physics report (report=True)"
         f = _shown
         rows = [
             ("character", f"{self.retarget.character.name} (L = {self.retarget.L:.3f}, M = {self.retarget.M:.3f})"),
@@ -50,7 +52,8 @@ class Result:
             ("COM tracking", f"RMS {f(r.com_tracking_rms_mm, '.2f')} mm, max {f(r.com_tracking_max_mm, '.2f')} mm"),
             ("foot skate / penetration", f"{f(r.foot_skate_mm, '.2f')} mm / {f(r.penetration_mm, '.2f')} mm "
              f"(ball and tip near the floor: {f(r.foot_skate_floor_mm, '.2f')} mm)"),
-            ("joint jump", f"{f(r.max_joint_jump_deg, '.1f')} deg (reference {f(r.reference_max_joint_jump_deg, '.1f')})"),
+            ("joint jump",
+             f"{f(r.max_joint_jump_deg, '.1f')} deg (reference {f(r.reference_max_joint_jump_deg, '.1f')})"),
         ]
         return rows
 
@@ -78,8 +81,8 @@ def in_place_motion(result: Result) -> Motion:
     t = np.arange(motion.n_frames) * motion.frame_time
     fwd = result.path.frame[0] if result.path is not None else _travel_direction(motion, result)
     x = result.path.com @ fwd if result.path is not None else result.retarget.body.com(motion) @ fwd
-    knots = t[[0, -1]] if result.path is None else np.concatenate(
-        [[t[0]], result.path.t_touchdown[(result.path.t_touchdown > t[0]) & (result.path.t_touchdown < t[-1])], [t[-1]]])
+    td = None if result.path is None else result.path.t_touchdown
+    knots = t[[0, -1]] if td is None else np.concatenate([[t[0]], td[(td > t[0]) & (td < t[-1])], [t[-1]]])
     travel = np.interp(t, knots, np.interp(knots, t, x))
     return _replace(motion, root_positions=motion.root_positions - np.outer(travel - travel[0], fwd))
 
@@ -113,6 +116,9 @@ def write_result(result: Result, out_path, data=None, in_place: bool | None = No
         result.report.extras["written"] = "in place (root travel removed)" if in_place else "with root travel"
     with atomic_group():  # every file of the result or none
         save(in_place_motion(result) if in_place else result.motion, out_path, **bvh_options)
+        if result.report is None:
+            raise FroudeError("a result without its physics report cannot be written: compute it first "
+                              "(pipeline.add_report)")
         write_report(result.report, rp)
         if data is None:
             return out_path, rp

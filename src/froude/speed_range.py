@@ -47,6 +47,7 @@ def _speed_ok(prep: Prepared, character, s: float, numbers: dict) -> tuple[bool,
         rep = plan_scale(prep, character, speed=s, strides=4, **numbers).finish().report
     except FitError as e:
         return False, str(e)
+    assert rep is not None  # finish() computes the report by default
     fails = rep.check_bars()
     return not fails, "; ".join(fails)
 

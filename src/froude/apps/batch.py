@@ -134,8 +134,7 @@ def load_plan(path) -> Plan:
 
 def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
     """A Plan from the parsed YAML mapping; every problem is one BatchError line naming the key."""
-    from ..body.characters import list_presets
-    from ..body.characters import resolve_character
+    from ..body.characters import list_presets, resolve_character
 
     def bad(where, msg):
         raise BatchError(f"{source}: {where}: {msg}")
@@ -152,7 +151,8 @@ def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
     sex = str(ref.get("sex", "male"))
     if sex not in ("male", "female"):
         bad("reference.sex", f"male or female, got '{sex}'")
-    length_scale = None if ref.get("length_scale") is None else _positive(ref["length_scale"], "reference.length_scale", bad)
+    length_scale = (None if ref.get("length_scale") is None
+                    else _positive(ref["length_scale"], "reference.length_scale", bad))
     fps = None if data.get("fps") is None else _positive(data["fps"], "fps", bad)
 
     chars = data.get("characters")

@@ -8,9 +8,9 @@ report table.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -76,7 +76,7 @@ def run_demo(outdir: str | Path, clip: str | Path | None = None, *, strides: int
         ("fast", "2 speed x1.2", "1.2 x the original speed (5.2; faster than the clip, the cycle is re-solved "
          "with a shorter stance and the same step time)",
          lambda: pipeline.scale(prep, None, speed=1.2, strides=strides)),
-        ("decel", "3 slow to 0.5x", "decelerating to half speed over 8 steps (5.3: transition table)",
+        ("decel", "3 slow to 0.5x", "decelerating to half speed over 8 steps (5.3: planned step by step)",
          lambda: pipeline.accelerate(prep, None, to_factor=0.5, steps=8, lead_steps=1, hold_steps=2)),
         ("troll", "4 troll", "2.3 m, 250 kg, short legs, long heavy arms (5.1: dynamic similarity)",
          lambda: pipeline.scale(prep, "troll", strides=strides)),
@@ -92,6 +92,7 @@ def run_demo(outdir: str | Path, clip: str | Path | None = None, *, strides: int
         results[key] = res
         p = out / files_of[key]
         pipeline.write_result(res, p)
+        assert res.report is not None  # the pipeline computes it by default
         rows.append(DemoRow(key, label, desc, p, res.report))
         say(f"      {label:<16} {res.motion.n_frames:>4} frames, {res.report.mean_speed_m_s:.2f} m/s")
 

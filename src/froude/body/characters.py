@@ -23,16 +23,16 @@ YAML format (all keys but ``name`` optional; presets in ``froude/data/characters
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 
-from .model import SIDES, BodyModel
-from ..errors import CharacterError, FroudeError
-from .presets import HEIGHT_RANGE_M, MASS_RANGE_KG, PART_SCALE_RANGE, PRESET_DIR, list_presets
 from ..core.skeleton import Skeleton
+from ..errors import CharacterError, FroudeError
+from .model import SIDES, BodyModel
+from .presets import HEIGHT_RANGE_M, MASS_RANGE_KG, PART_SCALE_RANGE, PRESET_DIR, list_presets
 
 PARTS = ("legs", "arms", "head", "trunk")
 _LIMB_SEGMENTS = ("upper_arm", "forearm", "hand", "thigh", "shank", "foot")
@@ -215,7 +215,8 @@ def apply_character(character: Character, reference_body: BodyModel) -> Retarget
         body = BodyModel.from_skeleton(skel, mass=mass, sex=character.sex, overrides=overrides or None)
     except FroudeError as e:
         raise CharacterError(f"character '{character.name}': {e}") from None
-    return Retarget(character, skel, body, body.leg_length / reference_body.leg_length, mass / reference_body.total_mass)
+    return Retarget(character, skel, body, body.leg_length / reference_body.leg_length,
+                    mass / reference_body.total_mass)
 
 
 def _expand_fractions(fracs: Mapping[str, float]) -> dict[str, float]:

@@ -13,8 +13,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..core import quat
 from ..constants import GRAVITY, UP_AXIS
+from ..core import quat
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 

@@ -11,10 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .model import SIDES, BodyModel
 from ..constants import GRAVITY, UP_AXIS
-from ..errors import NotARunningMotion
 from ..core.motion import Motion
+from ..errors import NotARunningMotion
+from .model import SIDES, BodyModel
 
 _HORIZONTAL = [a for a in range(3) if a != UP_AXIS]
 
@@ -53,7 +53,8 @@ class Gait:
 
     contact: (F, 2) bool per foot; stances: sorted by start; flights: ((start, stop), ...) frame intervals
     with no foot on the ground that lie between two stances; ground: median stance ground height [m];
-    frame_time [s]; leg_length [m].
+    frame_time [s]; leg_length [m]; ball: (F, 2, 3) world path of each foot's ball (the toe joint, the
+    foot's middle marker) [m], for the midstance times (``midstance_times``); None if not known.
     """
 
     contact: np.ndarray
@@ -63,6 +64,7 @@ class Gait:
     frame_time: float
     leg_length: float
     double_support_fraction: float
+    ball: np.ndarray | None = None
 
     @property
     def full_stances(self) -> tuple[Stance, ...]:
@@ -118,26 +120,100 @@ def _subframe_events(h: np.ndarray, v: np.ndarray, h_lim: float, v_lim: float, s
     return float(t_on), float(t_off)
 
 
-def step_period(gait: "Gait", n_frames: int) -> float:
-    """Mean step time [s] of a gait, NaN with fewer than two touchdowns or liftoffs.
+#: How far beyond the clip's edge a stance cut by it may have its midstance extrapolated [s]: the COM
+#: passes over a planted ball at nearly constant speed, so a few frames' extrapolation is exact to a
+#: fraction of a millisecond, and a clip that ends a frame earlier (another rate) keeps the same steps.
+MIDSTANCE_EXTRAPOLATION_S = 0.04
 
-    Measured from the sub-frame touchdown and liftoff times alike (two estimates, averaged by the number of
-    steps each spans; a contact cut by the clip's start gives no liftoff: its extent is uncertain). Each sequence is used over a whole number of strides when it spans more than one step
-    (an even number of steps), so a runner whose left and right steps differ is not biased by an odd step.
+
+def running_direction(gait: Gait, com: np.ndarray) -> np.ndarray | None:
+    """(3,) horizontal unit direction of running relative to the ground, or None when the body neither
+    travels nor has feet sliding back (standing).
+
+    The COM's mean velocity less the velocity of the feet resting on the ground: the COM's for a take with
+    root travel, minus the feet's for an in-place take (treadmill-like) whose stance feet slide back.
+    com: (F, 3) [m].
+    """
+    F = com.shape[0]
+    if F < 3:
+        return None
+    v = (com[-1] - com[0]) / ((F - 1) * gait.frame_time)
+    if gait.ball is not None:
+        v = v - ground_velocity(gait.ball, gait.leg_length, gait.frame_time)
+    v[UP_AXIS] = 0.0
+    n = float(np.linalg.norm(v))
+    return v / n if n > 0.05 * np.sqrt(GRAVITY * gait.leg_length) else None
+
+
+def midstance_times(gait: Gait, com: np.ndarray) -> np.ndarray:
+    """Sorted midstance times [frames]: where the COM passes over the stance foot's ball, one per stance.
+
+    The forward distance ball → COM grows through zero in every stance at about the running speed (the
+    ball is planted, or slides back at that speed in place), so its crossing falls between two frames
+    by linear interpolation to a fraction of a millisecond whatever the frame rate: unlike touchdown
+    and toe-off, whose thresholds are crossed slowly (a toe rolls off the floor over 50-80 ms) and
+    read 5-20 ms apart at 30 and 120 Hz. A stance cut by the clip's edge gives its midstance when the
+    crossing lies within MIDSTANCE_EXTRAPOLATION_S of the edge. com: (F, 3) [m]. Empty without a
+    running direction or the balls' paths.
+    """
+    ball = gait.ball
+    fwd = None if ball is None else running_direction(gait, com)
+    if ball is None or fwd is None:
+        return np.zeros(0)
+    F = com.shape[0]
+    reach = MIDSTANCE_EXTRAPOLATION_S / gait.frame_time
+    out = []
+    for st in gait.stances:
+        d = (com - ball[:, st.foot]) @ fwd  # (F,) [m]: < 0 while the ball is ahead of the COM
+        a, b = max(st.start - 1, 0), min(st.stop + 1, F)
+        seg = d[a:b]
+        up = np.flatnonzero((seg[:-1] < 0) & (seg[1:] >= 0))
+        if up.size:
+            i = a + int(up[0])
+            out.append(i + float(-d[i] / (d[i + 1] - d[i])))
+        elif st.stop == F and F >= 2 and d[-1] < 0 < d[-1] - d[-2]:  # the crossing just after the end
+            t = (F - 1) - d[-1] / (d[-1] - d[-2])
+            if t - (F - 1) <= reach:
+                out.append(float(t))
+        elif st.start == 0 and F >= 2 and d[0] > 0 and d[1] > d[0]:  # just before the start
+            t = -d[0] / (d[1] - d[0])
+            if -t <= reach:
+                out.append(float(t))
+    return np.sort(np.asarray(out, float))
+
+
+def _whole_stride_span(t: np.ndarray) -> tuple[float, int]:
+    """(span [same unit as t], steps) of sorted event times over a whole number of strides when they
+    span more than one step: an odd step count leaves out one step at either end and averages the two,
+    so a runner whose left and right steps differ is not biased by the odd step."""
+    n = len(t) - 1
+    if n > 1 and n % 2:
+        n -= 1
+        return 0.5 * ((t[n] - t[0]) + (t[-1] - t[-1 - n])), n
+    return t[n] - t[0], n
+
+
+def step_period(gait: Gait, n_frames: int, com: np.ndarray | None = None) -> float:
+    """Mean step time [s] of a gait, NaN when it cannot be measured.
+
+    From the midstance times (``midstance_times``, needs com (F, 3) [m]) when there are at least two;
+    otherwise from the sub-frame touchdown and liftoff times alike (two estimates, averaged by the
+    number of steps each spans; a contact cut by the clip's start gives no liftoff). Each sequence is
+    used over a whole number of strides (``_whole_stride_span``).
     """
     dt = gait.frame_time
+    if com is not None:
+        mids = midstance_times(gait, com)
+        if len(mids) >= 2:
+            span, n = _whole_stride_span(mids)
+            return float(span * dt / n)
     spans, steps = [], []
     for times in ([s.t_on for s in gait.stances if s.start > 0],
                   [s.t_off for s in gait.stances if 0 < s.start and s.stop < n_frames]):
         t = np.sort(np.asarray(times, float))
-        n = len(t) - 1
-        if n < 1:
+        if len(t) < 2:
             continue
-        if n > 1 and n % 2:
-            n -= 1  # whole strides: leave out one step at either end and average the two
-            span = 0.5 * ((t[n] - t[0]) + (t[-1] - t[-1 - n]))
-        else:
-            span = t[n] - t[0]
+        span, n = _whole_stride_span(t)
         spans.append(span * dt)
         steps.append(n)
     if not steps or sum(spans) <= 0:
@@ -189,7 +265,7 @@ def detect_gait(motion: Motion, body: BodyModel, markers: np.ndarray | None = No
                            t_on, t_off)
                 )
     stance_list.sort(key=lambda s: s.start)
-    any_contact = contact.any(axis=1)
+    any_contact = np.asarray(contact.any(axis=1), bool)
     flights = []
     if stance_list:
         first = min(s.start for s in stance_list)
@@ -198,7 +274,8 @@ def detect_gait(motion: Motion, body: BodyModel, markers: np.ndarray | None = No
             flights.append((first + a, first + b))
     ground = float(np.median([s.ground for s in stance_list])) if stance_list else global_ground
     both = contact.all(axis=1)
-    return Gait(contact, tuple(stance_list), tuple(flights), ground, dt, L, float(both.mean()) if F else 0.0)
+    return Gait(contact, tuple(stance_list), tuple(flights), ground, dt, L, float(both.mean()) if F else 0.0,
+                markers[:, :, 1])
 
 
 @dataclass(frozen=True)
@@ -245,7 +322,6 @@ def summarize(motion: Motion, body: BodyModel, com: np.ndarray | None = None, ga
         c, mk = body.com_and_markers(motion)
         com = c if com is None else com
         gait = detect_gait(motion, body, mk) if gait is None else gait
-    dt = motion.frame_time
     disp = com[-1, _HORIZONTAL] - com[0, _HORIZONTAL]
     dist = float(np.linalg.norm(disp))
     duration = motion.duration
@@ -254,7 +330,7 @@ def summarize(motion: Motion, body: BodyModel, com: np.ndarray | None = None, ga
     if dist > 0:
         heading[_HORIZONTAL] = disp / dist
     L = body.leg_length
-    period = step_period(gait, motion.n_frames)
+    period = step_period(gait, motion.n_frames, com)
     step_freq = 1.0 / period if period > 0 else np.nan
     step_len = speed / step_freq if np.isfinite(step_freq) else np.nan
     flight_times = gait.flight_times()
@@ -289,25 +365,57 @@ def stride_speeds(com: np.ndarray, gait: Gait, n_frames: int) -> tuple[np.ndarra
     return np.asarray(t_mid)[order], np.asarray(speeds)[order]
 
 
-def ground_velocity(markers: np.ndarray, leg_length: float, frame_time: float) -> np.ndarray:
-    """(3,) horizontal velocity of the balls of the feet while they rest on the ground [m/s] (a median).
+#: Feet sliding on the ground faster than this × √(g L) (a median over the frames they rest) are taken for
+#: an in-place take's, whose speed is then measured stance by stance (``ground_velocity``).
+SLIDING_FROUDE = 0.3
+#: Share of each contact over which a foot is taken to be planted (the window sliding fastest): the ball
+#: rolls forward after touchdown and before toe-off, and is still over about a third of the contact.
+PLANTED_SHARE = 1.0 / 3.0
 
-    markers: (F, 2, 3, 3) [m]. The ball (the foot's middle marker, the toe joint) counts as resting while
-    within 0.01 L of its own low level (5th percentile): it is the point a runner stands on from foot-flat
-    to toe-off (the ankle centre moves on as the foot rolls off the heel). For a take with root travel this
-    is ≈ 0; for an in-place take (treadmill-like, root travel removed) it is minus the running velocity: the
-    planted foot slides back at the running speed. Joint centres sit above the floor, so a rolling foot
-    still carries the ball's centre forward a little: on the CMU runs this reads 1-5 % below the speed.
+
+def ground_velocity(markers: np.ndarray, leg_length: float, frame_time: float) -> np.ndarray:
+    """(3,) horizontal velocity of the balls of the feet while they are planted on the ground [m/s].
+
+    markers: (F, 2, 3, 3) [m], or the balls' paths alone (F, 2, 3) [m]. The ball (the foot's middle marker,
+    the toe joint) rests while within 0.01 L of its own low level (5th percentile). For a take with root
+    travel the median velocity over those frames is returned (≈ 0). When the balls slide faster than
+    SLIDING_FROUDE √(g L) (an in-place take, treadmill-like, root travel removed: the planted foot slides
+    back at the running speed) the speed is measured per contact (within 0.05 L of the low level), a
+    median over contacts (``_planted_speeds``): the median over the frames a ball rests reads 1-5 % low,
+    because the ball rolls forward after touchdown and before toe-off.
     """
     if markers.shape[0] < 3:
         return np.zeros(3)
-    ball = markers[:, :, 1]  # (F, 2, 3)
+    ball = markers[:, :, 1] if markers.ndim == 4 else markers  # (F, 2, 3)
     vel = np.gradient(ball, frame_time, axis=0)
     h = ball[..., UP_AXIS]
-    rest = h <= np.percentile(h, 5, axis=0) + 0.01 * leg_length
+    low = np.percentile(h, 5, axis=0)
+    rest = h <= low + 0.01 * leg_length  # (F, 2): the ball on the floor
     v = np.median(vel[rest], axis=0) if rest.any() else np.zeros(3)
     v[UP_AXIS] = 0.0
-    return v
+    slide = float(np.linalg.norm(v))
+    if slide < SLIDING_FROUDE * np.sqrt(GRAVITY * leg_length):
+        return v
+    back = v / slide  # the direction the planted feet slide (the running direction's opposite)
+    contact = h <= low + 0.05 * leg_length  # the whole contact, as the gait's height test takes it
+    speeds = _planted_speeds(ball @ back, contact, frame_time)
+    return back * float(np.median(speeds)) if speeds.size else v
+
+
+def _planted_speeds(x: np.ndarray, rest: np.ndarray, frame_time: float) -> np.ndarray:
+    """Sliding speed of each contact's planted part [m/s]: per run of rest frames (≥ 0.06 s) of each foot,
+    the fastest mean speed over PLANTED_SHARE of it. x: (F, 2) ball position along the sliding
+    direction [m]; rest: (F, 2) bool."""
+    out = []
+    min_len = max(4, int(round(0.06 / frame_time)))
+    for foot in range(2):
+        for a, b in _runs(rest[:, foot]):
+            if b - a < min_len:
+                continue
+            w = max(2, int(round(PLANTED_SHARE * (b - a))))
+            xs = x[a:b, foot]
+            out.append(float(np.max(xs[w:] - xs[:-w])) / (w * frame_time))
+    return np.asarray(out)
 
 
 def classify(gait: Gait, speed: float, distance: float, leg_length: float, has_flight: bool) -> tuple[str, str]:

@@ -10,17 +10,17 @@ from __future__ import annotations
 
 import functools
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 
 from ..constants import UP_AXIS
-from ..errors import FroudeError
 from ..core.kinematics import fk_soa, from_soa, to_soa
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
+from ..errors import FroudeError
 
 
 class JointMapError(FroudeError):
@@ -147,15 +147,15 @@ def _common_ancestor(parents: tuple[int, ...], a: int, b: int) -> int:
 def _roles_of_names(names: tuple[str, ...], parents: tuple[int, ...],
                     joint_map: tuple[tuple[str, str], ...] | None) -> dict[str, int]:
     """``find_roles`` for joint names, parents and a joint map as sorted (role, name) pairs."""
-    joint_map = dict(joint_map) if joint_map else {}
-    for role, name in joint_map.items():
+    chosen = dict(joint_map) if joint_map else {}
+    for role, name in chosen.items():
         if role not in REQUIRED_ROLES + OPTIONAL_ROLES:
             raise JointMapError(
                 f"unknown role '{role}' in the joint map; roles are: {', '.join(REQUIRED_ROLES + OPTIONAL_ROLES)}"
             )
         if name not in names:
             raise JointMapError(f"joint map: role '{role}' names joint '{name}', which the skeleton lacks")
-    roles: dict[str, int] = {r: names.index(n) for r, n in joint_map.items()}
+    roles: dict[str, int] = {r: names.index(n) for r, n in chosen.items()}
     parsed = [_side_and_cores(n) for n in names]
     for side in SIDES:
         used = {roles[f"{side}_{r}"] for r in _CORE_WORDS if f"{side}_{r}" in roles}
@@ -260,7 +260,7 @@ class BodyModel:
         sex: str = "male",
         overrides: Mapping[str, float] | None = None,
         joint_map: Mapping[str, str] | None = None,
-    ) -> "BodyModel":
+    ) -> BodyModel:
         """Build the de Leva model for a skeleton.
 
         mass: total body mass [kg]; sex: "male" or "female" (de Leva's tables);
@@ -321,7 +321,8 @@ class BodyModel:
             leg_mean = np.mean([np.linalg.norm(pos(s + "_knee") - pos(s + "_hip"))
                                 + np.linalg.norm(pos(s + "_ankle") - pos(s + "_knee")) for s in SIDES])
             d = pos("head") - c7
-            d = d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9 else body_up(skeleton, rest, rest[0], rest[0] + np.eye(3)[UP_AXIS])
+            d = (d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9
+                 else body_up(skeleton, rest, rest[0], rest[0] + np.eye(3)[UP_AXIS]))
             vertex = c7 + 0.285 * leg_mean * d
             notes.append(f"no end point for '{skeleton.names[head_j]}': the head vertex estimated from the leg length")
         add("head", roles["head"], vertex, c7, "head")
@@ -442,7 +443,7 @@ class BodyModel:
 
     def com(self, motion: Motion) -> np.ndarray:
         """Whole-body centre of mass (F, 3) [m] of every frame (in chunks: memory O(FK_CHUNK))."""
-        return self.com_and_markers(motion, markers=False)[0]
+        return self._fk_pass(motion, markers=False)[0]
 
     def segment_points(self, p_world_joint: np.ndarray, R_world_joint: np.ndarray) -> np.ndarray:
         """(F, S, 3) world segment COMs [m] from frame-major FK outputs."""
@@ -465,7 +466,13 @@ class BodyModel:
                     out[:, i, k, r] = P[j, r] + R[j, 3 * r] * lx + R[j, 3 * r + 1] * ly + R[j, 3 * r + 2] * lz
         return out
 
-    def com_and_markers(self, motion: Motion, markers: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+    def com_and_markers(self, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+        """COM (F, 3) [m] and foot markers (F, 2, 3, 3) [m] from one FK pass."""
+        com, mk = self._fk_pass(motion, markers=True)
+        assert mk is not None
+        return com, mk
+
+    def _fk_pass(self, motion: Motion, markers: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """COM (F, 3) [m] and foot markers (F, 2, 3, 3) [m] (None if markers=False) from one FK pass.
 
         Frames are processed FK_CHUNK at a time: FK of all joints costs ~3 kB per frame, an hour at
@@ -480,7 +487,7 @@ class BodyModel:
             rp, rot, tr = to_soa(motion.root_positions[a:b], motion.rotations[a:b], tr)
             P, R = fk_soa(self.skeleton.parents, self.skeleton.offsets, rp, rot, tr)
             com[a:b] = self.com_soa(P, R).T
-            if markers:
+            if mk is not None:
                 mk[a:b] = self.foot_markers_soa(P, R)
         return com, mk
 

@@ -14,7 +14,6 @@ from ..errors import FroudeError
 from .gait import Gait, GaitSummary, detect_gait
 from .model import BodyModel
 
-
 #: A take whose stride speeds spread more than this (fastest / slowest − 1) is said to change speed: the
 #: output then says which part the machine models and how to choose another (``time_range``).
 SPEED_CHANGE_NOTE = 0.10  # a steady CMU run's strides spread 2-5 %
@@ -28,7 +27,8 @@ def parse_time_range(text: str) -> tuple[float | None, float | None]:
             raise ValueError
         return (float(a) if a.strip() else None), (float(b) if b.strip() else None)
     except ValueError:
-        raise FroudeError(f"cannot read time range '{text}': use T0:T1 in seconds (e.g. 1.2:3.0, or 1.2: to the end)") from None
+        raise FroudeError(f"cannot read time range '{text}': use T0:T1 in seconds (e.g. 1.2:3.0, or 1.2: to the "
+                          "end)") from None
 
 
 def select_range(motion: Motion, time_range, source: str = "motion") -> Motion:
@@ -73,8 +73,8 @@ def modelled_part(motion: Motion, summary: GaitSummary, com: np.ndarray, gait: G
 
 
 #: A clip is a loop when its last pose is this close to its first (mean joint angle), relative to the
-#: median change between neighbouring frames: below LOOP_DUPLICATE the last frame repeats the first, below LOOP_CONTINUES the first
-#: frame follows the last.
+#: median change between neighbouring frames: below LOOP_DUPLICATE the last frame repeats the first, below
+#: LOOP_CONTINUES the first frame follows the last.
 LOOP_DUPLICATE = 0.25
 LOOP_CONTINUES = 1.5
 #: A looping take is unrolled into at least this many copies and at least LOOP_MIN_S seconds.

@@ -4,8 +4,9 @@ Every operation returns a new ``Motion``; none mutates its input.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -80,12 +81,12 @@ class Motion:
         t[:, 0] = self.root_positions
         return t
 
-    def with_(self, **changes) -> "Motion":
+    def with_(self, **changes) -> Motion:
         """A copy with fields replaced (dataclasses.replace)."""
         return replace(self, **changes)
 
     # ---- pure operations ---------------------------------------------------------------------------
-    def cut(self, start: int, stop: int | None = None) -> "Motion":
+    def cut(self, start: int, stop: int | None = None) -> Motion:
         """Frames [start, stop) as a new motion."""
         sl = slice(start, stop)
         return replace(
@@ -95,7 +96,7 @@ class Motion:
             translations=None if self.translations is None else self.translations[sl],
         )
 
-    def sample(self, times_s: np.ndarray) -> "Motion":
+    def sample(self, times_s: np.ndarray) -> Motion:
         """The motion evaluated at arbitrary source times (T,) [s]: linear positions, slerped rotations.
 
         The result has frame time ``self.frame_time`` unless it is replaced afterwards; use ``resample``
@@ -119,7 +120,7 @@ class Motion:
             tr = self.translations[i0] * (1.0 - w)[:, None, None] + self.translations[i1] * w[:, None, None]
         return replace(self, root_positions=rp, rotations=r, translations=tr)
 
-    def resample(self, fps: float) -> "Motion":
+    def resample(self, fps: float) -> Motion:
         """The same motion at another frame rate [Hz], covering the same duration."""
         if not fps > 0:
             raise ValueError("fps must be > 0")
@@ -127,7 +128,7 @@ class Motion:
         out = self.sample(np.arange(n) / fps)
         return replace(out, frame_time=1.0 / fps)
 
-    def time_warp(self, source_times_s: np.ndarray, frame_time: float | None = None) -> "Motion":
+    def time_warp(self, source_times_s: np.ndarray, frame_time: float | None = None) -> Motion:
         """Retime by a monotone map: output frame i shows the source at ``source_times_s[i]`` [s]."""
         st = np.asarray(source_times_s, dtype=float)
         if st.ndim != 1 or (st.size > 1 and np.any(np.diff(st) < 0)):
@@ -135,14 +136,14 @@ class Motion:
         out = self.sample(st)
         return replace(out, frame_time=self.frame_time if frame_time is None else frame_time)
 
-    def continuous(self) -> "Motion":
+    def continuous(self) -> Motion:
         """The same motion with quaternion signs made continuous over time."""
         return replace(self, rotations=quat.make_continuous(self.rotations))
 
     def __len__(self) -> int:
         return self.n_frames
 
-    def __getitem__(self, item) -> "Motion":
+    def __getitem__(self, item) -> Motion:
         """Frame slicing without copying semantics surprises: ``motion[10:50]``, ``motion[::2]``."""
         if isinstance(item, (int, np.integer)):
             item = slice(int(item), int(item) + 1 if item != -1 else None)

@@ -120,6 +120,7 @@ def from_euler(angles_rad: np.ndarray, order: str) -> np.ndarray:
         axis[_AXIS_INDEX[axis_name]] = 1.0
         qi = from_axis_angle(axis, angles_rad[..., i])
         q = qi if q is None else mul(q, qi)
+    assert q is not None, "order names no axis"
     return q
 
 

@@ -109,7 +109,7 @@ class Skeleton:
         pts = np.concatenate([self.rest_positions(), self.rest_end_sites()], axis=0)
         return float(pts[:, UP_AXIS].max() - pts[:, UP_AXIS].min())
 
-    def scaled(self, factor: float | np.ndarray) -> "Skeleton":
+    def scaled(self, factor: float | np.ndarray) -> Skeleton:
         """A copy with every offset multiplied by ``factor`` (scalar or per-joint (J,) array)."""
         f = np.asarray(factor, dtype=float)
         per_joint = f.reshape(-1, 1) if f.ndim == 1 else f
@@ -119,7 +119,7 @@ class Skeleton:
         return Skeleton(self.names, self.parents, self.offsets * per_joint, self.channels, ends,
                         self.reference_pose, self.file_up, self.joint_map)
 
-    def with_offsets(self, offsets: np.ndarray, end_sites=None) -> "Skeleton":
+    def with_offsets(self, offsets: np.ndarray, end_sites=None) -> Skeleton:
         """A copy with new offsets (J, 3) [m] (and optionally new end sites)."""
         return Skeleton(
             self.names, self.parents, offsets, self.channels,
@@ -127,13 +127,13 @@ class Skeleton:
             self.joint_map,
         )
 
-    def with_(self, **changes) -> "Skeleton":
+    def with_(self, **changes) -> Skeleton:
         """A copy with fields replaced (dataclasses.replace)."""
         from dataclasses import replace
 
         return replace(self, **changes)
 
-    def same_topology(self, other: "Skeleton") -> str | None:
+    def same_topology(self, other: Skeleton) -> str | None:
         """None if ``other`` has the same joint names and parents, else a description of the first mismatch."""
         for j in range(max(self.n_joints, other.n_joints)):
             if j >= self.n_joints:

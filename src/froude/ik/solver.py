@@ -43,17 +43,17 @@ computed once per chunk, so the iterations' FK passes skip them.
 from __future__ import annotations
 
 import weakref
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..core import quat
 from ..body.model import BodyModel
-from ..errors import IkError
+from ..core import quat
 from ..core.kinematics import _quat_rows, com_jacobian, forward_kinematics, joint_depths, point_jacobian
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
+from ..errors import IkError
 
 __all__ = [
     "ComTask", "MarkerTask", "PostureTask", "RootTask", "IkResult", "solve_ik",
@@ -133,7 +133,8 @@ class MarkerTask:
     name: str = "markers"
 
     @classmethod
-    def feet(cls, body: BodyModel, target: np.ndarray, weight: float | np.ndarray = 1.0, name: str = "feet") -> "MarkerTask":
+    def feet(cls, body: BodyModel, target: np.ndarray, weight: float | np.ndarray = 1.0,
+             name: str = "feet") -> MarkerTask:
         """The body model's three markers per foot.
 
         target: (F, 2, 3, 3) [m], (left, right) x (ankle, toe, toe end) x xyz, as ``BodyModel.foot_markers``.
@@ -278,7 +279,8 @@ class IkResult:
         return not bool(np.any(self.failed))
 
     def __repr__(self) -> str:
-        parts = [f"{self.motion.n_frames} frames", f"iterations mean {self.iterations.mean():.2f} max {self.iterations.max(initial=0)}"]
+        parts = [f"{self.motion.n_frames} frames",
+                 f"iterations mean {self.iterations.mean():.2f} max {self.iterations.max(initial=0)}"]
         if self.com_error is not None:
             parts.append(f"COM error max {self.com_error.max(initial=0) * 1e3:.2f} mm")
         if self.marker_error is not None:
@@ -563,11 +565,11 @@ class _Plan:
 
 #: Plans already made, per body model (the studio and long batches solve the same body many times; a plan
 #: costs about a millisecond of Python). Weak keys: a plan goes with its body.
-_PLANS: "weakref.WeakKeyDictionary[BodyModel, dict]" = weakref.WeakKeyDictionary()
+_PLANS: weakref.WeakKeyDictionary[BodyModel, dict] = weakref.WeakKeyDictionary()
 
 
 def _cached_plan(skel: Skeleton, body: BodyModel | None, frozen, w_pos: float, w_rot: np.ndarray,
-                 mk_joint: np.ndarray, mk_local: np.ndarray, has_com: bool) -> "_Plan":
+                 mk_joint: np.ndarray, mk_local: np.ndarray, has_com: bool) -> _Plan:
     """``_make_plan``, remembered per body model for the same skeleton, joints, weights and markers."""
     if body is None:
         return _make_plan(skel, body, frozen, w_pos, w_rot, mk_joint, mk_local, has_com)
@@ -798,7 +800,7 @@ class _FK:
     world position [m], so task points and mass moments are small matrix products over T's rows.
     """
 
-    def __init__(self, plan: "_Plan", rot_T: np.ndarray, extra: Sequence[tuple[str, int]] = (),
+    def __init__(self, plan: _Plan, rot_T: np.ndarray, extra: Sequence[tuple[str, int]] = (),
                  fold: np.ndarray | None = None):
         Jn, F = len(plan.parents), rot_T.shape[-1]
         self.fold = fold  # (Na, 3, F) ``_fold_moments`` of the frames (needed by _evaluate when the plan folds)
@@ -953,7 +955,7 @@ class _Lin:
     L: np.ndarray
     inv: np.ndarray
 
-    def take(self, keep: np.ndarray) -> "_Lin":
+    def take(self, keep: np.ndarray) -> _Lin:
         """The frames ``keep``."""
         return _Lin([np.take(c, keep, axis=-1) for c in self.pairs], np.take(self.R, keep, axis=-1),
                     _take_lower(self.L, keep), np.take(self.inv, keep, axis=-1))
@@ -1246,7 +1248,8 @@ def solve_ik(
     ref_root = root.reference if root.reference is not None else motion
     for r in (ref_pose, ref_root):
         if r.n_frames != F or r.skeleton.n_joints != J:
-            raise IkError(f"reference motion has {r.n_frames} frames / {r.skeleton.n_joints} joints; expected {F} / {J}")
+            raise IkError(f"reference motion has {r.n_frames} frames / {r.skeleton.n_joints} joints; "
+                          f"expected {F} / {J}")
     # targets and weights, validated once
     com_target = com_w = None
     if com_task is not None:
@@ -1254,8 +1257,10 @@ def solve_ik(
         if com_target.shape != (F, 3):
             raise IkError(f"COM target must be (F, 3) = ({F}, 3); got {com_target.shape}")
         com_w = _rows(com_task.weight, F, (), com_task.name)
-    mk_joint = np.concatenate([np.asarray(t.joints, np.int64).reshape(-1) for t in markers]) if markers else np.zeros(0, np.int64)
-    mk_local = np.concatenate([np.asarray(t.p_local, float).reshape(-1, 3) for t in markers]) if markers else np.zeros((0, 3))
+    mk_joint = (np.concatenate([np.asarray(t.joints, np.int64).reshape(-1) for t in markers]) if markers
+                else np.zeros(0, np.int64))
+    mk_local = (np.concatenate([np.asarray(t.p_local, float).reshape(-1, 3) for t in markers]) if markers
+                else np.zeros((0, 3)))
     mk_target = mk_w = None
     if markers:
         tl, wl = [], []

@@ -16,8 +16,8 @@ import contextlib
 import contextvars
 import os
 import tempfile
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import Callable, Iterable, Iterator
 
 from ..errors import FroudeError
 
@@ -87,8 +87,9 @@ def atomic_group() -> Iterator[list]:
 
     Yields the list of (temporary, destination) pairs written so far. Nested groups join the outer one.
     """
-    if _group.get() is not None:
-        yield _group.get()
+    outer = _group.get()
+    if outer is not None:
+        yield outer
         return
     pending: list = []
     token = _group.set(pending)
@@ -175,7 +176,8 @@ def check_outputs(outputs: Iterable, inputs: Iterable = (), *, folders: Iterable
 
     outputs: files the command will write (None entries are skipped); inputs: files it reads (None and
     missing ones skipped); folders: output folders the command will fill (an existing folder must accept
-    new files; a missing one needs a writable parent). Checks, for each output: not an existing folder or special file; its folder
+    new files; a missing one needs a writable parent). Checks, for each output: not an existing folder or special
+    file; its folder
     exists and accepts a new file (probed by creating and removing one); not an input after resolving
     symbolic and hard links; not the same file as another output. Returns the outputs as Paths.
     """

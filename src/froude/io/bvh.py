@@ -20,12 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core import quat
-from ..errors import BvhError
 from ..body.conventions import understand
+from ..core import quat
 from ..core.motion import Motion
-from .atomic import atomic_write_text
 from ..core.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
+from ..errors import BvhError
+from .atomic import atomic_write_text
 
 _VALID_CHANNELS = set(POSITION_CHANNELS) | set(ROTATION_CHANNELS)
 
@@ -157,7 +157,8 @@ class _Parser:
         try:
             n = int(n_tok.text)
         except ValueError:
-            raise self.error(f"expected a channel count for joint '{shown}', found '{_show(n_tok.text)}'", n_tok.line) from None
+            raise self.error(f"expected a channel count for joint '{shown}', found '{_show(n_tok.text)}'",
+                             n_tok.line) from None
         if not 0 <= n <= 6:
             raise self.error(f"joint '{shown}' declares {n} channels (0-6 allowed)", n_tok.line)
         chans = []
@@ -222,7 +223,8 @@ class _Parser:
             if "_" in ft_tok.text:
                 raise ValueError
         except ValueError:
-            raise self.error(f"expected a number for the frame time, found '{_show(ft_tok.text)}'", ft_tok.line) from None
+            raise self.error(f"expected a number for the frame time, found '{_show(ft_tok.text)}'",
+                             ft_tok.line) from None
         lo, hi = FRAME_TIME_RANGE_S
         if not (np.isfinite(frame_time) and frame_time > 0):
             raise self.error(f"frame time must be > 0 s, found '{_show(ft_tok.text)}'", ft_tok.line)
@@ -400,7 +402,7 @@ def _clean(path, skeleton, values, linenos, finite, channel_names, length_scale)
         # rotations far larger than any other frame-to-frame change.
         jumps = _pose_jump_deg(rot)
         typical = np.percentile(jumps[1:], 99)
-        if jumps[0] > 5.0 and jumps[0] > 5.0 * typical:
+        if jumps[0] > 5.0 and jumps[0] > 3.0 * typical:
             notes.append(
                 f"dropped frame {start} (line {linenos[start]}): synthetic pose frame (T-pose), its joints turn "
                 f"by {jumps[0]:.0f} deg (median) to the next frame (99th percentile elsewhere {typical:.1f} deg)"
@@ -443,6 +445,7 @@ def _channels_to_pose(skeleton: Skeleton, values: np.ndarray, length_scale: floa
                 if j == 0:
                     root_positions[:, axis] = columns[col] * length_scale
                 else:
+                    assert translations is not None  # made above: a joint below the root has position channels
                     translations[:, j, axis] = columns[col] * length_scale
             else:
                 rot_cols.append(col)
@@ -472,6 +475,7 @@ def motion_to_channels(motion: Motion, length_scale: float = 1.0) -> np.ndarray:
             if c in POSITION_CHANNELS:
                 out[:, col] = trans[:, j, POSITION_CHANNELS.index(c)] / length_scale
             else:
+                assert euler is not None  # a rotation channel means the joint has a rotation order
                 out[:, col] = euler[:, k]
                 k += 1
             col += 1
@@ -505,7 +509,8 @@ def file_convention(motion: Motion, *, length_scale: float | None = None, up: st
     if rotations_only:
         if motion.translations is not None and np.ptp(motion.translations[:, 1:], axis=0).max() > 1e-9:
             moving = int(np.argmax(np.ptp(motion.translations[:, 1:], axis=0).max(axis=1))) + 1
-            raise BvhError(f"cannot write rotations only: joint '{skel.names[moving]}' moves along its position channels")
+            raise BvhError(f"cannot write rotations only: joint '{skel.names[moving]}' moves along its position "
+                           "channels")
         channels = tuple(c if j == 0 else tuple(x for x in c if x in ROTATION_CHANNELS)
                          for j, c in enumerate(skel.channels))
         motion = motion.with_(skeleton=skel.with_(channels=channels), translations=None)
@@ -523,10 +528,10 @@ def bvh_text(motion: Motion, length_scale: float | None = None, *, up: str | Non
     (``file_convention``). length_scale: metres per file unit (default: the source's, else 1)."""
     motion, length_scale = file_convention(motion, length_scale=length_scale, up=up, rotations_only=rotations_only)
     skel = motion.skeleton
-    children = [[] for _ in range(skel.n_joints)]
+    children: list[list[int]] = [[] for _ in range(skel.n_joints)]
     for j in range(1, skel.n_joints):
         children[skel.parents[j]].append(j)
-    ends = [[] for _ in range(skel.n_joints)]
+    ends: list[list[np.ndarray]] = [[] for _ in range(skel.n_joints)]
     for j, off in skel.end_sites:
         ends[j].append(np.asarray(off) / length_scale)
 

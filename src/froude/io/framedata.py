@@ -44,8 +44,8 @@ def frame_table(motion, body=None, *, machine_path=None) -> dict[str, np.ndarray
     body: the BodyModel (default: built from the skeleton, 70 kg); machine_path: a synthesis.timewarp.MachinePath on
     the same frames (outputs), adding the machine's COM, force and stance.
     """
-    from ..body.model import BodyModel
     from ..body.gait import detect_gait
+    from ..body.model import BodyModel
     from ..machine.forces import ground_force, smooth_com
 
     if body is None:
@@ -96,7 +96,12 @@ def write_frame_data(table: dict, path: str | os.PathLike) -> Path:
             bad = int(np.flatnonzero(~np.isfinite(col))[0])
             raise FroudeError(f"{path}: column {name} is not finite at frame {bad}: nothing written")
     if suffix == ".csv":
-        return atomic_write(path, lambda tmp: Path(tmp).write_text(_csv_text(table), newline="\n"))
+        text = _csv_text(table)
+
+        def write_csv(tmp: str) -> None:
+            Path(tmp).write_text(text, newline="\n")
+
+        return atomic_write(path, write_csv)
     if suffix == ".npz":
         def write_npz(tmp):
             with open(tmp, "wb") as f:  # a file object: np.savez would append .npz to a bare name

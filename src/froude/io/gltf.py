@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FroudeError
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
+from ..errors import FroudeError
 from .atomic import atomic_write
 
 #: glTF component types and accessor types used here.
@@ -86,7 +86,9 @@ def mannequin(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     rest = skeleton.rest_positions() + skeleton.offsets[0]
     segs = [(int(skeleton.parents[j]), rest[skeleton.parents[j]], rest[j]) for j in range(1, skeleton.n_joints)]
     segs += [(j, rest[j], rest[j] + np.asarray(off)) for j, off in skeleton.end_sites]
-    verts, tris, joints = [], [], []
+    verts: list[np.ndarray] = []
+    tris: list[tuple[int, int, int]] = []
+    joints: list[int] = []
     for joint, a, b in segs:
         d = b - a
         length = float(np.linalg.norm(d))

@@ -3,7 +3,8 @@
 Differentiation (documented choice, see docs/force_shares.md):
 
 * The whole-body COM (de Leva model) is low-passed with a **2nd-order Butterworth filter run forward
-  and backward** (``filtfilt`` here, the same as SciPy's ``sosfiltfilt``: zero lag, effective 4th order, −6 dB at ``CUTOFF_HZ`` = 8 Hz), then
+  and backward** (``filtfilt`` here, the same as SciPy's ``sosfiltfilt``: zero lag, effective 4th order, −6 dB at
+  ``CUTOFF_HZ`` = 8 Hz), then
   differentiated twice by central differences. 8 Hz is the trade-off measured on the nine running
   clips: lower cutoffs smear the touchdown force rise into the flight phases, higher ones pass the
   capture jitter (the flight residual grows monotonically above 8 Hz; see the docs for the table).
@@ -26,9 +27,8 @@ heading is +Z and up +Y). Sagittal coordinates: x = (p − origin) · heading, y
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import math
+from dataclasses import dataclass
 
 import numpy as np
 

@@ -35,7 +35,8 @@ import numpy as np
 from ..constants import GRAVITY
 from ..errors import FitError
 from ..io.atomic import atomic_write_text
-from ..io.jsonable import dumps, jsonable as _jsonable
+from ..io.jsonable import dumps
+from ..io.jsonable import jsonable as _jsonable
 from .dynamics import Control
 
 __all__ = ["SCHEMA", "SimpleMachine", "load_machine"]
@@ -130,7 +131,7 @@ class SimpleMachine:
         }
 
     # ---- dynamic similarity (§5.1, Table 1) ----------------------------------------------------------
-    def scaled(self, L: float, M: float = 1.0) -> "SimpleMachine":
+    def scaled(self, L: float, M: float = 1.0) -> SimpleMachine:
         """The dynamically similar machine for a character L times longer and M times heavier.
 
         Dimensionless fields are unchanged; l0 × L, mass × M; SI measurements: lengths × L, times × √L,
@@ -181,7 +182,7 @@ class SimpleMachine:
         })
 
     @classmethod
-    def from_dict(cls, d: dict, where: str = "machine") -> "SimpleMachine":
+    def from_dict(cls, d: dict, where: str = "machine") -> SimpleMachine:
         if not isinstance(d, dict) or d.get("schema") != SCHEMA:
             got = d.get("schema") if isinstance(d, dict) else type(d).__name__
             raise FitError(f"{where}: not a froude machine file (schema {got!r}, expected {SCHEMA!r})")
@@ -212,7 +213,7 @@ class SimpleMachine:
         atomic_write_text(path, dumps(self.to_dict(), indent=1) + "\n")
 
     @classmethod
-    def load(cls, path) -> "SimpleMachine":
+    def load(cls, path) -> SimpleMachine:
         return load_machine(path)
 
 

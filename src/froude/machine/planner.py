@@ -43,6 +43,10 @@ table, θ0-only plans start from a table rollout (``theta_for_speed`` + ``lookup
 use) and lead/hold steps take their first θ0 from it; the answer never comes from the
 interpolant: the final plan is re-simulated step by step with the simulator's scalar path (the
 one :func:`~froude.machine.dynamics.simulate` uses), so it is exact against direct simulation.
+``pipeline.accelerate`` passes no table: on the 9 CMU running clips θ0 alone reaches neither 0.9× nor
+1.1× in 8 steps, so every plan there is θ0 + δb, which the table (of the fitted control) does not
+cover; given a table, the 18 plans of 0.5×/1.3× are identical to the bit and no faster
+(``benchmarks/bench_plan_table.py``).
 
 Everything is dimensionless (l0 = g = m = 1); nothing depends on a character's size or mass, so one
 plan serves every dynamically similar character. SI appears only in :meth:`SpeedPlan.to_si`.
@@ -262,7 +266,7 @@ def _steps(U, H, theta0, b, control: Control) -> StepResult:
     the control fixed. Results are the simulator's own (scalar and batched paths agree to 1e-12)."""
     U, H, th, bb = np.broadcast_arrays(*(np.atleast_1d(np.asarray(v, float)) for v in (U, H, theta0, b)))
     if U.size > _SMALL:
-        return step(U, H, th, replace(control, b=bb))
+        return step(U, H, th, replace(control, b=bb))  # type: ignore[arg-type]  # step() broadcasts fields
     rows = [step(float(u), float(h), float(t), replace(control, b=float(v)))
             for u, h, t, v in zip(U, H, th, bb)]
     return StepResult(**{f: np.array([getattr(r, f) for r in rows]).reshape(U.shape)
@@ -348,7 +352,7 @@ def _theta_of(H, tau):
 _ORBIT_SCALES = np.array([0.05, 0.01, 0.02])
 
 
-def _orbit(cyc: "_Cycle", U_t, prior, energy, comfort):
+def _orbit(cyc: _Cycle, U_t, prior, energy, comfort):
     """Periodic orbit at apex speed U_t nearest prior (τ, b, H) in the scaled norm (minimum-norm
     Newton from the prior; scales _ORBIT_SCALES). energy "b": τ, b and H free; "theta": b fixed.
     Returns (LimitCycle or None, problems list)."""
@@ -373,7 +377,7 @@ def _orbit(cyc: "_Cycle", U_t, prior, energy, comfort):
     return lc, _orbit_problems(lc, cyc, comfort, energy)
 
 
-def _orbit_problems(lc, cyc: "_Cycle", comfort: Comfort, energy: str) -> list:
+def _orbit_problems(lc, cyc: _Cycle, comfort: Comfort, energy: str) -> list:
     """Comfort violations of an orbit, relative to the start cycle."""
     probs = []
     th_b, _ = _bounds(cyc, comfort, energy)
@@ -387,7 +391,7 @@ def _orbit_problems(lc, cyc: "_Cycle", comfort: Comfort, energy: str) -> list:
     return probs
 
 
-def _orbits(cyc: "_Cycle", U_nodes, energy: str, comfort: Comfort, H_prior=None):
+def _orbits(cyc: _Cycle, U_nodes, energy: str, comfort: Comfort, H_prior=None):
     """Continuation of periodic orbits through U_nodes from the start cycle (apex height prior
     H_prior, default the cycle's); yields (U, LimitCycle or None, problems), stops at the first
     failure."""
@@ -416,10 +420,8 @@ def target_cycle(cycle, U_target: float, *, energy: str = "b", comfort: Comfort 
     if not (math.isfinite(U_target) and U_target > 0):
         raise PlanError(f"target speed must be a finite U > 0, got {U_target}")
     n = max(1, int(math.ceil(abs(math.log(U_target / cyc.U)) / math.log(1.10))))
-    last = None
     for nodes in ([U_target], cyc.U * (U_target / cyc.U) ** (np.arange(1, n + 1) / n)):
-        for last in _orbits(cyc, nodes, energy, comfort, H_prior):
-            pass
+        *_, last = _orbits(cyc, nodes, energy, comfort, H_prior)  # the continuation's last node
         if last[1] is not None and not last[2] and last[0] == U_target:
             lc = last[1]
             return replace(lc, eigenvalues=step_map_eigenvalues(lc.U, lc.H, lc.theta0, lc.control))
@@ -503,7 +505,7 @@ def _solve_step(U, H, t0, ref, th_guess, b_guess, cyc, mode, th_b, b_b):
     return float(x[0]), float(x[1]), ok
 
 
-# --- multi-step optimisation of a change (single shooting, exact chain-rule Jacobian) -------------
+# --- multi-step optimisation of a change (multiple shooting, finite-difference Jacobian rows) -----
 def _shoot(U0, H0, t0, tau, b, ctl):
     """Simulate steps with inputs (τ_k, b_k) from apex (U0, H0) at time t0 (scalar simulator path,
     the one ``simulate`` uses). Returns (U (n+1,), H (n+1,), t (n+1,), θ0 (n,), results list, ok)."""
@@ -682,7 +684,7 @@ def _optimise_change(cyc, U0, H0, t0, n, U_ref, prior, H_t, mode, comfort, tau_s
         raise _StepFail(0, U0, H0, U_ref(0, t0 + cyc.step_time), "no valid first guess for the steps")
     polish = False
     history = []
-    for it in range(max_iter):
+    for _ in range(max_iter):
         C, J, c, r = e["C"], e["J"], e["c"], e["r"]
         q = C.shape[0]
         if polish:
@@ -977,7 +979,8 @@ def _first_mode(energy: str, attempt):
 
     plan is the first that succeeds, with the failed attempts prepended to its notes, or None.
     """
-    tried, fail = [], None
+    tried: list[str] = []
+    fail = None
     for mode in (("theta", "b") if energy == "auto" else (energy,)):
         try:
             plan = attempt(mode)

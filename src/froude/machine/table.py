@@ -53,8 +53,12 @@ class TableGrid:
         return (int(self.U[2]), int(self.H[2]), int(self.theta0[2]))
 
 
+#: Default half-width of the touchdown-angle axis of :func:`grid_around` [rad].
+THETA_BAND = float(np.radians(15.0))
+
+
 def grid_around(U, H, theta0, n=64, *, u_factor=(0.3, 2.0), h_band=(-0.08, 0.12),
-                theta_band=np.radians(15.0), n_theta=None, n_H=None):
+                theta_band=THETA_BAND, n_theta=None, n_H=None):
     """Grid centred on a running cycle (U, H, θ0) (e.g. a LimitCycle's).
 
     U from u_factor[0]·U to u_factor[1]·U; H from H + h_band[0] to H + h_band[1] [l0];

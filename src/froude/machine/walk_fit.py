@@ -38,11 +38,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..body.gait import detect_gait, summarize
 from ..body.model import BodyModel
 from ..constants import GRAVITY, UP_AXIS
-from ..errors import FitError, NotARunningMotion
-from ..body.gait import detect_gait, summarize
 from ..core.motion import Motion
+from ..errors import FitError, NotARunningMotion
 from .dynamics import Control
 from .forces import CUTOFF_HZ, ground_force, sagittal_frame, smooth_com
 from .walk_model import WalkingMachine
@@ -80,7 +80,7 @@ class LegSamples:
 
 def _leg_samples(geo, p_sag, F, dt) -> LegSamples:
     """Frames covered by complete stances only (every leg in contact has a known touchdown and liftoff)."""
-    cover = [[] for _ in range(F)]
+    cover: list[list[int]] = [[] for _ in range(F)]
     usable = np.zeros(F, bool)
     for i, sg in enumerate(geo):
         td, lo = sg.t_touchdown / dt, sg.t_liftoff / dt
@@ -91,8 +91,9 @@ def _leg_samples(geo, p_sag, F, dt) -> LegSamples:
     for k in range(F):
         if any(geo[i].partial for i in cover[k]):
             usable[k] = False
-    frames, rows = [], []
-    for k in np.flatnonzero(usable):
+    frames: list[int] = []
+    rows: list[tuple[int, int, int]] = []
+    for k in map(int, np.flatnonzero(usable)):
         for i in cover[k]:
             rows.append((len(frames), i, k))
         frames.append(k)
@@ -233,7 +234,7 @@ def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40):
         raise FitError(f"the measured walking step is not a valid machine step: {REASONS[w.reason]}")
     nrm = float(np.max(np.abs(R)))
     it = 0
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 (the iteration count is returned)
         if nrm <= tol:
             break
         J = np.empty((R.size, z.size))
@@ -388,8 +389,6 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     p, v, acc = smooth_com(com, dt, cutoff_hz)
     f = ground_force(acc, mass)
     heading, lateral = sagittal_frame(summary.heading)
-    lat = p @ lateral
-    line = np.polyfit(times, lat, 1)
 
     x_fwd = p @ heading
     geo, stances = [], []
@@ -497,15 +496,17 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
 
     # COM height over every complete step, phase-matched (double support → double support, single →
     # single).
-    t_ref, h_ref, h_mod = [], [], []
+    t_parts: list[np.ndarray] = []
+    h_parts: list[np.ndarray] = []
+    m_parts: list[np.ndarray] = []
     for a, b, c in zip(t_td, t_lo, t_nx):
         tt = times[(times >= a) & (times <= c)]
         tm = np.interp(tt, [a, b, c], [0.0, w.t_double, w.t_step])
         trj = rec.sample(tm)
-        t_ref.append(tt)
-        h_ref.append(height(tt))
-        h_mod.append(trj.pos[:, 1] * l0)
-    t_ref, h_ref, h_mod = map(np.concatenate, (t_ref, h_ref, h_mod))
+        t_parts.append(tt)
+        h_parts.append(height(tt))
+        m_parts.append(trj.pos[:, 1] * l0)
+    t_ref, h_ref, h_mod = (np.concatenate(p) for p in (t_parts, h_parts, m_parts))
     com_rms = float(np.sqrt(np.mean((h_mod - h_ref) ** 2)))
 
     def timing(key):

@@ -153,7 +153,7 @@ class WalkingMachine:
         return {"p_com": p * L, "v_com": tr.vel * self.speed_unit, "force": tr.total_force * mg,
                 "contact": contact, "cop": cop * L, "step": k}
 
-    def scaled(self, L: float, M: float = 1.0) -> "WalkingMachine":
+    def scaled(self, L: float, M: float = 1.0) -> WalkingMachine:
         """The dynamically similar machine for a character L times longer and M times heavier."""
         if not (L > 0 and M > 0):
             raise FitError(f"scale factors must be > 0 (L={L}, M={M})")
@@ -170,7 +170,7 @@ class WalkingMachine:
                 "reference": self.reference, "quality": self.quality, "fit": self.fit}
 
     @classmethod
-    def from_dict(cls, d: dict, where: str = "machine") -> "WalkingMachine":
+    def from_dict(cls, d: dict, where: str = "machine") -> WalkingMachine:
         if not isinstance(d, dict) or d.get("schema") != WALK_SCHEMA:
             got = d.get("schema") if isinstance(d, dict) else type(d).__name__
             raise FitError(f"{where}: not a froude walking machine file (schema {got!r}, expected {WALK_SCHEMA!r})")

@@ -16,12 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core import quat
+from ..body.gait import Gait
 from ..body.model import BodyModel
 from ..constants import UP, UP_AXIS
-from ..errors import FitError
-from ..body.gait import Gait
+from ..core import quat
 from ..core.motion import Motion
+from ..errors import FitError
 
 #: Stride-phase samples of the cycle (per stride). 240 keeps interpolation error far below a millimetre.
 CYCLE_SAMPLES = 240
@@ -118,21 +118,21 @@ def _phase_of_events(events: list[FootEvent], first_foot: int, fractions: np.nda
     """Unwrapped stride phase ψ of each event (ψ increases by 1 per stride; first A touchdown = 0)."""
     base = {(first_foot, "td"): 0.0, (first_foot, "lo"): fractions[0],
             (1 - first_foot, "td"): fractions[1], (1 - first_foot, "lo"): fractions[2]}
-    psi = []
+    values: list[float] = []
     for e in events:
         p = base[(e.foot, e.kind)]
-        if psi:
-            prev = psi[-1]
+        if values:
+            prev = values[-1]
             p = p + np.ceil(prev - p + 1e-9)  # smallest value ≡ p (mod 1) after prev
-        psi.append(p)
-    psi = np.array(psi)
+        values.append(p)
+    psi = np.array(values)
     first_a_td = next(i for i, e in enumerate(events) if e.foot == first_foot and e.kind == "td")
     return psi - np.floor(psi[first_a_td] + 1e-9)
 
 
 def _durations(events: list[FootEvent], first_foot: int, frame_time: float) -> np.ndarray:
     """Mean reference durations [s] of (stance A, flight after A, stance B, flight after B)."""
-    sums = {k: [] for k in range(4)}
+    sums: dict[int, list[float]] = {k: [] for k in range(4)}
     for e0, e1 in zip(events[:-1], events[1:]):
         dt = (e1.frame - e0.frame) * frame_time
         if e0.kind == "td" and e1.kind == "lo" and e0.foot == e1.foot:
@@ -222,17 +222,18 @@ def extract_cycle(
     grid = np.arange(K + 1) / K  # include φ = 1 for the loop closure
     n_lo, n_hi = int(np.floor(psi.min())) - 1, int(np.ceil(psi.max())) + 1
     taper = max(1.0, 0.04 / dt)  # frames over which occurrences near the clip's edges fade in
-    occ_frames, occ_w = [], []
+    frames_n: list[np.ndarray] = []
+    weights_n: list[np.ndarray] = []
     for n in range(n_lo, n_hi + 1):
         target = grid + n
         inside = (target >= psi[0]) & (target <= psi[-1])
         f = np.interp(target, psi, frames)
         w = np.clip(np.minimum(f, F - 1 - f) / taper, 0.0, 1.0) * inside
         if np.any(w > 0):
-            occ_frames.append(f)
-            occ_w.append(w)
-    occ_frames = np.array(occ_frames)  # (N, K+1)
-    occ_w = np.array(occ_w)
+            frames_n.append(f)
+            weights_n.append(w)
+    occ_frames = np.array(frames_n)  # (N, K+1)
+    occ_w = np.array(weights_n)
     if np.any(occ_w.sum(axis=0) <= 0):
         raise FitError("the clip does not cover a whole stride: every phase must be seen at least once")
 

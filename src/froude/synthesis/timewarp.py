@@ -110,7 +110,8 @@ def machine_path(
         contact[(t >= contact_on[i]) & (t < contact_off[i]), f] = True
     return MachinePath(
         times=t, com=com, force=force, psi=psi, stance=stance, contact=contact, foot_of_step=feet,
-        t_touchdown=t_td, t_liftoff=t_lo, contact_on=contact_on, contact_off=contact_off, contacts=contacts, apex_speed=stretch * tr.U_apex * m.speed_unit, U=tr.U_apex,
+        t_touchdown=t_td, t_liftoff=t_lo, contact_on=contact_on, contact_off=contact_off, contacts=contacts,
+        apex_speed=stretch * tr.U_apex * m.speed_unit, U=tr.U_apex,
         frame=Rh, l0=l0, mass=m.mass,
     )
 

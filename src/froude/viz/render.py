@@ -16,18 +16,18 @@ Public API: ``filmstrip_image`` (the RGB array plus the drawn geometry), ``rende
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
 
 import numpy as np
 
+from ..body.gait import detect_gait, summarize
 from ..body.model import BodyModel
 from ..constants import UP, UP_AXIS
-from ..errors import FroudeError
-from ..body.gait import detect_gait, summarize
 from ..core.kinematics import ancestor_mask, points_world
 from ..core.motion import Motion
+from ..errors import FroudeError
 
 INSTALL_HINT = "pip install 'froude[render]'"
 CAMERAS = ("side", "three-quarter", "front")
@@ -120,7 +120,7 @@ def build_rig(body: BodyModel) -> Rig:
     anc = ancestor_mask(sk)  # anc[b, k]: k is b or an ancestor of b
     stature = body.stature
     rest, R_ref = sk.reference_world()  # the upright reference pose (the rest pose unless it is folded)
-    ends = {}
+    ends: dict[int, np.ndarray] = {}
     for j, off in sk.end_sites:
         if np.linalg.norm(off) > 0:  # zero-length end sites ("OFFSET 0 0 0") mark nothing
             ends.setdefault(int(j), np.asarray(off, dtype=float))
@@ -188,6 +188,7 @@ def build_rig(body: BodyModel) -> Rig:
         elif toe in ends:
             bones.append((toe, add_point(toe, ends[toe]), "foot", code))
         # the hand: wrist -> hand end (a finger joint or an end site); fingers themselves are not drawn
+        b: int | None
         if f"{s}_hand_end" in roles:
             b = roles[f"{s}_hand_end"]  # a finger joint: follows the fingers' rotation
         elif wrist in ends:
@@ -209,9 +210,9 @@ def build_rig(body: BodyModel) -> Rig:
     vlen = np.linalg.norm(vertex_local)
     centre_local = vertex_local * max(vlen - radius, 0.35 * vlen) / max(vlen, 1e-12)
     head_pt = add_point(head, centre_local)
-    a, b, kinds, sides = zip(*bones)
+    bone_a, bone_b, kinds, sides = zip(*bones)
     return Rig(
-        np.array(point_joint), np.array(point_local), np.array(a), np.array(b),
+        np.array(point_joint), np.array(point_local), np.array(bone_a), np.array(bone_b),
         np.array([_WIDTH[k] * stature for k in kinds]), np.array(sides), head_pt, radius, stature,
         roles["pelvis"],
     )
@@ -299,15 +300,9 @@ def _actors(motions: Sequence[Motion], labels: Sequence[str] | None, camera: str
 
 def _colours(actor: _Actor) -> tuple[list[str], list[float]]:
     """Colour and z-order offset of each bone: far side, centre, near side."""
-    cols, zs = [], []
-    for s in actor.rig.bone_side:
-        if s == CENTRE:
-            cols.append(_MID), zs.append(0.2)
-        elif s == actor.far_side:
-            cols.append(_FAR), zs.append(0.1)
-        else:
-            cols.append(_NEAR), zs.append(0.3)
-    return cols, zs
+    look = {CENTRE: (_MID, 0.2), actor.far_side: (_FAR, 0.1)}
+    pairs = [look.get(s, (_NEAR, 0.3)) for s in actor.rig.bone_side]
+    return [c for c, _ in pairs], [z for _, z in pairs]
 
 
 def _shadow_outline(actor: _Actor, centre: np.ndarray, n: int = 28) -> np.ndarray:
@@ -352,8 +347,8 @@ class _FigureArtists:
         back = [k for k in np.argsort(zs, kind="stable") if zs[k] < 0.3]
         front = [k for k in np.argsort(zs, kind="stable") if zs[k] >= 0.3]
         self.order = {}
-        for name, ks, dz in (("back", back, 0.2), ("front", front, 0.3)):
-            ks = np.array(ks, dtype=int)
+        for name, picked, dz in (("back", back, 0.2), ("front", front, 0.3)):
+            ks = np.array(picked, dtype=int)
             widths = np.ravel(np.stack([rig.bone_width[ks] * pt_per_m + 2 * rim, rig.bone_width[ks] * pt_per_m], 1))
             colours = [c for k in ks for c in (_BG, cols[k])]
             lc = LineCollection(np.zeros((2 * len(ks), 2, 2)), colors=colours, linewidths=widths,
@@ -425,9 +420,9 @@ def _ground_artists(ax, actor: _Actor, x_range: tuple[float, float], ticks: bool
     half = 3.0 * actor.rig.stature
     s = np.arange(np.floor((along.min() - half) / 0.5) * 0.5, along.max() + half + 0.5, 0.5)
     t = np.arange(-1.5, 1.5 + 1e-9, 0.5)
-    segs = [np.stack([o + si * f + t[0] * lat, o + si * f + t[-1] * lat]) for si in s]
-    segs += [np.stack([o + s[0] * f + ti * lat, o + s[-1] * f + ti * lat]) for ti in t]
-    segs = _screen(np.array(segs), actor.basis)
+    lines = [np.stack([o + si * f + t[0] * lat, o + si * f + t[-1] * lat]) for si in s]
+    lines += [np.stack([o + s[0] * f + ti * lat, o + s[-1] * f + ti * lat]) for ti in t]
+    segs = _screen(np.array(lines), actor.basis)
     ax.add_collection(LineCollection(segs, colors="#c9c9c9", linewidths=0.8, zorder=z))
 
 
@@ -539,7 +534,7 @@ def filmstrip_image(
     fig, canvas = _new_figure(width, H)
     axes = []
     title = max(9.0, 0.075 * tallest * px_per_m * 72 / _DPI)
-    for i, (act, t, xy, shadow, lo, hi) in enumerate(geo):
+    for i, (act, t, xy, shadow, lo, _hi) in enumerate(geo):
         ax = _blank_axes(fig, (0, 1 - tops[i + 1] / H, 1, row_h[i] / H))
         x0 = lo[0] - margin
         y0 = lo[1] - 0.5 * margin
@@ -557,7 +552,7 @@ def filmstrip_image(
     image = _rgb(canvas)
     # geometry in pixel rows (top = 0), through the same transforms that drew the picture
     ground_px, lowest_px, row_px, contact = [], [], [], []
-    for i, ((act, t, xy, shadow, lo, hi), ax) in enumerate(zip(geo, axes)):
+    for i, ((act, t, xy, _shadow, _lo, _hi), ax) in enumerate(zip(geo, axes)):
         to_px = ax.transData.transform
         low = _lowest_drawn(act, xy)
         lowest_px.append(H - to_px(np.stack([np.zeros_like(low), low], -1))[:, 1])
@@ -620,7 +615,7 @@ class _VideoScene:
         """Sample every motion at the output times (T,) [s] and project, all frames at once."""
         self.times = np.asarray(times, dtype=float)
         self.tracks = []
-        for ax, act, fa, follow, clock in self.panels:
+        for _ax, act, _fa, follow, _clock in self.panels:
             m = act.motion
             snap = m.sample(self.times)
             p, R = act.body.world(snap)
@@ -635,7 +630,7 @@ class _VideoScene:
 
     def frame(self, k: int) -> np.ndarray:
         """(H, W, 3) uint8 image of output frame k (each motion clamped to its own end)."""
-        for (ax, act, fa, follow, clock), (xy, shadow, centre, clock_t) in zip(self.panels, self.tracks):
+        for (ax, _act, fa, _follow, clock), (xy, shadow, centre, clock_t) in zip(self.panels, self.tracks):
             fa.set(xy[k], shadow[k])
             c = centre[k]
             ax.set_xlim(c[0] - 0.5 * self.span_x, c[0] + 0.5 * self.span_x)
@@ -752,6 +747,7 @@ def _encode_mp4(ffmpeg: str, tmp: str, frames, fps: float, width: int, height: i
     linux = sys.platform.startswith("linux")
     proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             start_new_session=True, preexec_fn=_die_with_parent if linux else None)
+    assert proc.stdin is not None and proc.stderr is not None  # both are pipes
     try:
         try:
             for im in frames:
@@ -804,9 +800,10 @@ def render_video(
                 progress(k + 1, len(times))
 
     def write(tmp: str) -> None:
-        if mp4:
+        if ffmpeg is not None:
             _encode_mp4(ffmpeg, tmp, frames(), fps, scene.width, scene.height)
         else:
+            assert iio3 is not None
             # GIF delays are whole centiseconds; Pillow merges identical consecutive frames, so
             # frames are nudged apart only by their content (the clock text changes every frame)
             with iio3.imopen(tmp, "w", plugin="pillow", extension=".gif") as f:

@@ -6,7 +6,6 @@ l0, times in √(l0/g), angles in degrees.
 """
 from __future__ import annotations
 
-
 import numpy as np
 
 __all__ = ["plot_table", "plot_speed_profile"]

@@ -4,7 +4,9 @@ from __future__ import annotations
 import time
 
 from .common import (
+    MOTION_OUTPUTS,
     add_character_options,
+    add_data_option,
     add_force,
     add_fps,
     add_keep,
@@ -19,6 +21,7 @@ from .common import (
     character_kwargs,
     check_character,
     check_inputs,
+    data_output,
     guard_outputs,
     number,
     output_kwargs,
@@ -27,7 +30,6 @@ from .common import (
     say,
     speed,
 )
-from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Steps of a speed change, and of the steady parts around it, froude plans at most.
 MAX_STEPS = 500
@@ -37,14 +39,15 @@ PLOT_SUFFIXES = (".png",)
 
 
 #: The one-line summary ``froude --help`` lists.
-HELP = "speed up or slow down a run over some steps (transition table, paper 5.3)"
+HELP = "speed up or slow down a run over some steps (step-by-step plan on the simple machine, paper 5.3)"
 
 
 def register(sub) -> None:
     p = sub.add_parser(
         "accelerate", help=HELP,
-        description="Plan touchdown angles step by step so that the simple machine reaches a target speed "
-        "(a step is one stance and the flight after it), simulate it, time-warp the reference cycle onto "
+        description="Plan the touchdown angle of every step, and how hard the leg pushes where the angle alone "
+        "cannot change the speed, so that the simple machine reaches a target speed (a step is one stance and "
+        "the flight after it; each step solved on the simulator), time-warp the reference cycle onto "
         "the planned steps and correct the whole body with IK. Works for any character: the plan is "
         "dimensionless. Writes OUT.bvh (or .glb/.gltf) and OUT.report.json (with the per-step speed profile), "
         "and the plot "
@@ -70,7 +73,8 @@ def register(sub) -> None:
     p.add_argument("--policy", choices=("ease", "even"), default="ease",
                    help="speed profile: ease (smooth start and end, default) or even (equal change per step)")
     p.add_argument("--plot", default=None, metavar="PNG",
-                   help="also plot the speed profile (PNG) and the transition table (PNG-table.png beside it)")
+                   help="also plot the speed profile (PNG) and, as PNG-table.png beside it, the transition "
+                   "table of the start cycle: the next apex speed the touchdown angle alone reaches")
     add_fps(p)
     add_mass(p)
     add_force(p)
@@ -121,6 +125,7 @@ def run(args) -> int:
         raise PlanError(f"{e}; {_steady_range(prep, args)}") from None
     for note in res.notes:
         say(f"note: {note}", args.quiet)
+    assert res.report is not None  # the pipeline computes it by default
     fails = res.report.check_bars()
     if fails and not args.keep:
         say(f"froude accelerate: output not written: it misses physics bars ({'; '.join(fails)}); "

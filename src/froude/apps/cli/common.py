@@ -13,8 +13,8 @@ import math
 import sys
 from pathlib import Path
 
-from ...errors import FroudeError
 from ...body.presets import HEIGHT_RANGE_M, MASS_RANGE_KG, PART_SCALE_RANGE, list_presets
+from ...errors import FroudeError
 
 #: Reference body mass the fit assumes [kg] and its supported range.
 BODY_MASS_RANGE_KG = (20.0, 300.0)

@@ -13,7 +13,6 @@ from .common import (
     say,
 )
 
-
 #: The one-line summary ``froude --help`` lists.
 HELP = "convert a motion between BVH and glTF/GLB (skin, joints, animation, mannequin)"
 

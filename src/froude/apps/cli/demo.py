@@ -34,8 +34,8 @@ def register(sub) -> None:
 def run(args) -> int:
     from pathlib import Path
 
-    from ..demo import demo_files, run_demo
     from ...io.atomic import atomic_group
+    from ..demo import demo_files, run_demo
 
     check_inputs(args.clip)
     out = Path(args.output)

@@ -16,7 +16,6 @@ from .common import (
     say_loaded,
 )
 
-
 #: The one-line summary ``froude --help`` lists.
 HELP = "fit the simple machine (running: one spring leg; walking: two) to a running or walking clip"
 
@@ -62,10 +61,12 @@ def fit_table(res) -> str:
         f"a = {m.a:+.4f}  b = {m.b:+.4f}  c = {m.c:+.4f}  T_c = {m.T_c:.4f}   (l0 = {m.l0:.3f} m, m = {m.mass:g} kg)",
         f"        k = {m.k / 1000:.2f} kN/m, periodic to {m.periodicity:.1e} ({m.iterations} simulator calls), "
         f"peak leg force {m.peak_force:.2f} BW",
-        f"        stance {m.t_stance * T:.3f} s (measured {ref['stance_time_s']:.3f}, {100 * q['stance_time_error']:+.1f}%)"
-        f"  flight {m.t_flight * T:.3f} s (measured {ref['flight_time_s']:.3f}, {100 * q['flight_time_error']:+.1f}%)",
+        f"        stance {m.t_stance * T:.3f} s (measured {ref['stance_time_s']:.3f}, "
+        f"{100 * q['stance_time_error']:+.1f}%)  flight {m.t_flight * T:.3f} s (measured {ref['flight_time_s']:.3f}, "
+        f"{100 * q['flight_time_error']:+.1f}%)",
         f"        mean speed {m.mean_speed * m.speed_unit:.3f} m/s (measured {ref['mean_speed_m_s']:.3f}, "
-        f"{100 * q['mean_speed_error']:+.1f}%)  COM height RMS vs reference over a stride {100 * q['com_rms_m']:.2f} cm",
+        f"{100 * q['mean_speed_error']:+.1f}%)  COM height RMS vs reference over a stride "
+        f"{100 * q['com_rms_m']:.2f} cm",
         f"forces  flight residual {ref['flight_residual_bw']:.3f} BW RMS; share of stance force captured: "
         f"along the leg {100 * ref['shares']['leg']:.0f}%, vertical only {100 * ref['shares']['vertical']:.0f}%",
     ]
@@ -125,23 +126,26 @@ def walk_table(res) -> str:
         return f"{100 * x:+.1f}%"
 
     lines = [
-        f"walking machine  u = {m.u:.4f}  v = {m.v:+.4f}  d = {m.d:.4f}  s = {m.s:.4f}  θ0 = {math.degrees(m.theta0):.2f}°"
-        f"  l_td = {m.l_td:.4f}  roll = {m.roll:.4f}",
+        f"walking machine  u = {m.u:.4f}  v = {m.v:+.4f}  d = {m.d:.4f}  s = {m.s:.4f}  "
+        f"θ0 = {math.degrees(m.theta0):.2f}°  l_td = {m.l_td:.4f}  roll = {m.roll:.4f}",
         f"        control  K = {m.K:.2f}  a = {m.a:+.4f}  b = {m.b:+.4f}  c = {m.c:+.4f}  T_c = {m.T_c:.4f}"
         f"   (l0 = {m.l0:.3f} m, m = {m.mass:g} kg; periodic to {m.periodicity:.1e})",
         "",
         "                       clip    machine",
         f"stance [s]           {ref['stance_time_s']:6.3f}     {st:6.3f}  {pct(q['stance_time_error'])}",
-        f"double support [s]   {ref['double_support_s']:6.3f}     {m.t_double * T:6.3f}  {pct(q['double_support_error'])}",
-        f"speed [m/s]          {ref['mean_speed_m_s']:6.3f}     {m.mean_speed * m.speed_unit:6.3f}  {pct(q['mean_speed_error'])}",
+        f"double support [s]   {ref['double_support_s']:6.3f}     {m.t_double * T:6.3f}  "
+        f"{pct(q['double_support_error'])}",
+        f"speed [m/s]          {ref['mean_speed_m_s']:6.3f}     {m.mean_speed * m.speed_unit:6.3f}  "
+        f"{pct(q['mean_speed_error'])}",
         f"step time [s]        {ref['step_time_s']:6.3f}     {m.t_step * T:6.3f}",
     ]
     for key, name in (("peak1", "weight-acceptance peak"), ("trough", "trough"), ("peak2", "push-off peak")):
         lines.append(f"{name:<22} {fr[key]:5.2f} BW at {1e3 * fr['tau_' + key] * ref['stance_time_s']:4.0f} ms   "
                      f"{fm[key]:5.2f} BW at {1e3 * fm['tau_' + key] * st:4.0f} ms   "
                      f"({q[key + '_error_bw']:+.2f} BW, {pct(q[key + '_timing_error_step'])} of a step)")
-    lines.append(f"COM height RMS over {ref['n_steps']} complete steps: {100 * q['com_rms_m']:.2f} cm; force over a stance "
-                 f"RMS {q['force_profile_rms_bw']:.3f} BW (machine through the clip's {ref['filter']['cutoff_hz']:g} Hz filter)")
+    lines.append(f"COM height RMS over {ref['n_steps']} complete steps: {100 * q['com_rms_m']:.2f} cm; force over a "
+                 f"stance RMS {q['force_profile_rms_bw']:.3f} BW (machine through the clip's "
+                 f"{ref['filter']['cutoff_hz']:g} Hz filter)")
     return "\n".join(lines)
 
 

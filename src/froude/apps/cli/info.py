@@ -15,7 +15,6 @@ from .common import (
     load_clip,
 )
 
-
 #: The one-line summary ``froude --help`` lists.
 HELP = "summarise a BVH clip: skeleton, units, speed, Froude number, steps, phases"
 
@@ -95,8 +94,8 @@ def run(args) -> int:
     data = data_output(args)
     if data is not None:
         guard_outputs([data], [args.clip])
-    from ...body.model import BodyModel
     from ...body.gait import detect_gait, summarize
+    from ...body.model import BodyModel
 
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.json or args.quiet, args.joint_map,
                        args.up)
@@ -133,8 +132,10 @@ def run(args) -> int:
         ("flight times", _fmt_list(summary.flight_times) if summary.has_flight else "no flight phase"),
         ("step frequency", "n/a" if d["step_frequency_hz"] is None else f"{d['step_frequency_hz']:.3f} Hz"),
         ("step length", "n/a" if d["step_length_m"] is None else f"{d['step_length_m']:.3f} m"),
-        ("COM vertical excursion", f"{_n(d['com_vertical_excursion_m'] and 100 * d['com_vertical_excursion_m'], '.1f')} cm"),
-        ("double support", f"{_n(d['double_support_fraction'] and 100 * d['double_support_fraction'], '.0f')}% of frames"),
+        ("COM vertical excursion",
+         f"{_n(d['com_vertical_excursion_m'] and 100 * d['com_vertical_excursion_m'], '.1f')} cm"),
+        ("double support",
+         f"{_n(d['double_support_fraction'] and 100 * d['double_support_fraction'], '.0f')}% of frames"),
     ]
     width = max(len(k) for k, _ in rows)
     for k, v in rows:

@@ -6,7 +6,9 @@ from pathlib import Path
 
 from ...body.presets import list_presets
 from .common import (
+    MOTION_OUTPUTS,
     add_character_options,
+    add_data_option,
     add_force,
     add_fps,
     add_keep,
@@ -21,16 +23,16 @@ from .common import (
     character_kwargs,
     check_character,
     check_inputs,
+    data_output,
     guard_outputs,
-    number,
     load_clip,
+    number,
     output_kwargs,
     prepare_clip,
     print_rows,
     say,
     speed,
 )
-from .common import MOTION_OUTPUTS, add_data_option, data_output
 
 #: Output length options: strides [1, MAX_STRIDES], duration [s] up to MAX_DURATION_S.
 MAX_STRIDES = 10_000
@@ -45,9 +47,9 @@ def register(sub) -> None:
     p = sub.add_parser(
         "scale", help=HELP,
         description="Fit the simple machine to the clip, scale it to the character by dynamic similarity "
-        "(times x sqrt(L), speeds x sqrt(L)), change its speed by horizontal stretching, synthesise any "
-        "number of strides and correct the whole body with IK. Writes OUT.bvh or OUT.glb/.gltf (same joint names "
-        "and "
+        "(times x sqrt(L), speeds x sqrt(L)), change its speed (slower: horizontal stretching, paper 5.2; "
+        "faster: the machine's cycle re-solved with a shorter stance), synthesise any number of strides and "
+        "correct the whole body with IK. Writes OUT.bvh or OUT.glb/.gltf (same joint names and "
         "channel orders as the input, the target's bone lengths) and OUT.report.json (the physics report), "
         "both or neither. Every option is checked before the work starts; an output that would replace an "
         "input is refused.",
@@ -120,6 +122,7 @@ def run(args) -> int:
                           f"with every physics bar met this clip runs {rng.describe()} ({e})") from None
     for note in res.notes:
         say(f"note: {note}", args.quiet)
+    assert res.report is not None  # the pipeline computes it by default
     fails = res.report.check_bars() if args.method == "physical" else []
     if fails and not args.keep:
         rng = reachable_speed_range(prep, args.character, **character_kwargs(args))

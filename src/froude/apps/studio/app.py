@@ -271,7 +271,7 @@ class Tab:
     server itself for a tab without a browser, as in tests); client: the ClientHandle or None.
     """
 
-    def __init__(self, studio: "Studio", target, client=None, root: str = "/froude"):
+    def __init__(self, studio: Studio, target, client=None, root: str = "/froude"):
         self.studio, self.target, self.client, self.root_name = studio, target, client, root
         self.session: Session = studio.session
         self.clip_name = studio.clip_name
@@ -1211,7 +1211,7 @@ class Studio:
         port = self.server.get_port()
         return [f"http://{f'[{a}]' if ':' in a else a}:{port}" for a in reachable_addresses(self.server.get_host())]
 
-    def start(self) -> "Studio":
+    def start(self) -> Studio:
         self._player.start()
         return self
 

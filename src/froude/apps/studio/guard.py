@@ -34,7 +34,7 @@ def reachable_addresses(host: str) -> list[str]:
     found: list[str] = []
     try:
         for info in socket.getaddrinfo(socket.gethostname(), None, socket.AF_INET):
-            found.append(info[4][0])
+            found.append(str(info[4][0]))
     except OSError:
         pass
     found.append("127.0.0.1")
@@ -109,6 +109,7 @@ def install(server, port_of, bound: str, on_refused=None) -> set:
             return
         headers = raw.request.headers
         host, origin = headers.get_all("Host"), headers.get_all("Origin")
+        why: str | None = None
         if len(host) != 1 or len(origin) > 1:
             why = "repeated Host or Origin headers"
         else:

@@ -9,12 +9,14 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from ... import pipeline
 from ...body.characters import apply_character, list_presets, resolve_character
 from ...errors import FitError, FroudeError
+from ...result import Result
 from .tracks import Track, machine_track, motion_hash, reference_track
 
 MODES = ("scale", "accelerate")
@@ -85,7 +87,7 @@ class Params:
     to_factor: float = 1.1  # accelerate: goal = factor × the start speed
     steps: int = 16  # accelerate: steps the change takes
 
-    def check(self, presets=None) -> "Params":
+    def check(self, presets=None) -> Params:
         """Every value against its control's options and limits (``LIMITS``); the checked copy, or a
         one-line FroudeError saying which control, the value and the range. presets: the Character
         control's options (default: the shipped presets and "same") -- a character is only ever one of them,
@@ -96,7 +98,7 @@ class Params:
         if self.character not in options:
             raise FroudeError(f"Character must be one of the presets ({', '.join(options)}); "
                               f"got {str(self.character)[:40]!r}")
-        out = {}
+        out: dict[str, Any] = {}
         for name, lim in LIMITS.items():
             v = getattr(self, name)
             out[name] = None if v is None else lim.check(v)
@@ -119,7 +121,7 @@ class Solved:
 
     params: Params
     track: Track
-    result: object  # pipeline.Result | None
+    result: Result | None
     preview: bool
     seconds: float
     hash: str
@@ -158,6 +160,7 @@ class Session:
         spec, nums = params.character_args()
         plan = pipeline.plan_scale(self.prep, spec, speed=params.speed, strides=int(params.strides), **nums)
         retarget, path = plan.retarget, plan.path
+        assert path is not None  # the physical method (the studio has no naive preview)
         targets = pipeline.targets_of(self.prep, path, retarget)
         _require_finite(targets.initial)
         track = machine_track(targets.initial, retarget.body, path)
@@ -185,6 +188,7 @@ class Session:
             except FroudeError as e:
                 raise FroudeError(self._accelerate_message(params, e)) from None
         _require_finite(res.motion)
+        assert res.targets is not None  # a physical result
         # the corrected COM is the machine's (correct() makes it exact), so the track needs no COM pass
         track = machine_track(res.motion, res.retarget.body, res.path, body_com=res.targets.com)
         return Solved(params, track, res, False, time.perf_counter() - t0, motion_hash(res.motion),

@@ -11,12 +11,16 @@ import functools
 import hashlib
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ...constants import GRAVITY, UP_AXIS
 from ...core.kinematics import fk_soa, to_soa
 from ...core.motion import Motion
+
+if TYPE_CHECKING:
+    from ...body.model import BodyModel
 
 #: Every n-th frame of the COM path goes into the drawn trail (a trail needs no 120 Hz detail).
 TRAIL_STRIDE = 3
@@ -55,7 +59,7 @@ class Track:
     force_bw: np.ndarray
     body_com: np.ndarray
     loop_shift: np.ndarray
-    body: object = None  # froude.body.model.BodyModel of the runner (its capsules); None: lines only
+    body: BodyModel | None = None  # the runner's body model (its capsules); None: lines only
 
     @functools.cached_property
     def rig(self):
@@ -64,7 +68,7 @@ class Track:
 
         return build_rig(self.body)
 
-    def borrow_rig(self, other: "Track") -> bool:
+    def borrow_rig(self, other: Track) -> bool:
         """Draw with ``other``'s capsules scaled to this body's stature until this body's own rig is built
         (``exact_rig``): a new result reaches the page without the ~8 ms rig build. False when the
         skeletons differ in topology (then the rig is built now)."""
@@ -85,6 +89,7 @@ class Track:
         """Replace a borrowed rig by this body's own (and redo the capsules)."""
         from ...viz.render import build_rig
 
+        assert self.body is not None, "a track without a body draws lines only"
         self.__dict__["rig"] = build_rig(self.body)
         self.__dict__.pop("capsules", None)
         _ = self.capsules

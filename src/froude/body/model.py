@@ -252,6 +252,8 @@ class BodyModel:
     stature: float
     notes: tuple[str, ...] = field(default=())
 
+    # Long because de Leva's segments are placed in table order from one set of role lookups and rest
+    # positions, which every segment uses.
     @classmethod
     def from_skeleton(
         cls,

@@ -582,6 +582,8 @@ def _cached_plan(skel: Skeleton, body: BodyModel | None, frozen, w_pos: float, w
     return plan
 
 
+# Long because it builds the component-major index tables of the kernels, each derived from the ones
+# before it (needed → active → FK order → DOF columns → marker and COM rows).
 def _make_plan(skel: Skeleton, body: BodyModel | None, frozen: list[int], w_pos: float, w_rot: np.ndarray,
                mk_joint: np.ndarray, mk_local: np.ndarray, has_com: bool) -> _Plan:
     J = skel.n_joints
@@ -1085,6 +1087,8 @@ def _take_lower(L: np.ndarray, keep: np.ndarray) -> np.ndarray:
     return out
 
 
+# Long because the Gauss-Newton iteration (linearise, factorise, step, compact the working set) shares
+# its in-place buffers between stages; split, every stage would take a dozen arrays.
 def _solve_chunk(plan: _Plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, sw,
                  tol: float, step_tol: float, max_iters: int, max_step: float, refresh: bool,
                  start_is_reference: bool = False, q_start=None, fold=None):
@@ -1191,6 +1195,8 @@ def _solve_chunk(plan: _Plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, 
 
 
 # ---- the public entry point -------------------------------------------------------------------------
+# Long because it is the public entry: argument and task checks, the plan, the chunk loop and the
+# result assembly in the order a reader follows; the numerical work is in _solve_chunk and the kernels.
 def solve_ik(
     motion: Motion,
     tasks: Sequence,

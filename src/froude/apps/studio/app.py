@@ -259,9 +259,9 @@ def _page_script(title: str) -> str:
 
 
 def _js_str(s: str) -> str:
-    import json
+    from ...io.jsonable import dumps
 
-    return json.dumps(s).replace("<", "\\u003c")
+    return dumps(s).replace("<", "\\u003c")
 
 
 # ---- one browser tab ---------------------------------------------------------------------------------
@@ -409,6 +409,7 @@ class Tab:
             cs.look_at = look
 
     # ---- GUI
+    # Long because it is a flat list of the page's controls, one statement per widget, in page order.
     def _build_gui(self) -> None:
         gui = self.target.gui
         gui.configure_theme(control_width="large", show_logo=False)
@@ -1257,16 +1258,9 @@ class Studio:
 def serve(prep, *, host: str = "127.0.0.1", port: int = 8080, params: Params | None = None,
           open_browser: bool = False, announce=print) -> int:
     """Run the studio until Ctrl-C (or SIGTERM); returns 0 after a clean shutdown."""
-    import signal
+    from ..signals import interrupt_on_signals, restore_signals
 
-    def _interrupt(signum, frame):
-        raise KeyboardInterrupt
-
-    # Ctrl-C and SIGTERM both stop cleanly, even when started from a shell that ignores SIGINT in
-    # background jobs (signal handlers can only be set from the main thread)
-    old = {}
-    if threading.current_thread() is threading.main_thread():
-        old = {sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
+    old = interrupt_on_signals()  # Ctrl-C and SIGTERM both stop cleanly (apps.signals)
     studio = None
     try:
         studio = Studio(prep, host=host, port=port, params=params).start()
@@ -1285,6 +1279,5 @@ def serve(prep, *, host: str = "127.0.0.1", port: int = 8080, params: Params | N
     finally:
         if studio is not None:
             studio.stop()
-        for sig, handler in old.items():
-            signal.signal(sig, handler)
+        restore_signals(old)
     return 0

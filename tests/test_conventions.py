@@ -10,6 +10,7 @@ from __future__ import annotations
 import functools
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,7 +21,7 @@ from froude.body.model import BodyModel, find_roles
 from froude.io.bvh import load_bvh
 
 import rig_variants as rv
-from conftest import BANDAI_RUNS, MOCAP, RUNNING, clip, clip_params, read_bvh_oracle
+from conftest import BANDAI, BANDAI_RUNS, BANDAI_WALKS, MOCAP, RUNNING, clip, clip_params, read_bvh_oracle
 
 CMU_SCALE = 0.056444
 
@@ -181,6 +182,16 @@ def test_bandai_rig_reads_in_centimetres_at_human_size(name):
     assert set(trunk) <= spine
 
 
+def test_one_rig_reads_one_stature():
+    """The Bandai clips share one actor rig (leg 0.80 m); one export writes 10 cm end sites on the joints,
+    the others none. The head's end site falling short of its anthropometric extent is no head top: every
+    clip reads the same stature (before: dash_normal 1.42 m, the others 1.49 m)."""
+    if BANDAI is None:
+        pytest.skip("Bandai clips not found")
+    statures = {n: BodyModel.from_skeleton(load_bvh(clip(n)).skeleton).stature for n in BANDAI_RUNS + BANDAI_WALKS}
+    assert max(statures.values()) < 1.005 * min(statures.values()), statures
+
+
 def test_cmu_clips_keep_their_rest_pose_and_units():
     m = load_bvh(clip("09_01"))
     assert m.meta["length_scale"] == CMU_SCALE and m.skeleton.reference_pose is None
@@ -332,6 +343,36 @@ def test_z_up_file_is_written_z_up_and_reads_like_its_y_up_original(tmp_path, ru
     iy, iz = _info(str(outs["y"])), _info(str(outs["z"]))
     for key in ("speed", "height", "leg"):
         assert iz[key] == pytest.approx(iy[key], rel=0.01), key
+
+
+BLENDER_EXPORT = Path(__file__).parent / "fixtures" / "blender" / "09_01_blender_metres.bvh"
+
+
+def test_a_real_blender_export_reads_and_scales_like_its_original(tmp_path, run_cli):
+    """Issue 12 acceptance 4 on a file written by Blender itself (5.0.1, the bpy wheel; made by
+    tests/blender_bvh_export.py from the shipped 09_01): Z up, metres, six channels on every joint, frame time
+    to 6 decimals. ``info`` and ``scale --character child`` agree with the Y-up original; the output stays
+    in Blender's layout (measured: speed, step frequency, height, leg within 0.01 %)."""
+    from importlib.resources import files
+
+    original = str(files("froude") / "data" / "09_01.bvh")
+    ref, got = _info(original), _info(str(BLENDER_EXPORT))
+    for key in ("speed", "froude", "leg", "step_hz", "height"):
+        assert got[key] == pytest.approx(ref[key], rel=0.001), key
+    assert load_bvh(BLENDER_EXPORT).meta["up_axis"] == "Z"
+    reports = {}
+    for tag, path in (("y", original), ("blender", BLENDER_EXPORT)):
+        out = tmp_path / f"{tag}_child.bvh"
+        code, _, err = run_cli("scale", path, "--character", "child", "-o", out, "-q")
+        assert code == 0, err
+        reports[tag] = json.loads(out.with_suffix(".report.json").read_text(),
+                                  parse_constant=lambda c: pytest.fail(f"{c} in the report JSON"))
+    for key in ("mean_speed_m_s", "step_frequency_hz", "froude_U", "leg_length_m", "flight_gravity_m_s2",
+                "leg_stiffness_K"):
+        assert reports["blender"][key] == pytest.approx(reports["y"][key], rel=0.001), key
+    back = read_bvh_oracle(tmp_path / "blender_child.bvh")
+    assert back.names == read_bvh_oracle(BLENDER_EXPORT).names
+    assert load_bvh(tmp_path / "blender_child.bvh").meta["up_axis"] == "Z"
 
 
 def test_output_unit_rotations_only_and_frame_time(tmp_path, run_cli):

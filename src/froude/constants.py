@@ -12,3 +12,22 @@ UP_AXIS = 1
 UP = np.array([0.0, 1.0, 0.0])
 #: Gravity vector in world coordinates [m/s^2], shape (3,).
 G_WORLD = -GRAVITY * UP
+
+
+def heading_frame(heading: np.ndarray) -> np.ndarray:
+    """(3, 3) rows forward, up, lateral: unit vectors (world) of the heading frame of a travel direction.
+
+    heading: (3,) any vector with a horizontal part (its vertical part is dropped). lateral = forward × UP,
+    the runner's right: the one lateral sign of the package. The rows form a rotation (det +1), so
+    ``p_world = p_heading @ frame`` and ``p_heading = p_world @ frame.T``.
+    Raises FitError when the heading has no horizontal part.
+    """
+    fwd = np.asarray(heading, float).copy()
+    fwd[UP_AXIS] = 0.0
+    n = np.linalg.norm(fwd)
+    if not n > 0:
+        from .errors import FitError
+
+        raise FitError("no horizontal travel direction: cannot define the heading frame")
+    fwd /= n
+    return np.stack([fwd, UP, np.cross(fwd, UP)])

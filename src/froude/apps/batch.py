@@ -452,20 +452,17 @@ def _task_params(task: Task, plan: Plan) -> dict:
 
 def read_done(outdir, task: Task, plan: Plan) -> dict | None:
     """The index row stored by a complete earlier run of ``task``, or None (missing, partial or stale)."""
+    from ..io.jsonable import jsonable
     from ..pipeline import report_path
 
     bvh = Path(outdir) / task.output
     try:
         m = json.loads(marker_path(bvh).read_text())
-        ok = (m.get("schema") == MARKER_SCHEMA and m.get("params") == _jsonable(_task_params(task, plan))
+        ok = (m.get("schema") == MARKER_SCHEMA and m.get("params") == jsonable(_task_params(task, plan))
               and bvh.stat().st_size == m["bvh_bytes"] and report_path(bvh).stat().st_size == m["report_bytes"])
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return None
     return dict(m["row"]) if ok else None
-
-
-def _jsonable(x):
-    return json.loads(json.dumps(x))
 
 
 def is_temporary(name: str) -> bool:
@@ -522,6 +519,7 @@ def run_task(prepped: Prepped, task: Task, plan: Plan, outdir: str) -> dict:
     """Worker task: one variation of one prepared clip → BVH + report (atomic), done-marker last; its index row."""
     from .. import pipeline
     from ..io.bvh import atomic_write_text
+    from ..io.jsonable import dumps
 
     t0, c0 = time.perf_counter(), time.process_time()
     row = base_row(task)
@@ -543,7 +541,7 @@ def run_task(prepped: Prepped, task: Task, plan: Plan, outdir: str) -> dict:
     row["task_s"], row["task_cpu_s"] = time.perf_counter() - t0, time.process_time() - c0
     marker = {"schema": MARKER_SCHEMA, "params": _task_params(task, plan), "row": row,
               "bvh_bytes": bvh.stat().st_size, "report_bytes": rep.stat().st_size}
-    atomic_write_text(marker_path(out), json.dumps(_jsonable(marker), indent=1, allow_nan=True) + "\n")
+    atomic_write_text(marker_path(out), dumps(marker, indent=1) + "\n")  # strict JSON: NaN → null
     return row
 
 
@@ -610,7 +608,9 @@ def index_text(rows) -> str:
 
 
 def _cell(v) -> str:
-    if v is None:
+    """An index cell: empty for a figure that is absent or could not be measured (None, NaN: a done-marker
+    stores NaN as null, so a resumed row and a fresh one read the same)."""
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return ""
     if isinstance(v, float):
         return f"{v:.6g}"
@@ -708,23 +708,19 @@ def start_client(scheduler: str | None = None, n_workers: int | None = None):
             raise BatchError(f"cannot reach the Dask scheduler at {scheduler}: {e}".splitlines()[0]) from None
     import logging
     import signal
-    import threading
+
+    from .signals import ignoring
 
     n = n_workers or default_workers()
     env = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **WORKER_ENV}
     # Ctrl-C reaches the whole foreground process group: the worker processes ignore it (they inherit
     # SIG_IGN at spawn) and the driver alone stops the batch, cancels and closes the cluster.
-    main = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
-    try:
+    with ignoring(signal.SIGINT):
         with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
             # no dashboard; the scheduler's small HTTP server on a free port (8787 may be taken)
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
                                    scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                                    silence_logs=logging.CRITICAL)  # our rows carry every error
-    finally:
-        if main:
-            signal.signal(signal.SIGINT, previous)
     return Client(cluster), cluster
 
 
@@ -824,33 +820,30 @@ _NOISY_LOGGERS = ("tornado.application", "distributed", "asyncio")
 
 
 def _interrupt_handlers():
-    """SIGINT and SIGTERM → KeyboardInterrupt, Dask's teardown messages silenced (main thread only)."""
+    """SIGINT and SIGTERM → KeyboardInterrupt (``apps.signals``), Dask's teardown messages silenced when
+    one arrives; returns what ``_restore_handlers`` puts back."""
     import logging
-    import signal
-    import threading
 
-    if threading.current_thread() is not threading.main_thread():
-        return None
+    from .signals import interrupt_on_signals
+
     levels = {n: logging.getLogger(n).level for n in _NOISY_LOGGERS}
 
-    def stop(signum, frame):
+    def quiet():
         for n in _NOISY_LOGGERS:
             logging.getLogger(n).setLevel(logging.CRITICAL)
-        raise KeyboardInterrupt
 
-    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
-    return previous, levels
+    return interrupt_on_signals(quiet), levels
 
 
 def _restore_handlers(handlers) -> None:
     import logging
-    import signal
 
-    if handlers is None:
+    from .signals import restore_signals
+
+    if handlers is None:  # stopped before they were installed
         return
     previous, levels = handlers
-    for sig, h in previous.items():
-        signal.signal(sig, h)
+    restore_signals(previous)
     for n, level in levels.items():
         logging.getLogger(n).setLevel(level)
 
@@ -887,7 +880,9 @@ def _run_on_dask(tasks, todo, plan, outdir, summary, client, progress):
                     reason = f"{type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}"
                 except Exception as e:  # noqa: BLE001
                     reason = f"{fut.status}: {e}"
-                row = base_row(tasks[i], "failed", reason)
+                # the worker may have died after its done-marker (the last write): the task is then done
+                done = read_done(outdir, tasks[i], plan)
+                row = dict(done, status="ok", output=tasks[i].output) if done else base_row(tasks[i], "failed", reason)
             rows[i] = row
             summary.ran += 1
             n_ok += row["status"] == "ok"

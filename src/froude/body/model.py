@@ -252,6 +252,8 @@ class BodyModel:
     stature: float
     notes: tuple[str, ...] = field(default=())
 
+    # Long because de Leva's segments are placed in table order from one set of role lookups and rest
+    # positions, which every segment uses.
     @classmethod
     def from_skeleton(
         cls,
@@ -312,19 +314,27 @@ class BodyModel:
         # Head+neck: vertex -> C7. Vertex = head end site; C7 ≈ the neck joint (or the head joint).
         c7 = pos("neck") if "neck" in roles else pos("head")
         head_j = roles["head"]
+        vertex: np.ndarray | None = None
         if ("head_end" in roles or head_j in ends or "neck" not in roles
                 or any(np.linalg.norm(skeleton.offsets[c]) > 0 for c in skeleton.children(head_j))):
             vertex = end_point("head", "head_end", "neck" if "neck" in roles else "pelvis")
-        else:
-            # No point above the head joint: the vertex from de Leva's proportions, C7 -> vertex being
-            # 0.285 of the leg (hip -> ankle) along the neck -> head line.
+        if "neck" in roles and "head_end" not in roles:
+            # de Leva's proportions: C7 -> vertex is 0.285 of the leg (hip -> ankle), along neck -> head. It
+            # stands in when the rig marks no point above the head joint, and when its end site falls short
+            # of it: a nominal bone tip (one Bandai export writes 10 cm end sites, another none, and the
+            # same actor's rig then read 1.42 and 1.49 m), not the top of the head.
             leg_mean = np.mean([np.linalg.norm(pos(s + "_knee") - pos(s + "_hip"))
                                 + np.linalg.norm(pos(s + "_ankle") - pos(s + "_knee")) for s in SIDES])
             d = pos("head") - c7
             d = (d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9
                  else body_up(skeleton, rest, rest[0], rest[0] + np.eye(3)[UP_AXIS]))
-            vertex = c7 + 0.285 * leg_mean * d
-            notes.append(f"no end point for '{skeleton.names[head_j]}': the head vertex estimated from the leg length")
+            estimate = c7 + 0.285 * leg_mean * d
+            if vertex is None or (vertex - c7) @ d < (estimate - c7) @ d:
+                notes.append(f"no end point for '{skeleton.names[head_j]}'" if vertex is None else
+                             f"the end site of '{skeleton.names[head_j]}' falls short of the head's extent")
+                notes[-1] += ": the head vertex estimated from the leg length"
+                vertex = estimate
+        assert vertex is not None  # "neck" or "head_end" missing: the end point above
         add("head", roles["head"], vertex, c7, "head")
         # Trunk: three parts along mid-hip JC -> mid-shoulder JC, each fixed to the spine joint below it.
         mid_hip = 0.5 * (pos("left_hip") + pos("right_hip"))

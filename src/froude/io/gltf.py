@@ -230,6 +230,8 @@ def _accessor_array(gl, index: int) -> np.ndarray:
     return np.ascontiguousarray(rows).view(dtype).reshape(acc.count, n).astype(float)
 
 
+# Long because a foreign glTF is checked step by step (skin, joints, animation, samplers), each check
+# with its own one-line error naming what is missing.
 def load_gltf(path: str | os.PathLike, *, fps: float | None = None) -> Motion:
     """Read the first skin's skeleton and the first animation of a .glb/.gltf file as a Motion.
 

@@ -286,6 +286,8 @@ def _partial_step(px, py, vx, vy, ax1, ay1, s, tau0, invTc, K, a1, b, c):
     return pxn, pyn, vxn, vyn, g, gdot
 
 
+# Long because the batched RK4 loop with its event detection stays one body, line for line the twin of
+# _integrate_stance_scalar (the two must agree to 1e-12), with everything in locals (hot loop).
 def _integrate_stance(px, py, vx, vy, K, a, b, c, Tc, n_per_stance, max_stance):
     """Integrate stance for N rows from touchdown to liftoff (or failure).
 
@@ -471,6 +473,8 @@ def _integrate_stance(px, py, vx, vy, K, a, b, c, Tc, n_per_stance, max_stance):
             "reason": out_reason}
 
 
+# Long because it is the plain-float twin of _integrate_stance, kept line for line comparable with it
+# (hot loop: function calls per RK4 stage would cost more than the stage).
 def _integrate_stance_scalar(px, py, vx, vy, K, a, b, c, Tc, n_per_stance, max_stance,
                              record=False):
     """Single-row twin of :func:`_integrate_stance` in plain floats (no NumPy per-call overhead:
@@ -750,6 +754,8 @@ def _hermite(t0, t1, y0, d0, y1, d1, t):
             + (-2 * s3 + 3 * s2) * y1 + (s3 - s2) * hh * d1)
 
 
+# Long because stance nodes and flight parabolas are sampled in one loop over steps, which keeps the
+# sample order and the apex continuity between steps in one place.
 def simulate(U, H, theta0, control, dt, *, n_steps=None, n_per_stance=N_PER_STANCE,
              max_stance=MAX_STANCE_FACTOR, times=None):
     """Dense trajectory of the machine over a sequence of steps, for synthesis.

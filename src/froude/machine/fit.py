@@ -29,11 +29,11 @@ import numpy as np
 
 from ..body.gait import detect_gait, require_running, summarize
 from ..body.model import BodyModel
-from ..constants import GRAVITY, UP_AXIS
+from ..constants import GRAVITY, UP_AXIS, heading_frame
 from ..core.motion import Motion
 from ..errors import FitError, NotARunningMotion
 from .control_fit import fit_leg_control
-from .dynamics import N_PER_STANCE, REASONS, Control, simulate, step
+from .dynamics import N_PER_STANCE, Control, simulate, step
 from .forces import (
     CUTOFF_HZ,
     EVENT_THRESHOLD_BW,
@@ -41,11 +41,11 @@ from .forces import (
     force_shares,
     ground_force,
     refine_events,
-    sagittal_frame,
     smooth_com,
     stance_geometry,
 )
 from .model import SimpleMachine
+from .orbit import solve_orbit
 
 __all__ = ["StanceFit", "FitResult", "fit_stance_control", "fit_machine", "fit_machine_detailed",
            "CYCLE_SCALES", "SWAY_SAMPLES"]
@@ -195,14 +195,12 @@ def _stride_window(ev):
 
 
 def _cycle_search(z0, T_c, targets, n_per_stance, tol=1e-10, max_iter=30, n_coarse=16):
-    """Minimum-norm Newton for the periodic cycle matching targets (see module doc).
+    """The periodic cycle matching targets nearest the priors (``machine.orbit.solve_orbit``).
 
     z0: (7,) priors (U, H, θ0, K, a, b, c); T_c: held nominal stance time; targets: (t_stance, t_flight,
-    mean_speed), all dimensionless. Two phases keep the simulator calls cheap: Newton with a batched
-    forward-difference Jacobian on a coarse stance grid (``n_coarse`` RK4 steps) down to 1e-7, then
-    chord iterations at full resolution (``n_per_stance``) that reuse the last Jacobian and need only
-    the single-row step per iteration (a fresh full-resolution Jacobian only if the chord stalls).
-    Returns (z, StepResult row dict, simulator calls, residual vector).
+    mean_speed), all dimensionless: residual rows (U' − U, H' − H) and the three targets as relative
+    errors. Coarse stance grid (``n_coarse`` RK4 steps) down to 1e-7, then full resolution
+    (``n_per_stance``). Returns (z, StepResult row dict, simulator calls, residual vector).
     """
     s = np.array([CYCLE_SCALES[v] for v in _VARS])
     s[3] *= abs(z0[3])
@@ -219,51 +217,11 @@ def _cycle_search(z0, T_c, targets, n_per_stance, tol=1e-10, max_iter=30, n_coar
                       (r.apex_dx / t_step - tgt[2]) * wt[2]], axis=1)
         return R, r
 
-    def newton_target(z, J, R0):
-        Js = J * s[None, :]
-        y = (z - z0) / s
-        y_new, *_ = np.linalg.lstsq(Js, Js @ y - R0, rcond=1e-12)
-        return z0 + s * y_new
-
-    z = z0.copy()
-    z_prev, nrm_prev, J = None, np.inf, None
-    calls = 0
-    fine = False
-    nrm = np.inf
-    R = r = None
-    for _ in range(max_iter):
-        n = n_per_stance if fine else n_coarse
-        need_jac = (not fine) or J is None
-        Z = np.repeat(z[None, :], 8 if need_jac else 1, axis=0)
-        if need_jac:
-            Z[1 + np.arange(7), np.arange(7)] += h
-        R, r = evaluate(Z, n)
-        calls += 1
-        nrm = float(np.max(np.abs(R[0]))) if r.valid[0] else np.inf
-        if z_prev is not None and not nrm < nrm_prev:
-            if fine and not need_jac:
-                J = None  # the chord stalled: take a fresh full-resolution Jacobian here
-                z, z_prev, nrm_prev = z_prev, None, np.inf
-            else:
-                z = z_prev + 0.5 * (z - z_prev)  # rejected Newton step: halve it
-            continue
-        if fine and nrm <= tol:
-            break
-        if not fine and nrm <= 1e-7:
-            fine, z_prev, nrm_prev = True, None, np.inf  # coarse fixed point found; J kept for the chord
-            continue
-        if need_jac:
-            if not np.all(r.valid):
-                raise FitError("no running cycle found: the search left the feasible region "
-                               f"({REASONS[int(r.reason[~r.valid][0])]})")
-            J = ((R[1:] - R[0]) / h[:, None]).T  # (5, 7)
-        z_prev, nrm_prev = z, nrm
-        z = newton_target(z, J, R[0])
-    if not (fine and nrm <= tol):
-        raise FitError(f"no periodic running cycle found within {max_iter} simulator calls (residual {nrm:.2g})")
+    z, r, calls, R0 = solve_orbit(evaluate, z0, s, h, tol=tol, max_iter=max_iter,
+                                  resolutions=(n_coarse, n_per_stance))
     row = {f: np.asarray(getattr(r, f))[0] for f in ("t_fall", "t_stance", "t_rise", "apex_dx", "peak_force",
                                                     "U_next", "H_next")}
-    return z, row, calls, R[0]
+    return z, row, calls, R0
 
 
 def _upsampled(motion: Motion, body: BodyModel, fps: float) -> tuple[Motion, np.ndarray, np.ndarray]:
@@ -285,6 +243,9 @@ def _upsampled(motion: Motion, body: BodyModel, fps: float) -> tuple[Motion, np.
     return out, CubicSpline(t_src, com, axis=0)(t), CubicSpline(t_src, markers, axis=0)(t)
 
 
+# Long because the §4 fit is one sequential pass (events → stance geometry → control → priors → cycle →
+# reference comparisons) whose many intermediates all end up in FitResult; split, they would travel
+# between the pieces as a dozen loose arrays.
 def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: float = 70.0, *,
                          cutoff_hz: float = CUTOFF_HZ, n_per_stance: int = N_PER_STANCE,
                          source: str | None = None) -> FitResult:
@@ -324,7 +285,7 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     p, v, acc = smooth_com(com, dt, cutoff_hz)
     f = ground_force(acc, mass)
     fy_bw = f[:, UP_AXIS] / mg
-    heading, lateral = sagittal_frame(summary.heading)
+    heading, _, lateral = heading_frame(summary.heading)
 
     # Lateral COM line (least squares over the clip): sway and foot offsets are measured from it.
     lat = p @ lateral
@@ -376,8 +337,8 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         raise NotARunningMotion(f"{src}: no complete flight phase between two contacts")
     stance_time = float(np.mean([s.duration for s in full]))
     flight_time_measured = float(np.mean([b - a for a, b in flights]))
-    # The cycle's step time is the clip's own step period (the measure ``info`` prints, from sub-frame
-    # contacts over whole strides), so the output steps at the clip's cadence. Stance is the force-based
+    # The cycle's step time is the clip's own step period (the measure ``info`` prints, timed at midstance
+    # over whole strides), so the output steps at the clip's cadence. Stance is the force-based
     # one (what the machine's leg does); the flight is the rest of the step. Averaging stance and flight
     # over different sets of stances would not add up to the step period (the issue that made outputs
     # step 5 % off the clip).

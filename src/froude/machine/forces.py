@@ -22,8 +22,8 @@ crosses ``EVENT_THRESHOLD_BW`` = 0.5 body weights nearest the marker event (with
 ``EVENT_SEARCH_S``); if no crossing is found there, the marker event is kept.
 
 Frames: the machine is sagittal. The sagittal plane is spanned by the travel direction ``heading``
-(horizontal unit vector, world) and UP; ``lateral`` = UP × heading (the runner's left when the
-heading is +Z and up +Y). Sagittal coordinates: x = (p − origin) · heading, y = p · UP − ground.
+(horizontal unit vector, world) and UP; ``lateral`` = heading × UP, the runner's right
+(``constants.heading_frame``). Sagittal coordinates: x = (p − origin) · heading, y = p · UP − ground.
 """
 from __future__ import annotations
 
@@ -32,12 +32,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import G_WORLD, GRAVITY, UP, UP_AXIS
+from ..constants import G_WORLD, GRAVITY, UP_AXIS
 from ..errors import FitError
 
 __all__ = [
     "CUTOFF_HZ", "FILTER_ORDER", "EDGE_PAD_S", "EDGE_FIT_S", "EVENT_THRESHOLD_BW", "EVENT_SEARCH_S",
-    "smooth_com", "ground_force", "refine_events", "sagittal_frame", "StanceGeometry",
+    "smooth_com", "ground_force", "refine_events", "StanceGeometry",
     "stance_geometry", "force_shares", "flight_residual",
 ]
 
@@ -145,17 +145,6 @@ def smooth_com(p_world_com: np.ndarray, frame_time: float, cutoff_hz: float = CU
 def ground_force(a_world_com: np.ndarray, mass: float) -> np.ndarray:
     """Eq. 1: total ground force f = m (a_com − g) (F, 3) [N]; a_world_com (F, 3) [m/s²], mass [kg]."""
     return mass * (np.asarray(a_world_com, float) - G_WORLD)
-
-
-def sagittal_frame(heading: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(heading (3,), lateral (3,)) unit vectors: horizontal travel direction and UP × heading."""
-    h = np.asarray(heading, float).copy()
-    h[UP_AXIS] = 0.0
-    n = np.linalg.norm(h)
-    if not n > 0:
-        raise FitError("no horizontal travel direction: cannot define the sagittal plane")
-    h /= n
-    return h, np.cross(UP, h)
 
 
 def _crossing(fy_bw: np.ndarray, lo: int, hi: int, rising: bool, near: float) -> float | None:

@@ -55,7 +55,8 @@ class SimpleMachine:
       step_time; mean_speed = step_length/step_time; peak_force [m g]; periodicity = max |(U', H') −
       (U, H)| of the step map at the cycle; iterations of the search.
     SI: mass [kg], l0 [m] (mean touchdown leg length contact → COM), g [m/s²].
-    frame: heading (3,) travel direction, lateral (3,) = UP × heading, up (3,), ground [m] (median).
+    frame: heading (3,) travel direction, lateral (3,) = heading × UP (the runner's right, constants.heading_frame),
+    up (3,), ground [m] (median).
     lateral_foot_offset: (2,) [m] mean lateral offset of the left/right contact point from the COM line;
     lateral_sway: (N,) [m] mean lateral COM offset from its line over one stride, at lateral_sway_phase (N,)
       in [0, 1) of the reference stride (see reference["stride"]).

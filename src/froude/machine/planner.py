@@ -54,13 +54,13 @@ plan serves every dynamically similar character. SI appears only in :meth:`Speed
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
 from froude.errors import PlanError
-from froude.machine.cycle import LimitCycle, step_map_eigenvalues
 from froude.machine.dynamics import REASONS, Control, StepResult, Trajectory, fall_time, simulate, step
+from froude.machine.orbit import LimitCycle, cycle_record, step_map_eigenvalues
 
 __all__ = ["Comfort", "SpeedPlan", "plan_speed_change", "plan_speed_profile", "target_cycle",
            "one_step_range", "sustainable_range", "speed_fraction_at", "POLICIES", "ENERGY_MODES"]
@@ -193,24 +193,10 @@ def speed_fraction_at(plan: SpeedPlan, t) -> np.ndarray:
 
 
 # --- the cycle, in whatever form ----------------------------------------------------------------
-@dataclass(frozen=True)
-class _Cycle:
-    U: float
-    H: float
-    theta0: float
-    control: Control
-    t_stance: float
-    peak_force: float
-    step_time: float
-    t_fall: float
-    source: object = field(default=None, compare=False)
-
-
-def _as_cycle(cycle) -> _Cycle:
-    """A LimitCycle, a fitted SimpleMachine or anything with U, H, theta0, control, t_stance,
-    peak_force (dimensionless)."""
-    if isinstance(cycle, _Cycle):
-        return cycle
+def _as_cycle(cycle) -> LimitCycle:
+    """The start cycle as the one cycle record (``orbit.LimitCycle``), its durations, step and peak force
+    re-measured by the simulator (one source of truth for the bounds): from a LimitCycle, a fitted
+    SimpleMachine or anything with U, H, theta0, control (dimensionless)."""
     try:
         c = cycle.control
         ctl = Control(*(float(v) for v in c.as_tuple()))
@@ -219,22 +205,23 @@ def _as_cycle(cycle) -> _Cycle:
         raise PlanError(f"not a running cycle (needs U, H, theta0, control): {e}") from None
     if not all(math.isfinite(v) for v in (U, H, th, *ctl.as_tuple())) or U <= 0:
         raise PlanError(f"the start cycle is not a valid running cycle (U={U}, H={H})")
-    # durations and peak force from the simulator itself (one source of truth for the bounds)
     r = step(U, H, th, ctl)
     if not bool(r.valid):
         raise PlanError(f"the start cycle's step is invalid: {REASONS[int(r.reason)]}")
-    return _Cycle(U, H, th, ctl, float(r.t_stance), float(r.peak_force),
-                  float(r.t_fall + r.t_stance + r.t_rise), float(r.t_fall), cycle)
+    return LimitCycle(U=U, H=H, theta0=th, control=ctl, t_stance=float(r.t_stance), t_fall=float(r.t_fall),
+                      t_rise=float(r.t_rise), t_flight=float(r.t_rise + r.t_fall), step_length=float(r.apex_dx),
+                      step_time=float(r.t_fall + r.t_stance + r.t_rise), peak_force=float(r.peak_force),
+                      iterations=0, residual=0.0, eigenvalues=np.full(2, np.nan + 0j))
 
 
-def _bounds(cyc: _Cycle, comfort: Comfort, energy: str):
+def _bounds(cyc: LimitCycle, comfort: Comfort, energy: str):
     """((θ_lo, θ_hi), (b_lo, b_hi)) of the inputs."""
     th = (cyc.theta0 - comfort.theta_band, cyc.theta0 + comfort.theta_band)
     bb = comfort.b_band if energy == "b" else 0.0
     return th, (cyc.control.b - bb, cyc.control.b + bb)
 
 
-def _step_ok(r, cyc: _Cycle, comfort: Comfort):
+def _step_ok(r, cyc: LimitCycle, comfort: Comfort):
     """(N,) bool: valid step inside the comfort bounds (stance length, peak force, apex height)."""
     H_lo, H_hi = cyc.H + comfort.H_band[0], cyc.H + comfort.H_band[1]
     with np.errstate(invalid="ignore"):
@@ -243,7 +230,7 @@ def _step_ok(r, cyc: _Cycle, comfort: Comfort):
                 & (r.H_next >= H_lo - 1e-9) & (r.H_next <= H_hi + 1e-9))
 
 
-def _why_not(r, i, cyc: _Cycle, comfort: Comfort) -> str:
+def _why_not(r, i, cyc: LimitCycle, comfort: Comfort) -> str:
     """Reason text for row i of a StepResult failing :func:`_step_ok`."""
     if not r.valid[i]:
         return REASONS[int(r.reason[i])]
@@ -325,17 +312,6 @@ def _newton(resid, x0, lo, hi, free, *, tol=_TOL, max_iter=40, h=1e-7):
 
 
 # --- target cycle ---------------------------------------------------------------------------------
-def _cycle_from(U, H, th, ctl, residual, iterations=0, eigenvalues=True) -> LimitCycle:
-    """LimitCycle record of a periodic orbit found by the planner."""
-    r = step(U, H, th, ctl)
-    t_fall, t_rise, t_st = float(r.t_fall), float(r.t_rise), float(r.t_stance)
-    eig = step_map_eigenvalues(U, H, th, ctl) if eigenvalues else np.full(2, np.nan + 0j)
-    return LimitCycle(U=U, H=H, theta0=th, control=ctl, t_stance=t_st, t_fall=t_fall, t_rise=t_rise,
-                      t_flight=t_fall + t_rise, step_length=float(r.apex_dx),
-                      step_time=t_fall + t_st + t_rise, peak_force=float(r.peak_force),
-                      iterations=iterations, residual=float(residual), eigenvalues=eig)
-
-
 def _theta_of(H, tau):
     """Touchdown angle [rad] for apex height H and apex → touchdown fall time τ: cos θ0 = H − τ²/2.
     NaN where that height is above the leg length (H − τ²/2 > 1) or not positive.
@@ -352,7 +328,7 @@ def _theta_of(H, tau):
 _ORBIT_SCALES = np.array([0.05, 0.01, 0.02])
 
 
-def _orbit(cyc: _Cycle, U_t, prior, energy, comfort):
+def _orbit(cyc: LimitCycle, U_t, prior, energy, comfort):
     """Periodic orbit at apex speed U_t nearest prior (τ, b, H) in the scaled norm (minimum-norm
     Newton from the prior; scales _ORBIT_SCALES). energy "b": τ, b and H free; "theta": b fixed.
     Returns (LimitCycle or None, problems list)."""
@@ -372,12 +348,12 @@ def _orbit(cyc: _Cycle, U_t, prior, energy, comfort):
         why = "the search left the valid region" if R is None else f"residual {np.max(np.abs(R)):.2g}"
         return None, [f"no periodic orbit within the bounds ({why})"]
     tau, b, H = x * s
-    lc = _cycle_from(float(U_t), float(H), float(_theta_of(H, tau)), replace(ctl, b=float(b)),
+    lc = cycle_record(float(U_t), float(H), float(_theta_of(H, tau)), replace(ctl, b=float(b)),
                      np.max(np.abs(R)), eigenvalues=False)
     return lc, _orbit_problems(lc, cyc, comfort, energy)
 
 
-def _orbit_problems(lc, cyc: _Cycle, comfort: Comfort, energy: str) -> list:
+def _orbit_problems(lc, cyc: LimitCycle, comfort: Comfort, energy: str) -> list:
     """Comfort violations of an orbit, relative to the start cycle."""
     probs = []
     th_b, _ = _bounds(cyc, comfort, energy)
@@ -391,7 +367,7 @@ def _orbit_problems(lc, cyc: _Cycle, comfort: Comfort, energy: str) -> list:
     return probs
 
 
-def _orbits(cyc: _Cycle, U_nodes, energy: str, comfort: Comfort, H_prior=None):
+def _orbits(cyc: LimitCycle, U_nodes, energy: str, comfort: Comfort, H_prior=None):
     """Continuation of periodic orbits through U_nodes from the start cycle (apex height prior
     H_prior, default the cycle's); yields (U, LimitCycle or None, problems), stops at the first
     failure."""
@@ -524,6 +500,8 @@ def _shoot(U0, H0, t0, tau, b, ctl):
     return U, H, t, th, res, True
 
 
+# Long because the multiple-shooting problem's unknown layout (index offsets iT, iB, iU, iH, it_, ih_) is
+# shared by its residual, Jacobian and unpacking closures; split apart they would each re-derive it.
 def _optimise_change(cyc, U0, H0, t0, n, U_ref, prior, H_t, mode, comfort, tau_start=None,
                      max_iter=80):
     """Inputs of n change steps from apex (U0, H0) at t0, by constrained Gauss–Newton on the exact
@@ -568,6 +546,8 @@ def _optimise_change(cyc, U0, H0, t0, n, U_ref, prior, H_t, mode, comfort, tau_s
         t = np.r_[t0, z[it_:it_ + n]]
         return tau, b, U, H, t
 
+    # Long because the constraints, soft residuals and their Jacobian columns are evaluated from one batch of
+    # perturbed steps, indexed by the shared unknown layout above.
     def evaluate(z, jac=False, h=1e-6):
         """Constraints c, soft residuals r (and their Jacobians) at z; None if a step is invalid."""
         tau, b, U, H, t = parts(z)
@@ -1048,7 +1028,7 @@ def _change_steps(cyc, out, n, U_ref, target, mode, comfort, table, policy):
             raise _StepFail(start + k, U, H, U_ref(k, t_next), _why_not(r, (), cyc, comfort))
         _record(out, th, float(b[k]), r, CHANGE, float(U_ref(k, t_next)))
     if target is None:
-        target = _cycle_from(out["U"][-1], out["H"][-1], float(th_h), cyc.control, 0.0)
+        target = cycle_record(out["U"][-1], out["H"][-1], float(th_h), cyc.control, 0.0)
         probs = _orbit_problems(target, cyc, comfort, mode)
         if probs:
             raise PlanError("the orbit the theta0-only steps end on is not comfortable: " + "; ".join(probs))

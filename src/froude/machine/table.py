@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from froude.errors import PlanError
+from froude.io.jsonable import dumps
 from froude.machine.dynamics import N_PER_STANCE, Control, fall_time, step
 
 __all__ = ["TABLE_VERSION", "TableGrid", "TransitionTable", "TableLookup", "grid_around",
@@ -217,7 +218,7 @@ class TransitionTable:
 
         def write(tmp):
             with open(tmp, "wb") as fh:
-                np.savez(fh, meta=np.array(json.dumps(meta)), valid=self.valid, reason=self.reason,
+                np.savez(fh, meta=np.array(dumps(meta)), valid=self.valid, reason=self.reason,
                          **{f: getattr(self, f) for f in _VALUE_FIELDS})
 
         atomic_write(path, write)
@@ -246,7 +247,7 @@ def table_key(control, grid, n_per_stance=N_PER_STANCE):
                         [float(grid.H[0]).hex(), float(grid.H[1]).hex(), int(grid.H[2])],
                         [float(grid.theta0[0]).hex(), float(grid.theta0[1]).hex(), int(grid.theta0[2])]],
                "n_per_stance": int(n_per_stance)}
-    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
+    return hashlib.sha256(dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
 
 
 def default_cache_dir():

@@ -40,11 +40,11 @@ import numpy as np
 
 from ..body.gait import detect_gait, summarize
 from ..body.model import BodyModel
-from ..constants import GRAVITY, UP_AXIS
+from ..constants import GRAVITY, UP_AXIS, heading_frame
 from ..core.motion import Motion
 from ..errors import FitError, NotARunningMotion
 from .dynamics import Control
-from .forces import CUTOFF_HZ, ground_force, sagittal_frame, smooth_com
+from .forces import CUTOFF_HZ, ground_force, smooth_com
 from .walk_model import WalkingMachine
 from .walking import N_PER_STANCE, REASONS, WalkState, record_step, simulate_walk, walk_step
 
@@ -365,6 +365,8 @@ def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_un
     return sol.x, float(sol.cost)
 
 
+# Long because, like fit.fit_machine_detailed, the walking fit is one sequential pass whose intermediates
+# all end up in the WalkFitResult.
 def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: float = 70.0, *,
                          cutoff_hz: float = CUTOFF_HZ, n_per_stance: int = N_PER_STANCE,
                          source: str | None = None) -> WalkFitResult:
@@ -388,7 +390,7 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     times = np.arange(F) * dt
     p, v, acc = smooth_com(com, dt, cutoff_hz)
     f = ground_force(acc, mass)
-    heading, lateral = sagittal_frame(summary.heading)
+    heading, _, lateral = heading_frame(summary.heading)
 
     x_fwd = p @ heading
     geo, stances = [], []

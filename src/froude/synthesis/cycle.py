@@ -18,7 +18,7 @@ import numpy as np
 
 from ..body.gait import Gait
 from ..body.model import BodyModel
-from ..constants import UP, UP_AXIS
+from ..constants import UP_AXIS, heading_frame
 from ..core import quat
 from ..core.motion import Motion
 from ..errors import FitError
@@ -27,15 +27,6 @@ from ..errors import FitError
 CYCLE_SAMPLES = 240
 #: A loaded foot marker is held still while within this fraction of the leg length of its lowest point.
 SLIDE_BAND_L = 0.022
-
-
-def heading_frame(heading: np.ndarray) -> np.ndarray:
-    """(3, 3) rows = forward, up, lateral unit vectors (world) for a horizontal travel direction."""
-    fwd = np.asarray(heading, float).copy()
-    fwd[UP_AXIS] = 0.0
-    fwd /= np.linalg.norm(fwd)
-    lat = np.cross(fwd, UP)
-    return np.stack([fwd, UP, lat])
 
 
 def min_jerk(u: np.ndarray) -> np.ndarray:
@@ -152,6 +143,8 @@ def _durations(events: list[FootEvent], first_foot: int, frame_time: float) -> n
     return out
 
 
+# Long because it is one pass over the clip (phases, per-phase averages, loop closure, contact phases)
+# whose intermediates are the cycle's own fields.
 def extract_cycle(
     motion: Motion,
     body: BodyModel,

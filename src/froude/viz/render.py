@@ -107,6 +107,7 @@ class Rig:
         return points_world(p_world_joint, R_world_joint, self.point_joint, self.point_local)
 
 
+# Long because capsule sides, ends and radii come from one walk over the bones with shared lookups.
 def build_rig(body: BodyModel) -> Rig:
     """The capsules of a skeleton: bones parent→child, minus fingers and zero-length bones.
 
@@ -483,6 +484,7 @@ def snapshot_times(duration: float, interval: float) -> np.ndarray:
     return np.arange(n) * interval
 
 
+# Long because the rows share one scale, spacing and figure layout computed across all motions first.
 def filmstrip_image(
     motions: Sequence[Motion],
     labels: Sequence[str] | None = None,

@@ -179,11 +179,10 @@ def default_frozen_joints(body: BodyModel, reference: Motion | None = None, free
     return [int(j) for j in np.flatnonzero(frozen)]
 
 
-def _resolve_frozen(skel: Skeleton, body: BodyModel, freeze, reference: Motion) -> list[int]:
-    if freeze is None or (isinstance(freeze, str) and freeze == "auto"):
-        return default_frozen_joints(body, reference)
-    if isinstance(freeze, str) and freeze == "auto+head":
-        return default_frozen_joints(body, reference, freeze_head=True)
+def _resolve_frozen(skel: Skeleton, body: BodyModel | None, freeze, reference: Motion) -> list[int]:
+    if freeze is None or (isinstance(freeze, str) and freeze in ("auto", "auto+head")):
+        body = BodyModel.from_skeleton(skel) if body is None else body  # the default freeze needs the roles
+        return default_frozen_joints(body, reference, freeze_head=freeze == "auto+head")
     out = set()
     for f in freeze:
         if isinstance(f, str):
@@ -293,6 +292,7 @@ def _make_plan(skel: Skeleton, body: BodyModel | None, frozen: list[int], w_pos:
     needed = np.zeros(J, bool)
     needed[0] = True
     if has_com:
+        assert body is not None, "a COM task needs the body model"
         needed[body.seg_joint] = True
     needed[mk_joint] = True
     active = np.ones(J, bool)
@@ -365,6 +365,7 @@ def _make_plan(skel: Skeleton, body: BodyModel | None, frozen: list[int], w_pos:
                 i2 = np.searchsorted(groups[g2].joints, common)
                 pairs.append((g1, g2, i1, i2))
     if has_com:
+        assert body is not None
         seg_all = np.asarray(body.seg_joint, np.int64)
         seg_local, seg_mass = np.asarray(body.seg_local, float), np.asarray(body.seg_mass, float)
     else:
@@ -381,10 +382,10 @@ def _make_plan(skel: Skeleton, body: BodyModel | None, frozen: list[int], w_pos:
     fold_parents = np.zeros(len(fold_orig) + 1, np.int64)
     fold_parents[0] = -1
     attach_of = np.zeros(J, np.int64)  # per folded joint: its attach joint (sub numbering)
-    for i, j in enumerate(fold_orig):
-        pj = skel.parents[j]
+    for i, jf in enumerate(fold_orig):
+        pj = skel.parents[jf]
         fold_parents[i + 1] = in_fold[pj] if folded[pj] else 0
-        attach_of[j] = attach_of[pj] if folded[pj] else new[pj]
+        attach_of[jf] = attach_of[pj] if folded[pj] else new[pj]
     fold_attach = np.unique(attach_of[fold_orig])
     seg_fold = folded[seg_all]
     seg_joint = np.where(seg_fold, attach_of[seg_all], new[seg_all])  # the FK joint carrying each segment
@@ -508,10 +509,13 @@ class _FK:
                  fold: np.ndarray | None = None):
         Jn, F = len(plan.parents), rot_T.shape[-1]
         self.fold = fold  # (Na, 3, F) ``_fold_moments`` of the frames (needed by _evaluate when the plan folds)
+        #: (Jn, 3, F) each FK joint's own segments' first mass moment [kg m], set by ``_evaluate(moments=True)``
+        self.s_own: np.ndarray | None = None
         K = len(plan.act)
         self.plan = plan
         self.F = F
         self.K = K
+        self.n: int = F  # frames of the current working set (``_view``)
         # Local rotations of all FK joints in one (9, K + frozen, F) store, entry-major so that each
         # conversion step writes one contiguous block: the active joints first (rewritten every call), then
         # the frozen ones (converted once); plan.fk_levels index it.
@@ -534,7 +538,7 @@ class _FK:
     def area(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
         """The work area ``name`` as a contiguous (*shape, n) array over the current n frames."""
         off, rows = self._regions[name]
-        n = getattr(self, "n", self.F)
+        n = self.n
         size = int(np.prod(shape, dtype=np.int64)) * n
         assert size <= rows * self.F
         return self._work[off:off + size].reshape(*shape, n)
@@ -593,15 +597,17 @@ def _evaluate(plan: _Plan, root_T, rot_T, tr_T, fk: _FK, q_act=None, moments: bo
         a = plan.fold_attach
         if moments:
             s_own = fk.area("s_own", (Jn, 3)) if "s_own" in fk._regions else None
-            fk.s_own = np.matmul(plan.w_own, T, out=s_own)  # (Jn, 3, F): one stacked matrix product
+            own = fk.s_own = np.matmul(plan.w_own, T, out=s_own)  # (Jn, 3, F): one stacked matrix product
             if len(a):  # folded subtrees: R_a v_a + m_a p_a at their attach joints a
+                assert fk.fold is not None  # a plan that folds gets the fold moments
                 fold = np.einsum("arcf,acf->arf", T[a, :9].reshape(len(a), 3, 3, F), fk.fold)
                 fold += plan.fold_mass[:, None, None] * T[a, 9:]
-                fk.s_own[a] += fold
-            np.add.reduce(fk.s_own, axis=0, out=x[0])
+                own[a] += fold
+            np.add.reduce(own, axis=0, out=x[0])
         else:  # Σ_j W_own,j T_j + Σ_a m_a p_a in one product, plus Σ_a R_a v_a
             np.matmul(plan.w_com, T.reshape(Jn * 12, F), out=x[0])
             if len(a):
+                assert fk.fold is not None  # a plan that folds gets the fold moments
                 x[0] += np.einsum("arcf,acf->rf", T[a, :9].reshape(len(a), 3, 3, F), fk.fold)
         x[0] *= 1.0 / plan.m_sub[0]
     if len(plan.mk_joint):  # the markers: one stacked matrix product over their joints' FK rows
@@ -730,11 +736,11 @@ def _linearize(plan: _Plan, P, R, x, sw, s_own=None, fk=None) -> _Lin:
     pairs, row = [], 0
     for U in levers:
         g, u = U.shape[:2]
-        c = pair_rows[row:row + 6 * g * u].reshape(g, u, 2, 3, F)
+        cross = pair_rows[row:row + 6 * g * u].reshape(g, u, 2, 3, F)
         row += 6 * g * u
-        np.take(U, _CYC[::-1], axis=2, out=c, mode="clip")  # [ũ[a+2], ũ[a+1]] ...
-        np.negative(c[:, :, 1], out=c[:, :, 1])  # ... [ũ[a+2], −ũ[a+1]]
-        pairs.append(c)
+        np.take(U, _CYC[::-1], axis=2, out=cross, mode="clip")  # [ũ[a+2], ũ[a+1]] ...
+        np.negative(cross[:, :, 1], out=cross[:, :, 1])  # ... [ũ[a+2], −ũ[a+1]]
+        pairs.append(cross)
     L = _cholesky_soa(A)
     return _Lin(pairs, Ra.reshape(K, 3, 3, F), L, _block_inverses(L, inv))
 
@@ -983,9 +989,9 @@ def solve_ik(
         mk_w = np.concatenate(wl, axis=1)
         if np.any((mk_joint < 0) | (mk_joint >= J)):
             raise IkError("marker joint index out of range")
-    for what, a in (("COM target", com_target), ("marker targets", mk_target)):
-        if a is not None and not np.all(np.isfinite(a)):
-            f = int(np.flatnonzero(~np.all(np.isfinite(a.reshape(F, -1)), axis=1))[0])
+    for what, given in (("COM target", com_target), ("marker targets", mk_target)):
+        if given is not None and not np.all(np.isfinite(given)):
+            f = int(np.flatnonzero(~np.all(np.isfinite(given.reshape(F, -1)), axis=1))[0])
             raise IkError(f"{what} are not finite at frame {f}")
     if not (np.all(np.isfinite(motion.rotations)) and np.all(np.isfinite(motion.root_positions))):
         raise IkError("the input motion is not finite")
@@ -1003,14 +1009,14 @@ def solve_ik(
     posture_dev = np.zeros(F)
     failed = np.zeros(F, bool)
     chunk = max(1, int(chunk))
-    has_tr = motion.translations is not None
+    trans = motion.translations  # (F, J, 3) or None
     start_is_reference = ref_pose is motion and ref_root is motion
     for a in range(0, F, chunk):
         b = min(F, a + chunk)
         root_T = np.ascontiguousarray(out_root[a:b].T)
         # the FK joints' input rotations as a (Jn, 4, f) view: only the frozen ones are read, once
         rot_T = np.take(motion.rotations[a:b], plan.sub, axis=1).transpose(1, 2, 0)
-        tr_T = np.ascontiguousarray(motion.translations[a:b, plan.sub].transpose(1, 2, 0)) if has_tr else None
+        tr_T = np.ascontiguousarray(trans[a:b, plan.sub].transpose(1, 2, 0)) if trans is not None else None
         ref_root_T = np.ascontiguousarray(ref_root.root_positions[a:b].T)
         ref_act = _soa_quats(ref_pose.rotations[a:b], plan.act_orig)
         if ref_root is not ref_pose:
@@ -1018,17 +1024,17 @@ def solve_ik(
         q_start = ref_act if start_is_reference else _soa_quats(motion.rotations[a:b], plan.act_orig)
         target = np.empty((npts, 3, b - a))
         sw = np.empty((npts, b - a))
-        if com_task is not None:
+        if com_target is not None and com_w is not None:
             target[0] = com_target[a:b].T
             sw[0] = np.sqrt(com_w[a:b])
-        if len(mk_joint):
+        if mk_target is not None and mk_w is not None:
             target[npts - len(mk_joint):] = mk_target[a:b, plan.mk_order].transpose(1, 2, 0)
             sw[npts - len(mk_joint):] = np.sqrt(mk_w[a:b, plan.mk_order].T)
         its, conv, x, dev, q_act = _solve_chunk(plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, sw,
                                                 tol, step_tol, max_iters, max_step, refresh_jacobian,
                                                 start_is_reference, q_start,
                                                 _fold_moments(plan, motion.rotations[a:b],
-                                                              motion.translations[a:b] if has_tr else None))
+                                                              trans[a:b] if trans is not None else None))
         iterations[a:b] = its
         converged[a:b] = conv
         posture_dev[a:b] = dev
@@ -1069,13 +1075,13 @@ def solve_ik(
     out = motion.with_(root_positions=out_root, rotations=out_rot, meta=meta)
     com_err = errors[:, 0] if com_task is not None else None
     mk_err = errors[:, npts - len(mk_joint):] if len(mk_joint) else None
-    residuals = {}
+    residuals: dict[str, np.ndarray] = {}
     if com_task is not None:
-        residuals[com_task.name] = com_err
+        residuals[com_task.name] = errors[:, 0]
     off = 0
     for t in markers:
         Pm = len(np.asarray(t.joints).reshape(-1))
-        residuals[t.name] = mk_err[:, off:off + Pm].max(axis=1)
+        residuals[t.name] = errors[:, npts - len(mk_joint) + off:npts - len(mk_joint) + off + Pm].max(axis=1)
         off += Pm
     residuals[posture.name] = posture_dev
     residuals[root.name] = np.linalg.norm(out_root - ref_root.root_positions, axis=1)

@@ -338,8 +338,8 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         raise NotARunningMotion(f"{src}: no complete flight phase between two contacts")
     stance_time = float(np.mean([s.duration for s in full]))
     flight_time_measured = float(np.mean([b - a for a, b in flights]))
-    # The cycle's step time is the clip's own step period (the measure ``info`` prints, from sub-frame
-    # contacts over whole strides), so the output steps at the clip's cadence. Stance is the force-based
+    # The cycle's step time is the clip's own step period (the measure ``info`` prints, timed at midstance
+    # over whole strides), so the output steps at the clip's cadence. Stance is the force-based
     # one (what the machine's leg does); the flight is the rest of the step. Averaging stance and flight
     # over different sets of stances would not add up to the step period (the issue that made outputs
     # step 5 % off the clip).

@@ -12,7 +12,8 @@ from ..body.model import BodyModel
 from ..constants import UP_AXIS
 from ..core.motion import Motion
 from ..synthesis.targets import COM_WEIGHT, Targets
-from .solver import DEFAULT_JOINT_WEIGHT, DEFAULT_MAX_ERROR, ComTask, MarkerTask, PostureTask, RootTask, solve_ik
+from .solver import DEFAULT_MAX_ERROR, solve_ik
+from .tasks import DEFAULT_JOINT_WEIGHT, ComTask, MarkerTask, PostureTask, RootTask
 
 #: IK stops a frame when every weighted error is below this [m], after at most IK_ITERS steps; the COM is
 #: then made exact by shifting the root (a root translation moves the COM one to one).
@@ -57,6 +58,7 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
                    max_iters=IK_ITERS)
     held = _held_markers(targets)
     res = _replace(res, failed=_missed(res, held, DEFAULT_MAX_ERROR))
+    assert res.com_error is not None and res.com is not None  # the ComTask is always given
     rot = res.motion.rotations
     init_jump = _largest_joint_angle_deg(targets.initial.rotations[1:], targets.initial.rotations[:-1])
     jump = _largest_joint_angle_deg(rot[1:], rot[:-1])
@@ -98,6 +100,7 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
         from ..errors import IkError
 
         f = int(np.flatnonzero(res.failed)[0])
+        assert res.com_error is not None  # the ComTask is always given
         raise IkError(f"IK cannot reach its targets at frame {f} (COM error {1000 * res.com_error[f]:.1f} mm)")
     return res
 

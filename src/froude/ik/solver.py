@@ -50,196 +50,31 @@ import numpy as np
 
 from ..body.model import BodyModel
 from ..core import quat
-from ..core.kinematics import _quat_rows, com_jacobian, forward_kinematics, joint_depths, point_jacobian
+from ..core.kinematics import _quat_rows, joint_depths
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from ..errors import IkError
+from .kernels import _CYC, _block_inverses, _cho_solve_soa, _cholesky_soa, _exp_soa, _log_err_soa, _qmul_soa, _soa_quats
+from .tasks import (
+    ComTask,
+    MarkerTask,
+    PostureTask,
+    RootTask,
+    _rows,
+)
 
 __all__ = [
     "ComTask", "MarkerTask", "PostureTask", "RootTask", "IkResult", "solve_ik",
     "default_frozen_joints", "max_joint_step", "dof_weights",
 ]
 
-# Defaults, tuned on the real clips (see benchmarks/bench_ik.py and tests/test_ik.py).
-DEFAULT_JOINT_WEIGHT = 1e-4  # [1/rad²] posture pull per joint
-DEFAULT_ROOT_POSITION_WEIGHT = 1e-4  # [1/m²]
-DEFAULT_ROOT_ORIENTATION_WEIGHT = 1e-4  # [1/rad²]
+# Defaults of the solver, tuned on the real clips (the task weights' are in ik.tasks).
 DEFAULT_TOL = 1e-3  # [m] a frame is done when every COM/marker error is below this ("imperceptible")
 DEFAULT_STEP_TOL = 1e-6  # [rad or m] ... or when its largest DOF increment is below this
 DEFAULT_MAX_ITERS = 4
 DEFAULT_MAX_ERROR = 0.02  # [m] a frame whose COM or marker error stays above this has failed
 DEFAULT_MAX_STEP = 0.5  # [rad or m] largest DOF increment applied in one iteration (trust region)
 DEFAULT_CHUNK = 2048  # frames processed together (memory stays O(chunk), cache-friendly rows)
-
-
-def _rows(w, F: int, shape: tuple[int, ...], what: str) -> np.ndarray:
-    """Broadcast a weight given as a scalar or array to (F, *shape), checking it is finite and >= 0."""
-    w = np.asarray(w, dtype=float)
-    try:
-        if w.ndim and w.shape[0] == F and w.ndim == len(shape) + 1:
-            out = np.broadcast_to(w, (F,) + shape)
-        else:
-            out = np.broadcast_to(w, shape)
-            out = np.broadcast_to(out, (F,) + shape)
-    except ValueError:
-        raise IkError(f"{what}: weight of shape {w.shape} does not fit (F={F}, {shape})") from None
-    if not np.all(np.isfinite(out)) or np.any(out < 0):
-        raise IkError(f"{what}: weights must be finite and >= 0")
-    return out
-
-
-# ---- tasks -------------------------------------------------------------------------------------------
-@dataclass(frozen=True, eq=False)
-class ComTask:
-    """Move the whole-body centre of mass to ``target``.
-
-    body: the body model (segment masses) of the motion's skeleton.
-    target: (F, 3) desired COM [m].
-    weight: scalar or (F,) [1/m²].
-    """
-
-    body: BodyModel
-    target: np.ndarray
-    weight: float | np.ndarray = 1.0
-    name: str = "com"
-
-    def current(self, motion: Motion) -> np.ndarray:
-        """(F, 3) COM of the motion [m]."""
-        return self.body.com(motion)
-
-    def error(self, motion: Motion) -> np.ndarray:
-        """(F, 3) target − current [m]."""
-        return np.asarray(self.target, float) - self.current(motion)
-
-    def jacobian(self, motion: Motion) -> np.ndarray:
-        """(F, 3, 3 + 3J) d COM / d q in the DOF layout of ``kinematics``."""
-        p, R = forward_kinematics(motion.skeleton, motion.root_positions, motion.rotations, motion.translations)
-        seg = self.body.segment_points(p, R)
-        return com_jacobian(motion.skeleton, p, R, self.body.seg_mass, self.body.seg_joint, seg)[1]
-
-
-@dataclass(frozen=True, eq=False)
-class MarkerTask:
-    """Move P points fixed in joint frames (markers) to targets.
-
-    joints: (P,) joint each marker is fixed to; p_local: (P, 3) marker in that joint's frame [m];
-    target: (F, P, 3) desired positions [m]; weight: scalar, (P,) or (F, P) [1/m²].
-    """
-
-    joints: np.ndarray
-    p_local: np.ndarray
-    target: np.ndarray
-    weight: float | np.ndarray = 1.0
-    name: str = "markers"
-
-    @classmethod
-    def feet(cls, body: BodyModel, target: np.ndarray, weight: float | np.ndarray = 1.0,
-             name: str = "feet") -> MarkerTask:
-        """The body model's three markers per foot.
-
-        target: (F, 2, 3, 3) [m], (left, right) x (ankle, toe, toe end) x xyz, as ``BodyModel.foot_markers``.
-        weight: scalar, (2,) per foot, (2, 3) per marker, (F, 2) per frame and foot or (F, 2, 3) [1/m²].
-        """
-        target = np.asarray(target, float)
-        if target.ndim != 4 or target.shape[1:] != (2, 3, 3):
-            raise IkError(f"foot marker targets must be (F, 2, 3, 3); got {target.shape}")
-        F = target.shape[0]
-        w = np.asarray(weight, float)
-        if w.shape == (2,) or (w.ndim == 2 and w.shape == (F, 2) and w.shape != (2, 3)):
-            w = w[..., None]
-        w = _rows(w, F, (2, 3), name).reshape(F, 6)
-        return cls(body.marker_joint.reshape(6), body.marker_local.reshape(6, 3), target.reshape(F, 6, 3), w, name)
-
-    def current(self, motion: Motion) -> np.ndarray:
-        """(F, P, 3) marker positions of the motion [m]."""
-        p, R = forward_kinematics(motion.skeleton, motion.root_positions, motion.rotations, motion.translations)
-        return p[:, self.joints] + np.einsum("fpab,pb->fpa", R[:, self.joints], np.asarray(self.p_local, float))
-
-    def error(self, motion: Motion) -> np.ndarray:
-        """(F, P, 3) target − current [m]."""
-        return np.asarray(self.target, float) - self.current(motion)
-
-    def jacobian(self, motion: Motion) -> np.ndarray:
-        """(F, P, 3, 3 + 3J) d marker / d q."""
-        p, R = forward_kinematics(motion.skeleton, motion.root_positions, motion.rotations, motion.translations)
-        x = self.current(motion)
-        return point_jacobian(motion.skeleton, p, R, np.asarray(self.joints), x)
-
-
-def _log_rotation_error(q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
-    """Local rotation vectors (..., 3) [rad] taking q to q_ref by right-multiplication: log(q⁻¹ q_ref)."""
-    return quat.to_rotvec(quat.mul(quat.conj(q), q_ref))
-
-
-@dataclass(frozen=True, eq=False)
-class PostureTask:
-    """Pull the joint rotations (joints 1..J-1) toward a reference pose.
-
-    weight: scalar, (J,) per joint (entry 0 unused: the root orientation is the RootTask's) or a mapping
-        joint name -> weight (others get ``DEFAULT_JOINT_WEIGHT``) [1/rad²]. Must be > 0 for active joints.
-    reference: the reference motion (same skeleton and frame count); None = the motion given to solve_ik.
-    """
-
-    weight: float | np.ndarray | Mapping[str, float] = DEFAULT_JOINT_WEIGHT
-    reference: Motion | None = None
-    name: str = "posture"
-
-    def weights(self, skeleton: Skeleton) -> np.ndarray:
-        """(J,) per-joint weights [1/rad²]."""
-        J = skeleton.n_joints
-        if isinstance(self.weight, Mapping):
-            w = np.full(J, DEFAULT_JOINT_WEIGHT)
-            for n, v in self.weight.items():
-                if n not in skeleton.names:
-                    raise IkError(f"posture weight for unknown joint '{n}'")
-                w[skeleton.names.index(n)] = v
-        else:
-            w = np.broadcast_to(np.asarray(self.weight, float), (J,)).copy()
-        if not np.all(np.isfinite(w[1:])) or np.any(w[1:] <= 0):
-            raise IkError("posture weights must be finite and > 0 (freeze a joint instead of a zero weight)")
-        return w
-
-    def error(self, motion: Motion) -> np.ndarray:
-        """(F, J, 3) local rotation vectors [rad] from the current rotations to the reference's (joint 0 zero)."""
-        ref = motion if self.reference is None else self.reference
-        e = _log_rotation_error(motion.rotations, ref.rotations)
-        e[:, 0] = 0.0
-        return e
-
-    def jacobian(self, motion: Motion) -> np.ndarray:
-        """(F, 3J, 3 + 3J) selection of the joint rotation increments (rows of joint 0 zero)."""
-        F, J = motion.n_frames, motion.skeleton.n_joints
-        jac = np.zeros((3 * J, 3 + 3 * J))
-        jac[3:, 6:] = np.eye(3 * J - 3)
-        return np.broadcast_to(jac, (F,) + jac.shape)
-
-
-@dataclass(frozen=True, eq=False)
-class RootTask:
-    """Pull the root translation and orientation toward the reference.
-
-    position_weight [1/m²], orientation_weight [1/rad²]: both > 0.
-    reference: None = the motion given to solve_ik.
-    """
-
-    position_weight: float = DEFAULT_ROOT_POSITION_WEIGHT
-    orientation_weight: float = DEFAULT_ROOT_ORIENTATION_WEIGHT
-    reference: Motion | None = None
-    name: str = "root"
-
-    def error(self, motion: Motion) -> np.ndarray:
-        """(F, 6): reference − current root position [m], then local rotation vector to the reference [rad]."""
-        ref = motion if self.reference is None else self.reference
-        return np.concatenate(
-            [ref.root_positions - motion.root_positions,
-             _log_rotation_error(motion.rotations[:, 0], ref.rotations[:, 0])], axis=-1)
-
-    def jacobian(self, motion: Motion) -> np.ndarray:
-        """(F, 6, 3 + 3J): selection of the root translation and root rotation increments."""
-        F, J = motion.n_frames, motion.skeleton.n_joints
-        jac = np.zeros((6, 3 + 3 * J))
-        jac[:, :6] = np.eye(6)
-        return np.broadcast_to(jac, (F,) + jac.shape)
 
 
 # ---- result ------------------------------------------------------------------------------------------
@@ -344,11 +179,10 @@ def default_frozen_joints(body: BodyModel, reference: Motion | None = None, free
     return [int(j) for j in np.flatnonzero(frozen)]
 
 
-def _resolve_frozen(skel: Skeleton, body: BodyModel, freeze, reference: Motion) -> list[int]:
-    if freeze is None or (isinstance(freeze, str) and freeze == "auto"):
-        return default_frozen_joints(body, reference)
-    if isinstance(freeze, str) and freeze == "auto+head":
-        return default_frozen_joints(body, reference, freeze_head=True)
+def _resolve_frozen(skel: Skeleton, body: BodyModel | None, freeze, reference: Motion) -> list[int]:
+    if freeze is None or (isinstance(freeze, str) and freeze in ("auto", "auto+head")):
+        body = BodyModel.from_skeleton(skel) if body is None else body  # the default freeze needs the roles
+        return default_frozen_joints(body, reference, freeze_head=freeze == "auto+head")
     out = set()
     for f in freeze:
         if isinstance(f, str):
@@ -369,139 +203,6 @@ def dof_weights(skeleton: Skeleton, posture: PostureTask, root: RootTask) -> tup
     if not (root.position_weight > 0 and root.orientation_weight > 0):
         raise IkError("root weights must be > 0")
     return float(root.position_weight), w
-
-
-# ---- component-major (SOA) helpers ---------------------------------------------------------------------
-def _qmul_soa(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None, conj_a: bool = False) -> np.ndarray:
-    """Hamilton product of quaternion rows a, b (4, ...) -> (4, ...) (conj(a) b with ``conj_a``), written into
-    ``out`` when given (which must not overlap a or b)."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    if out is None:
-        out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    t = np.empty(out.shape[1:])
-    flip = -1 if conj_a else 1  # conj(a) negates the terms of ax, ay, az
-    # each row left to right, as written: w = aw bw − ax bx − ay by − az bz, ...
-    for o, terms in ((out[0], ((aw, bw, 1), (ax, bx, -flip), (ay, by, -flip), (az, bz, -flip))),
-                     (out[1], ((aw, bx, 1), (ax, bw, flip), (ay, bz, flip), (az, by, -flip))),
-                     (out[2], ((aw, by, 1), (ax, bz, -flip), (ay, bw, flip), (az, bx, flip))),
-                     (out[3], ((aw, bz, 1), (ax, by, flip), (ay, bx, -flip), (az, bw, flip)))):
-        np.multiply(terms[0][0], terms[0][1], out=o)
-        for u, v, sgn in terms[1:]:
-            np.multiply(u, v, out=t)
-            if sgn > 0:
-                o += t
-            else:
-                o -= t
-    return out
-
-
-def _log_err_soa(q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
-    """log(q⁻¹ q_ref) for rows (4, ...) -> (3, ...) [rad] (the shorter way round: q and −q are one rotation)."""
-    d = _qmul_soa(q, q_ref, conj_a=True)
-    w, v = d[0], d[1:]
-    s = np.sqrt(np.einsum("a...,a...->...", v, v))
-    half = np.arctan2(s, np.abs(w))  # half the angle
-    small = s < 1e-12
-    if small.any():
-        scale = np.where(small, 1.0, half / np.where(small, 1.0, s))
-    else:
-        scale = np.divide(half, s, out=half)
-    scale *= 2.0
-    np.negative(scale, out=scale, where=w < 0)
-    v *= scale
-    return v
-
-
-def _exp_soa(v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """Quaternion rows (4, ...) of rotation vectors (3, ...) [rad], written into ``out`` when given."""
-    if out is None:
-        out = np.empty((4,) + v.shape[1:])
-    angle = v[0] * v[0]
-    t = np.multiply(v[1], v[1], out=out[1])
-    angle += t
-    np.multiply(v[2], v[2], out=t)
-    angle += t
-    np.sqrt(angle, out=angle)
-    half = np.multiply(angle, 0.5, out=out[2])
-    np.cos(half, out=out[0])
-    small = angle < 1e-8
-    if small.any():
-        scale = np.where(small, 0.5 - angle * angle / 48.0, np.sin(half) / np.where(small, 1.0, angle))
-    else:
-        scale = np.sin(half, out=out[3])
-        scale /= angle
-    np.multiply(v[0], scale, out=out[1])
-    np.multiply(v[1], scale, out=out[2])
-    np.multiply(v[2], scale, out=out[3])
-    return out
-
-
-def _soa_quats(rotations: np.ndarray, joints: np.ndarray) -> np.ndarray:
-    """(4, K, F) contiguous quaternion rows of the joints ``joints`` (K,) of rotations (F, J, 4)."""
-    F = rotations.shape[0]
-    g = np.take(rotations, joints, axis=1).reshape(F, 4 * len(joints)).T.copy()  # (K·4, F)
-    return g.reshape(len(joints), 4, F).transpose(1, 0, 2).copy()
-
-
-def _cholesky_soa(A: np.ndarray) -> np.ndarray:
-    """Lower Cholesky factor of a batch of SPD matrices stored (m, m, F) (frame axis last), written over
-    A's lower triangle (returned: A itself; its strict upper triangle is neither read nor written). One
-    NumPy call works on whole (k, F) blocks; no second m × m × F array is touched."""
-    m = A.shape[0]
-    L = A
-    for j in range(m):
-        if j:  # column j from the diagonal down, less its products with the columns done (one einsum)
-            L[j:, j] -= np.einsum("ikf,kf->if", L[j:, :j], L[j, :j])
-        d = np.sqrt(L[j, j], out=L[j, j])
-        if j < m - 1:
-            L[j + 1:, j] /= d
-    return L
-
-
-def _block_inverses(L: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """(nb, 3, 3, F) inverses of the 3 × 3 diagonal blocks of lower Cholesky factors L (3 nb, 3 nb, F): lower
-    triangular, from the closed-form inverse of a triangular 3 × 3 matrix, all blocks at once (written into
-    ``out`` when given)."""
-    nb, F = L.shape[0] // 3, L.shape[2]
-    i = 3 * np.arange(nb)
-    inv = np.empty((nb, 3, 3, F)) if out is None else out
-    inv[:, 0, 1:] = 0.0
-    inv[:, 1, 2] = 0.0
-    for k in range(3):
-        np.divide(1.0, L[i + k, i + k], out=inv[:, k, k])
-    inv[:, 1, 0] = -L[i + 1, i] * inv[:, 0, 0] * inv[:, 1, 1]
-    inv[:, 2, 1] = -L[i + 2, i + 1] * inv[:, 1, 1] * inv[:, 2, 2]
-    inv[:, 2, 0] = -(L[i + 2, i] * inv[:, 0, 0] + L[i + 2, i + 1] * inv[:, 1, 0]) * inv[:, 2, 2]
-    return inv
-
-
-def _cho_solve_soa(L: np.ndarray, inv: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solve L Lᵀ x = b for (m, m, F) lower factors and (m, F) right-hand sides, by 3 × 3 blocks (one task
-    point each; ``inv``: ``_block_inverses(L)``): per block and sweep one einsum against the solved blocks
-    and one with the block's inverse, instead of three NumPy calls per row."""
-    nb, F = L.shape[0] // 3, b.shape[1]
-    r = np.empty((3, F))
-    y = np.empty_like(b)
-    for B in range(nb):  # L y = b
-        s = slice(3 * B, 3 * B + 3)
-        if B:
-            np.subtract(b[s], np.einsum("ikf,kf->if", L[s, :s.start], y[:s.start]), out=r)
-        np.einsum("ikf,kf->if", inv[B], r if B else b[s], out=y[s])
-    x = y  # Lᵀ x = y from the bottom up: block B of y is read before it is written
-    for B in range(nb - 1, -1, -1):
-        s = slice(3 * B, 3 * B + 3)
-        if B < nb - 1:
-            np.subtract(y[s], np.einsum("kif,kf->if", L[s.stop:, s], x[s.stop:]), out=r)
-        else:
-            r[:] = y[s]
-        np.einsum("kif,kf->if", inv[B], r, out=x[s])
-    return x
-
-
-#: Cyclic axis pairs (a + 1, a + 2) mod 3 for a = x, y, z: gathering a vector's rows with these gives the
-#: (2, 3) layout that ``_Lin.pairs`` contracts with (v × u over all three axes in one einsum).
-_CYC = np.array([[1, 2, 0], [2, 0, 1]])
 
 
 # ---- the solver plan: which joints, which levers ------------------------------------------------------
@@ -591,6 +292,7 @@ def _make_plan(skel: Skeleton, body: BodyModel | None, frozen: list[int], w_pos:
     needed = np.zeros(J, bool)
     needed[0] = True
     if has_com:
+        assert body is not None, "a COM task needs the body model"
         needed[body.seg_joint] = True
     needed[mk_joint] = True
     active = np.ones(J, bool)
@@ -663,6 +365,7 @@ def _make_plan(skel: Skeleton, body: BodyModel | None, frozen: list[int], w_pos:
                 i2 = np.searchsorted(groups[g2].joints, common)
                 pairs.append((g1, g2, i1, i2))
     if has_com:
+        assert body is not None
         seg_all = np.asarray(body.seg_joint, np.int64)
         seg_local, seg_mass = np.asarray(body.seg_local, float), np.asarray(body.seg_mass, float)
     else:
@@ -679,10 +382,10 @@ def _make_plan(skel: Skeleton, body: BodyModel | None, frozen: list[int], w_pos:
     fold_parents = np.zeros(len(fold_orig) + 1, np.int64)
     fold_parents[0] = -1
     attach_of = np.zeros(J, np.int64)  # per folded joint: its attach joint (sub numbering)
-    for i, j in enumerate(fold_orig):
-        pj = skel.parents[j]
+    for i, jf in enumerate(fold_orig):
+        pj = skel.parents[jf]
         fold_parents[i + 1] = in_fold[pj] if folded[pj] else 0
-        attach_of[j] = attach_of[pj] if folded[pj] else new[pj]
+        attach_of[jf] = attach_of[pj] if folded[pj] else new[pj]
     fold_attach = np.unique(attach_of[fold_orig])
     seg_fold = folded[seg_all]
     seg_joint = np.where(seg_fold, attach_of[seg_all], new[seg_all])  # the FK joint carrying each segment
@@ -806,10 +509,13 @@ class _FK:
                  fold: np.ndarray | None = None):
         Jn, F = len(plan.parents), rot_T.shape[-1]
         self.fold = fold  # (Na, 3, F) ``_fold_moments`` of the frames (needed by _evaluate when the plan folds)
+        #: (Jn, 3, F) each FK joint's own segments' first mass moment [kg m], set by ``_evaluate(moments=True)``
+        self.s_own: np.ndarray | None = None
         K = len(plan.act)
         self.plan = plan
         self.F = F
         self.K = K
+        self.n: int = F  # frames of the current working set (``_view``)
         # Local rotations of all FK joints in one (9, K + frozen, F) store, entry-major so that each
         # conversion step writes one contiguous block: the active joints first (rewritten every call), then
         # the frozen ones (converted once); plan.fk_levels index it.
@@ -832,7 +538,7 @@ class _FK:
     def area(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
         """The work area ``name`` as a contiguous (*shape, n) array over the current n frames."""
         off, rows = self._regions[name]
-        n = getattr(self, "n", self.F)
+        n = self.n
         size = int(np.prod(shape, dtype=np.int64)) * n
         assert size <= rows * self.F
         return self._work[off:off + size].reshape(*shape, n)
@@ -891,15 +597,17 @@ def _evaluate(plan: _Plan, root_T, rot_T, tr_T, fk: _FK, q_act=None, moments: bo
         a = plan.fold_attach
         if moments:
             s_own = fk.area("s_own", (Jn, 3)) if "s_own" in fk._regions else None
-            fk.s_own = np.matmul(plan.w_own, T, out=s_own)  # (Jn, 3, F): one stacked matrix product
+            own = fk.s_own = np.matmul(plan.w_own, T, out=s_own)  # (Jn, 3, F): one stacked matrix product
             if len(a):  # folded subtrees: R_a v_a + m_a p_a at their attach joints a
+                assert fk.fold is not None  # a plan that folds gets the fold moments
                 fold = np.einsum("arcf,acf->arf", T[a, :9].reshape(len(a), 3, 3, F), fk.fold)
                 fold += plan.fold_mass[:, None, None] * T[a, 9:]
-                fk.s_own[a] += fold
-            np.add.reduce(fk.s_own, axis=0, out=x[0])
+                own[a] += fold
+            np.add.reduce(own, axis=0, out=x[0])
         else:  # Σ_j W_own,j T_j + Σ_a m_a p_a in one product, plus Σ_a R_a v_a
             np.matmul(plan.w_com, T.reshape(Jn * 12, F), out=x[0])
             if len(a):
+                assert fk.fold is not None  # a plan that folds gets the fold moments
                 x[0] += np.einsum("arcf,acf->rf", T[a, :9].reshape(len(a), 3, 3, F), fk.fold)
         x[0] *= 1.0 / plan.m_sub[0]
     if len(plan.mk_joint):  # the markers: one stacked matrix product over their joints' FK rows
@@ -1028,11 +736,11 @@ def _linearize(plan: _Plan, P, R, x, sw, s_own=None, fk=None) -> _Lin:
     pairs, row = [], 0
     for U in levers:
         g, u = U.shape[:2]
-        c = pair_rows[row:row + 6 * g * u].reshape(g, u, 2, 3, F)
+        cross = pair_rows[row:row + 6 * g * u].reshape(g, u, 2, 3, F)
         row += 6 * g * u
-        np.take(U, _CYC[::-1], axis=2, out=c, mode="clip")  # [ũ[a+2], ũ[a+1]] ...
-        np.negative(c[:, :, 1], out=c[:, :, 1])  # ... [ũ[a+2], −ũ[a+1]]
-        pairs.append(c)
+        np.take(U, _CYC[::-1], axis=2, out=cross, mode="clip")  # [ũ[a+2], ũ[a+1]] ...
+        np.negative(cross[:, :, 1], out=cross[:, :, 1])  # ... [ũ[a+2], −ũ[a+1]]
+        pairs.append(cross)
     L = _cholesky_soa(A)
     return _Lin(pairs, Ra.reshape(K, 3, 3, F), L, _block_inverses(L, inv))
 
@@ -1281,9 +989,9 @@ def solve_ik(
         mk_w = np.concatenate(wl, axis=1)
         if np.any((mk_joint < 0) | (mk_joint >= J)):
             raise IkError("marker joint index out of range")
-    for what, a in (("COM target", com_target), ("marker targets", mk_target)):
-        if a is not None and not np.all(np.isfinite(a)):
-            f = int(np.flatnonzero(~np.all(np.isfinite(a.reshape(F, -1)), axis=1))[0])
+    for what, given in (("COM target", com_target), ("marker targets", mk_target)):
+        if given is not None and not np.all(np.isfinite(given)):
+            f = int(np.flatnonzero(~np.all(np.isfinite(given.reshape(F, -1)), axis=1))[0])
             raise IkError(f"{what} are not finite at frame {f}")
     if not (np.all(np.isfinite(motion.rotations)) and np.all(np.isfinite(motion.root_positions))):
         raise IkError("the input motion is not finite")
@@ -1301,14 +1009,14 @@ def solve_ik(
     posture_dev = np.zeros(F)
     failed = np.zeros(F, bool)
     chunk = max(1, int(chunk))
-    has_tr = motion.translations is not None
+    trans = motion.translations  # (F, J, 3) or None
     start_is_reference = ref_pose is motion and ref_root is motion
     for a in range(0, F, chunk):
         b = min(F, a + chunk)
         root_T = np.ascontiguousarray(out_root[a:b].T)
         # the FK joints' input rotations as a (Jn, 4, f) view: only the frozen ones are read, once
         rot_T = np.take(motion.rotations[a:b], plan.sub, axis=1).transpose(1, 2, 0)
-        tr_T = np.ascontiguousarray(motion.translations[a:b, plan.sub].transpose(1, 2, 0)) if has_tr else None
+        tr_T = np.ascontiguousarray(trans[a:b, plan.sub].transpose(1, 2, 0)) if trans is not None else None
         ref_root_T = np.ascontiguousarray(ref_root.root_positions[a:b].T)
         ref_act = _soa_quats(ref_pose.rotations[a:b], plan.act_orig)
         if ref_root is not ref_pose:
@@ -1316,17 +1024,17 @@ def solve_ik(
         q_start = ref_act if start_is_reference else _soa_quats(motion.rotations[a:b], plan.act_orig)
         target = np.empty((npts, 3, b - a))
         sw = np.empty((npts, b - a))
-        if com_task is not None:
+        if com_target is not None and com_w is not None:
             target[0] = com_target[a:b].T
             sw[0] = np.sqrt(com_w[a:b])
-        if len(mk_joint):
+        if mk_target is not None and mk_w is not None:
             target[npts - len(mk_joint):] = mk_target[a:b, plan.mk_order].transpose(1, 2, 0)
             sw[npts - len(mk_joint):] = np.sqrt(mk_w[a:b, plan.mk_order].T)
         its, conv, x, dev, q_act = _solve_chunk(plan, root_T, rot_T, tr_T, ref_root_T, ref_act, target, sw,
                                                 tol, step_tol, max_iters, max_step, refresh_jacobian,
                                                 start_is_reference, q_start,
                                                 _fold_moments(plan, motion.rotations[a:b],
-                                                              motion.translations[a:b] if has_tr else None))
+                                                              trans[a:b] if trans is not None else None))
         iterations[a:b] = its
         converged[a:b] = conv
         posture_dev[a:b] = dev
@@ -1367,15 +1075,16 @@ def solve_ik(
     out = motion.with_(root_positions=out_root, rotations=out_rot, meta=meta)
     com_err = errors[:, 0] if com_task is not None else None
     mk_err = errors[:, npts - len(mk_joint):] if len(mk_joint) else None
-    residuals = {}
+    residuals: dict[str, np.ndarray] = {}
     if com_task is not None:
-        residuals[com_task.name] = com_err
+        residuals[com_task.name] = errors[:, 0]
     off = 0
     for t in markers:
         Pm = len(np.asarray(t.joints).reshape(-1))
-        residuals[t.name] = mk_err[:, off:off + Pm].max(axis=1)
+        residuals[t.name] = errors[:, npts - len(mk_joint) + off:npts - len(mk_joint) + off + Pm].max(axis=1)
         off += Pm
     residuals[posture.name] = posture_dev
     residuals[root.name] = np.linalg.norm(out_root - ref_root.root_positions, axis=1)
     return IkResult(out, ref_pose, iterations, converged, failed, com_err, mk_err, residuals,
                     tuple(skel.names[j] for j in frozen), tuple(int(j) for j in plan.act_orig), com_out)
+

@@ -29,6 +29,7 @@ import numpy as np
 
 from ...constants import UP_AXIS
 from ...errors import FroudeError
+from ...result import Result
 from .session import LIMITS, MODES, Params, Session, Solved, with_character, with_report
 from .tracks import Track, capsule_instances, naive_track
 
@@ -348,7 +349,7 @@ class Tab:
         if self.gui_overlay.value or len(vis) < 2:
             return {id(r): np.zeros(3) for r in vis}
         across = self._lateral if self.gui_camera.value == "front" else self._forward
-        gap = 0.9 * max(r.track.body.stature for r in vis) + 0.4
+        gap = 0.9 * max(r.track.stature for r in vis) + 0.4
         n = len(vis)
         return {id(r): (k - (n - 1) / 2) * gap * across for k, r in enumerate(vis)}
 
@@ -377,7 +378,7 @@ class Tab:
             return
         slots = self._slots() if slots is None else slots
         vis = [r for r, v in self._runners() if v]
-        H = max(r.track.body.stature for r in vis)
+        H = max(r.track.stature for r in vis)
         pts = np.array([slots[id(r)] for r in vis])
         centre = pts.mean(axis=0)
         up = np.eye(3)[UP_AXIS]
@@ -714,6 +715,12 @@ class Tab:
         if client is not None:
             client.send_file_download(name, data, save_immediately=True)
 
+    @property
+    def _good_result(self) -> Result:
+        """The last good result's output (a good result is a solved one, never an IK-free preview)."""
+        assert self.good.result is not None
+        return self.good.result
+
     def _on_download_bvh(self, event) -> None:
         """The result as BVH: in the clip's units or metres/centimetres, at the clip's rate or another, with
         its root motion or in place (the horizontal travel of the COM taken off the root)."""
@@ -723,11 +730,11 @@ class Tab:
         if units not in BVH_UNITS or rate not in BVH_RATES or root not in BVH_ROOT:  # crafted values
             self._show_error("BVH export options must be chosen from their lists")
             return
-        motion = self.good.result.motion
+        motion = self._good_result.motion
         if rate != BVH_RATES[0]:
             motion = motion.resample(float(rate.split()[0]))
         if root == "in place":
-            com = self.good.result.retarget.body.com(motion)
+            com = self._good_result.retarget.body.com(motion)
             travel = com - com[:1]
             travel[:, UP_AXIS] = 0.0
             motion = motion.with_(root_positions=motion.root_positions - travel)
@@ -736,6 +743,7 @@ class Tab:
 
     def _on_download_report(self, event) -> None:
         res = with_report(self.session.prep, self.good).result
+        assert res is not None and res.report is not None  # with_report computes it
         self._send(event, self._file_stem() + ".report.json", res.report.to_json().encode())
 
     def _on_download_csv(self, event) -> None:
@@ -745,7 +753,7 @@ class Tab:
         except ImportError:
             self._show_error("per-frame CSV needs froude.io.framedata, which this build does not have")
             return
-        res = self.good.result
+        res = self._good_result
         path = res.path if res.path is not None and len(res.path.times) == res.motion.n_frames else None
         try:
             table = frame_table(res.motion, res.retarget.body, machine_path=path)
@@ -761,9 +769,9 @@ class Tab:
         capsules and this camera, then send the file. Takes seconds: the status says so."""
         from ...viz.render import render_video
 
-        motions = [self.session.prep.motion, self.good.result.motion]
+        motions = [self.session.prep.motion, self._good_result.motion]
         labels = ["reference", f"physical ({self.good.params.character})"]
-        if self.gui_show_naive.value and self.naive is not None:
+        if self.gui_show_naive.value and self.naive is not None and self.naive.result is not None:
             motions.append(self.naive.result.motion)
             labels.append("naive")
         self._set_status(f"*rendering the MP4 ({len(motions)} runners) ...*")
@@ -978,9 +986,10 @@ class Tab:
             if self._t >= dur:
                 self._t = self._t % dur
             self.gui_time.max = round(dur, 2)
-            if abs(old.track.body.stature - solved.track.body.stature) > 1e-6:
+            if abs(old.track.stature - solved.track.stature) > 1e-6:
                 self._camera_dirty = True
-            if not solved.preview and solved.result.report is not None:  # numbers and plots follow the runner
+            done = solved.result is not None and solved.result.report is not None
+            if not solved.preview and done:  # numbers and plots follow the runner
                 i, _ = solved.track.frame_at(self._t)
                 self._set_plot(self.gui_plot, self._force_series(solved.track, i))
                 self._set_plot(self.gui_speed_plot, self._speed_series(solved.track, i))
@@ -1050,8 +1059,9 @@ class Tab:
         """One line the tests (and the benchmark) read: what is on screen right now (in Details)."""
         s = self.shown
         p = s.params
-        complete = s.result is not None and s.result.report is not None
-        speed = f"{s.result.report.mean_speed_m_s:.3f}" if complete else "n/a"
+        rep = s.result.report if s.result is not None else None
+        complete = rep is not None
+        speed = f"{rep.mean_speed_m_s:.3f}" if rep is not None else "n/a"
         status = "error" if self.message.startswith("error") else (
             "preview" if s.preview else ("ok" if complete else "report"))
         naive = self.naive.n_frames if self.naive is not None else 0
@@ -1071,7 +1081,8 @@ class Tab:
             return f"*working: {self._work_what} … {time.perf_counter() - self._work_since:.1f} s*"
         if self.message:
             return self.message if self.message.startswith("*") else f"*{self.message}*"
-        res = self.good.result
+        res = self._good_result
+        assert res.report is not None  # a good result is shown with its report
         notes = list(res.notes) + [f"bar: {b}" for b in res.report.check_bars()]
         if self._range_note and self.good.params.mode == "scale":
             notes.append(self._range_note)
@@ -1093,8 +1104,8 @@ class Tab:
     def _table_md(self) -> str:
         """Reference, physical and naive side by side: the physics numbers that tell them apart."""
         sm = self.session.prep.summary
-        phys = self.good.result.report
-        nv = self.naive.result.report if self.naive is not None else None
+        phys = self._good_result.report
+        nv = self.naive.result.report if self.naive is not None and self.naive.result is not None else None
 
         def mean(x):
             return float(np.mean(x)) if len(x) else float("nan")

@@ -61,6 +61,12 @@ class Track:
     loop_shift: np.ndarray
     body: BodyModel | None = None  # the runner's body model (its capsules); None: lines only
 
+    @property
+    def stature(self) -> float:
+        """The runner's stature [m] (its body model's; every runner the studio places has one)."""
+        assert self.body is not None, "a track without a body model has no stature"
+        return float(self.body.stature)
+
     @functools.cached_property
     def rig(self):
         """The capsules of this skeleton (``froude render``'s): the same widths, head and sides."""

@@ -11,8 +11,8 @@ import numpy as np
 
 from froude import pipeline
 
-MOCAP = Path(os.environ.get("FROUDE_MOCAP_DIR", Path(__file__).resolve().parents[2] / "shared/data/mocap"))
-BANDAI = Path(os.environ.get("FROUDE_BANDAI_DIR", Path(__file__).resolve().parents[2] / "shared/data/bandai"))
+MOCAP = Path(os.environ.get("FROUDE_MOCAP_DIR", "/work/shared/data/mocap"))
+BANDAI = Path(os.environ.get("FROUDE_BANDAI_DIR", "/work/shared/data/bandai"))
 WALKS = {"02_01": MOCAP / "02_01.bvh", "07_01": MOCAP / "07_01.bvh",
          "Bandai walk": BANDAI / "dataset-1_walk_normal_001.bvh"}
 

@@ -15,6 +15,7 @@ from froude.core import quat
 from froude.core.kinematics import apply_dof_increment
 from froude.errors import IkError
 from froude.ik import solver as ik
+from froude.ik.tasks import DEFAULT_JOINT_WEIGHT
 
 from conftest import clip as real_clip
 
@@ -234,7 +235,7 @@ def test_weights_trade_accuracy_for_posture(clip, body):
     assert soft.residuals["posture"].max() > stiff.residuals["posture"].max()
     # per-joint weights by name
     w = ik.PostureTask({"LeftLeg": 1.0, "RightLeg": 1.0}).weights(clip.skeleton)
-    assert w[clip.skeleton.index("LeftLeg")] == 1.0 and w[clip.skeleton.index("Spine")] == ik.DEFAULT_JOINT_WEIGHT
+    assert w[clip.skeleton.index("LeftLeg")] == 1.0 and w[clip.skeleton.index("Spine")] == DEFAULT_JOINT_WEIGHT
 
 
 @pytest.mark.parametrize("name", ["09_03", "02_03"])

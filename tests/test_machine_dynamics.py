@@ -9,7 +9,8 @@ from scipy.optimize import brentq
 from froude.constants import GRAVITY
 from froude.errors import FitError, PlanError
 from froude.machine.control_fit import control_from_si, fit_leg_control
-from froude.machine.dynamics import APEX_BELOW_TOUCHDOWN, BAD_INPUT, OK, Control, energy, simulate, step, time_scale
+from froude.machine.dynamics import APEX_BELOW_TOUCHDOWN, BAD_INPUT, OK, Control, energy, simulate, step
+from froude.machine.units import time_unit
 
 # Seyfarth et al. 2002 standard setting: m = 80 kg, l0 = 1 m, k = 20 kN/m, 22° from vertical, 5 m/s.
 SEY_K = 20000.0 * 1.0 / (80.0 * GRAVITY)
@@ -88,7 +89,7 @@ def test_seyfarth_periodic_gait():
     assert abs(float(r.y_liftoff) - math.cos(SEY_TH)) <= 1e-6
     # Sanity against the published setting: plausible apex height (m) and stance time (s).
     assert 0.93 < H < 1.1
-    assert 0.1 < float(r.t_stance) * time_scale(1.0) < 0.3
+    assert 0.1 < float(r.t_stance) * time_unit(1.0) < 0.3
 
 
 def test_energy_conserved_over_ten_strides():
@@ -245,7 +246,7 @@ def test_synthetic_mocap_recovery():
     U, th = 1.2, 0.38
     H = math.cos(th) + 0.06
     assert step(U, H, th, true).valid
-    T = float(time_scale(l0))
+    T = time_unit(l0)
     dt = (1.0 / fps) / T
     tr = simulate(U, H, th, true, dt=dt, n_steps=1)
     t_s = tr.t * T

@@ -285,6 +285,29 @@ def test_bandai_30hz_fit_as_delivered(name):
     assert not rep.check_bars(), rep.check_bars()
 
 
+def test_info_says_how_a_loop_and_an_in_place_take_are_analysed(run_cli, tmp_path):
+    """Issue 13 acceptance 1 for takes that are not analysed as they are: ``info`` prints the loop's own
+    cadence and the in-place take's speed found from its feet, and ``scale`` with no change reproduces
+    them within 1 % (the raw 20-frame loop's two contacts give 3.08 steps/s; its stride, 3.000)."""
+    from froude.io.bvh import save_bvh
+
+    loop = clip("dataset-1_dash_normal_001")
+    still = tmp_path / "in_place.bvh"
+    motion = load_bvh(clip("09_01"))
+    save_bvh(_in_place(motion), still)
+    for path, word in ((loop, "looping take"), (still, "in-place take")):
+        code, text, err = run_cli("info", path, "--json")
+        assert code == 0, err
+        take = _strict(text)["take"]
+        assert any(word in n for n in take["notes"])
+        rep = pipeline.scale(pipeline.prepare(load_bvh(path))).report
+        assert rep.step_frequency_hz == pytest.approx(take["step_frequency_hz"], rel=0.01)
+        assert rep.mean_speed_m_s == pytest.approx(take["mean_speed_m_s"], rel=0.01)
+    assert take["mean_speed_m_s"] == pytest.approx(_summary(motion).mean_speed, rel=0.03)
+    code, text, err = run_cli("info", clip("09_01"), "--json")
+    assert _strict(text)["take"] is None  # a take analysed as it is
+
+
 def test_bandai_one_stride_loop(run_cli, tmp_path):
     """Issue 13 acceptance 2: the Bandai one-stride loop goes through fit, scale and accelerate."""
     path = clip("dataset-1_dash_normal_001")

@@ -11,6 +11,7 @@ from .body.model import BodyModel
 from .constants import UP_AXIS
 from .core.motion import Motion
 from .errors import FroudeError
+from .machine.units import similarity
 from .metrics import physics_report
 from .result import Result
 from .synthesis.cycle import ReferenceCycle, sample_cycle
@@ -64,7 +65,7 @@ def naive_clip(motion: Motion, character=None, *, speed: float = 1.0, target_spe
     L = retarget.L
     summary = summarize(motion, body)
     if target_speed is not None:
-        base = summary.mean_speed * math.sqrt(L)
+        base = summary.mean_speed * similarity(L).speed
         if not (base > 0 and np.isfinite(target_speed) and target_speed > 0):
             raise FroudeError(f"cannot run this clip at {target_speed:g} m/s: it does not travel (give a factor)")
         speed = target_speed / base

@@ -12,7 +12,8 @@ from ..body.model import BodyModel
 from ..constants import UP_AXIS
 from ..core.motion import Motion
 from ..synthesis.targets import COM_WEIGHT, Targets
-from .solver import DEFAULT_JOINT_WEIGHT, DEFAULT_MAX_ERROR, ComTask, MarkerTask, PostureTask, RootTask, solve_ik
+from .solver import DEFAULT_MAX_ERROR, solve_ik
+from .tasks import DEFAULT_JOINT_WEIGHT, ComTask, MarkerTask, PostureTask, RootTask
 
 #: IK stops a frame when every weighted error is below this [m], after at most IK_ITERS steps; the COM is
 #: then made exact by shifting the root (a root translation moves the COM one to one).

@@ -50,196 +50,31 @@ import numpy as np
 
 from ..body.model import BodyModel
 from ..core import quat
-from ..core.kinematics import _quat_rows, com_jacobian, forward_kinematics, joint_depths, point_jacobian
+from ..core.kinematics import _quat_rows, joint_depths
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from ..errors import IkError
+from .kernels import _CYC, _block_inverses, _cho_solve_soa, _cholesky_soa, _exp_soa, _log_err_soa, _qmul_soa, _soa_quats
+from .tasks import (
+    ComTask,
+    MarkerTask,
+    PostureTask,
+    RootTask,
+    _rows,
+)
 
 __all__ = [
     "ComTask", "MarkerTask", "PostureTask", "RootTask", "IkResult", "solve_ik",
     "default_frozen_joints", "max_joint_step", "dof_weights",
 ]
 
-# Defaults, tuned on the real clips (see benchmarks/bench_ik.py and tests/test_ik.py).
-DEFAULT_JOINT_WEIGHT = 1e-4  # [1/rad²] posture pull per joint
-DEFAULT_ROOT_POSITION_WEIGHT = 1e-4  # [1/m²]
-DEFAULT_ROOT_ORIENTATION_WEIGHT = 1e-4  # [1/rad²]
+# Defaults of the solver, tuned on the real clips (the task weights' are in ik.tasks).
 DEFAULT_TOL = 1e-3  # [m] a frame is done when every COM/marker error is below this ("imperceptible")
 DEFAULT_STEP_TOL = 1e-6  # [rad or m] ... or when its largest DOF increment is below this
 DEFAULT_MAX_ITERS = 4
 DEFAULT_MAX_ERROR = 0.02  # [m] a frame whose COM or marker error stays above this has failed
 DEFAULT_MAX_STEP = 0.5  # [rad or m] largest DOF increment applied in one iteration (trust region)
 DEFAULT_CHUNK = 2048  # frames processed together (memory stays O(chunk), cache-friendly rows)
-
-
-def _rows(w, F: int, shape: tuple[int, ...], what: str) -> np.ndarray:
-    """Broadcast a weight given as a scalar or array to (F, *shape), checking it is finite and >= 0."""
-    w = np.asarray(w, dtype=float)
-    try:
-        if w.ndim and w.shape[0] == F and w.ndim == len(shape) + 1:
-            out = np.broadcast_to(w, (F,) + shape)
-        else:
-            out = np.broadcast_to(w, shape)
-            out = np.broadcast_to(out, (F,) + shape)
-    except ValueError:
-        raise IkError(f"{what}: weight of shape {w.shape} does not fit (F={F}, {shape})") from None
-    if not np.all(np.isfinite(out)) or np.any(out < 0):
-        raise IkError(f"{what}: weights must be finite and >= 0")
-    return out
-
-
-# ---- tasks -------------------------------------------------------------------------------------------
-@dataclass(frozen=True, eq=False)
-class ComTask:
-    """Move the whole-body centre of mass to ``target``.
-
-    body: the body model (segment masses) of the motion's skeleton.
-    target: (F, 3) desired COM [m].
-    weight: scalar or (F,) [1/m²].
-    """
-
-    body: BodyModel
-    target: np.ndarray
-    weight: float | np.ndarray = 1.0
-    name: str = "com"
-
-    def current(self, motion: Motion) -> np.ndarray:
-        """(F, 3) COM of the motion [m]."""
-        return self.body.com(motion)
-
-    def error(self, motion: Motion) -> np.ndarray:
-        """(F, 3) target − current [m]."""
-        return np.asarray(self.target, float) - self.current(motion)
-
-    def jacobian(self, motion: Motion) -> np.ndarray:
-        """(F, 3, 3 + 3J) d COM / d q in the DOF layout of ``kinematics``."""
-        p, R = forward_kinematics(motion.skeleton, motion.root_positions, motion.rotations, motion.translations)
-        seg = self.body.segment_points(p, R)
-        return com_jacobian(motion.skeleton, p, R, self.body.seg_mass, self.body.seg_joint, seg)[1]
-
-
-@dataclass(frozen=True, eq=False)
-class MarkerTask:
-    """Move P points fixed in joint frames (markers) to targets.
-
-    joints: (P,) joint each marker is fixed to; p_local: (P, 3) marker in that joint's frame [m];
-    target: (F, P, 3) desired positions [m]; weight: scalar, (P,) or (F, P) [1/m²].
-    """
-
-    joints: np.ndarray
-    p_local: np.ndarray
-    target: np.ndarray
-    weight: float | np.ndarray = 1.0
-    name: str = "markers"
-
-    @classmethod
-    def feet(cls, body: BodyModel, target: np.ndarray, weight: float | np.ndarray = 1.0,
-             name: str = "feet") -> MarkerTask:
-        """The body model's three markers per foot.
-
-        target: (F, 2, 3, 3) [m], (left, right) x (ankle, toe, toe end) x xyz, as ``BodyModel.foot_markers``.
-        weight: scalar, (2,) per foot, (2, 3) per marker, (F, 2) per frame and foot or (F, 2, 3) [1/m²].
-        """
-        target = np.asarray(target, float)
-        if target.ndim != 4 or target.shape[1:] != (2, 3, 3):
-            raise IkError(f"foot marker targets must be (F, 2, 3, 3); got {target.shape}")
-        F = target.shape[0]
-        w = np.asarray(weight, float)
-        if w.shape == (2,) or (w.ndim == 2 and w.shape == (F, 2) and w.shape != (2, 3)):
-            w = w[..., None]
-        w = _rows(w, F, (2, 3), name).reshape(F, 6)
-        return cls(body.marker_joint.reshape(6), body.marker_local.reshape(6, 3), target.reshape(F, 6, 3), w, name)
-
-    def current(self, motion: Motion) -> np.ndarray:
-        """(F, P, 3) marker positions of the motion [m]."""
-        p, R = forward_kinematics(motion.skeleton, motion.root_positions, motion.rotations, motion.translations)
-        return p[:, self.joints] + np.einsum("fpab,pb->fpa", R[:, self.joints], np.asarray(self.p_local, float))
-
-    def error(self, motion: Motion) -> np.ndarray:
-        """(F, P, 3) target − current [m]."""
-        return np.asarray(self.target, float) - self.current(motion)
-
-    def jacobian(self, motion: Motion) -> np.ndarray:
-        """(F, P, 3, 3 + 3J) d marker / d q."""
-        p, R = forward_kinematics(motion.skeleton, motion.root_positions, motion.rotations, motion.translations)
-        x = self.current(motion)
-        return point_jacobian(motion.skeleton, p, R, np.asarray(self.joints), x)
-
-
-def _log_rotation_error(q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
-    """Local rotation vectors (..., 3) [rad] taking q to q_ref by right-multiplication: log(q⁻¹ q_ref)."""
-    return quat.to_rotvec(quat.mul(quat.conj(q), q_ref))
-
-
-@dataclass(frozen=True, eq=False)
-class PostureTask:
-    """Pull the joint rotations (joints 1..J-1) toward a reference pose.
-
-    weight: scalar, (J,) per joint (entry 0 unused: the root orientation is the RootTask's) or a mapping
-        joint name -> weight (others get ``DEFAULT_JOINT_WEIGHT``) [1/rad²]. Must be > 0 for active joints.
-    reference: the reference motion (same skeleton and frame count); None = the motion given to solve_ik.
-    """
-
-    weight: float | np.ndarray | Mapping[str, float] = DEFAULT_JOINT_WEIGHT
-    reference: Motion | None = None
-    name: str = "posture"
-
-    def weights(self, skeleton: Skeleton) -> np.ndarray:
-        """(J,) per-joint weights [1/rad²]."""
-        J = skeleton.n_joints
-        if isinstance(self.weight, Mapping):
-            w = np.full(J, DEFAULT_JOINT_WEIGHT)
-            for n, v in self.weight.items():
-                if n not in skeleton.names:
-                    raise IkError(f"posture weight for unknown joint '{n}'")
-                w[skeleton.names.index(n)] = v
-        else:
-            w = np.broadcast_to(np.asarray(self.weight, float), (J,)).copy()
-        if not np.all(np.isfinite(w[1:])) or np.any(w[1:] <= 0):
-            raise IkError("posture weights must be finite and > 0 (freeze a joint instead of a zero weight)")
-        return w
-
-    def error(self, motion: Motion) -> np.ndarray:
-        """(F, J, 3) local rotation vectors [rad] from the current rotations to the reference's (joint 0 zero)."""
-        ref = motion if self.reference is None else self.reference
-        e = _log_rotation_error(motion.rotations, ref.rotations)
-        e[:, 0] = 0.0
-        return e
-
-    def jacobian(self, motion: Motion) -> np.ndarray:
-        """(F, 3J, 3 + 3J) selection of the joint rotation increments (rows of joint 0 zero)."""
-        F, J = motion.n_frames, motion.skeleton.n_joints
-        jac = np.zeros((3 * J, 3 + 3 * J))
-        jac[3:, 6:] = np.eye(3 * J - 3)
-        return np.broadcast_to(jac, (F,) + jac.shape)
-
-
-@dataclass(frozen=True, eq=False)
-class RootTask:
-    """Pull the root translation and orientation toward the reference.
-
-    position_weight [1/m²], orientation_weight [1/rad²]: both > 0.
-    reference: None = the motion given to solve_ik.
-    """
-
-    position_weight: float = DEFAULT_ROOT_POSITION_WEIGHT
-    orientation_weight: float = DEFAULT_ROOT_ORIENTATION_WEIGHT
-    reference: Motion | None = None
-    name: str = "root"
-
-    def error(self, motion: Motion) -> np.ndarray:
-        """(F, 6): reference − current root position [m], then local rotation vector to the reference [rad]."""
-        ref = motion if self.reference is None else self.reference
-        return np.concatenate(
-            [ref.root_positions - motion.root_positions,
-             _log_rotation_error(motion.rotations[:, 0], ref.rotations[:, 0])], axis=-1)
-
-    def jacobian(self, motion: Motion) -> np.ndarray:
-        """(F, 6, 3 + 3J): selection of the root translation and root rotation increments."""
-        F, J = motion.n_frames, motion.skeleton.n_joints
-        jac = np.zeros((6, 3 + 3 * J))
-        jac[:, :6] = np.eye(6)
-        return np.broadcast_to(jac, (F,) + jac.shape)
 
 
 # ---- result ------------------------------------------------------------------------------------------
@@ -368,139 +203,6 @@ def dof_weights(skeleton: Skeleton, posture: PostureTask, root: RootTask) -> tup
     if not (root.position_weight > 0 and root.orientation_weight > 0):
         raise IkError("root weights must be > 0")
     return float(root.position_weight), w
-
-
-# ---- component-major (SOA) helpers ---------------------------------------------------------------------
-def _qmul_soa(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None, conj_a: bool = False) -> np.ndarray:
-    """Hamilton product of quaternion rows a, b (4, ...) -> (4, ...) (conj(a) b with ``conj_a``), written into
-    ``out`` when given (which must not overlap a or b)."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    if out is None:
-        out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    t = np.empty(out.shape[1:])
-    flip = -1 if conj_a else 1  # conj(a) negates the terms of ax, ay, az
-    # each row left to right, as written: w = aw bw − ax bx − ay by − az bz, ...
-    for o, terms in ((out[0], ((aw, bw, 1), (ax, bx, -flip), (ay, by, -flip), (az, bz, -flip))),
-                     (out[1], ((aw, bx, 1), (ax, bw, flip), (ay, bz, flip), (az, by, -flip))),
-                     (out[2], ((aw, by, 1), (ax, bz, -flip), (ay, bw, flip), (az, bx, flip))),
-                     (out[3], ((aw, bz, 1), (ax, by, flip), (ay, bx, -flip), (az, bw, flip)))):
-        np.multiply(terms[0][0], terms[0][1], out=o)
-        for u, v, sgn in terms[1:]:
-            np.multiply(u, v, out=t)
-            if sgn > 0:
-                o += t
-            else:
-                o -= t
-    return out
-
-
-def _log_err_soa(q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
-    """log(q⁻¹ q_ref) for rows (4, ...) -> (3, ...) [rad] (the shorter way round: q and −q are one rotation)."""
-    d = _qmul_soa(q, q_ref, conj_a=True)
-    w, v = d[0], d[1:]
-    s = np.sqrt(np.einsum("a...,a...->...", v, v))
-    half = np.arctan2(s, np.abs(w))  # half the angle
-    small = s < 1e-12
-    if small.any():
-        scale = np.where(small, 1.0, half / np.where(small, 1.0, s))
-    else:
-        scale = np.divide(half, s, out=half)
-    scale *= 2.0
-    np.negative(scale, out=scale, where=w < 0)
-    v *= scale
-    return v
-
-
-def _exp_soa(v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """Quaternion rows (4, ...) of rotation vectors (3, ...) [rad], written into ``out`` when given."""
-    if out is None:
-        out = np.empty((4,) + v.shape[1:])
-    angle = v[0] * v[0]
-    t = np.multiply(v[1], v[1], out=out[1])
-    angle += t
-    np.multiply(v[2], v[2], out=t)
-    angle += t
-    np.sqrt(angle, out=angle)
-    half = np.multiply(angle, 0.5, out=out[2])
-    np.cos(half, out=out[0])
-    small = angle < 1e-8
-    if small.any():
-        scale = np.where(small, 0.5 - angle * angle / 48.0, np.sin(half) / np.where(small, 1.0, angle))
-    else:
-        scale = np.sin(half, out=out[3])
-        scale /= angle
-    np.multiply(v[0], scale, out=out[1])
-    np.multiply(v[1], scale, out=out[2])
-    np.multiply(v[2], scale, out=out[3])
-    return out
-
-
-def _soa_quats(rotations: np.ndarray, joints: np.ndarray) -> np.ndarray:
-    """(4, K, F) contiguous quaternion rows of the joints ``joints`` (K,) of rotations (F, J, 4)."""
-    F = rotations.shape[0]
-    g = np.take(rotations, joints, axis=1).reshape(F, 4 * len(joints)).T.copy()  # (K·4, F)
-    return g.reshape(len(joints), 4, F).transpose(1, 0, 2).copy()
-
-
-def _cholesky_soa(A: np.ndarray) -> np.ndarray:
-    """Lower Cholesky factor of a batch of SPD matrices stored (m, m, F) (frame axis last), written over
-    A's lower triangle (returned: A itself; its strict upper triangle is neither read nor written). One
-    NumPy call works on whole (k, F) blocks; no second m × m × F array is touched."""
-    m = A.shape[0]
-    L = A
-    for j in range(m):
-        if j:  # column j from the diagonal down, less its products with the columns done (one einsum)
-            L[j:, j] -= np.einsum("ikf,kf->if", L[j:, :j], L[j, :j])
-        d = np.sqrt(L[j, j], out=L[j, j])
-        if j < m - 1:
-            L[j + 1:, j] /= d
-    return L
-
-
-def _block_inverses(L: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """(nb, 3, 3, F) inverses of the 3 × 3 diagonal blocks of lower Cholesky factors L (3 nb, 3 nb, F): lower
-    triangular, from the closed-form inverse of a triangular 3 × 3 matrix, all blocks at once (written into
-    ``out`` when given)."""
-    nb, F = L.shape[0] // 3, L.shape[2]
-    i = 3 * np.arange(nb)
-    inv = np.empty((nb, 3, 3, F)) if out is None else out
-    inv[:, 0, 1:] = 0.0
-    inv[:, 1, 2] = 0.0
-    for k in range(3):
-        np.divide(1.0, L[i + k, i + k], out=inv[:, k, k])
-    inv[:, 1, 0] = -L[i + 1, i] * inv[:, 0, 0] * inv[:, 1, 1]
-    inv[:, 2, 1] = -L[i + 2, i + 1] * inv[:, 1, 1] * inv[:, 2, 2]
-    inv[:, 2, 0] = -(L[i + 2, i] * inv[:, 0, 0] + L[i + 2, i + 1] * inv[:, 1, 0]) * inv[:, 2, 2]
-    return inv
-
-
-def _cho_solve_soa(L: np.ndarray, inv: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solve L Lᵀ x = b for (m, m, F) lower factors and (m, F) right-hand sides, by 3 × 3 blocks (one task
-    point each; ``inv``: ``_block_inverses(L)``): per block and sweep one einsum against the solved blocks
-    and one with the block's inverse, instead of three NumPy calls per row."""
-    nb, F = L.shape[0] // 3, b.shape[1]
-    r = np.empty((3, F))
-    y = np.empty_like(b)
-    for B in range(nb):  # L y = b
-        s = slice(3 * B, 3 * B + 3)
-        if B:
-            np.subtract(b[s], np.einsum("ikf,kf->if", L[s, :s.start], y[:s.start]), out=r)
-        np.einsum("ikf,kf->if", inv[B], r if B else b[s], out=y[s])
-    x = y  # Lᵀ x = y from the bottom up: block B of y is read before it is written
-    for B in range(nb - 1, -1, -1):
-        s = slice(3 * B, 3 * B + 3)
-        if B < nb - 1:
-            np.subtract(y[s], np.einsum("kif,kf->if", L[s.stop:, s], x[s.stop:]), out=r)
-        else:
-            r[:] = y[s]
-        np.einsum("kif,kf->if", inv[B], r, out=x[s])
-    return x
-
-
-#: Cyclic axis pairs (a + 1, a + 2) mod 3 for a = x, y, z: gathering a vector's rows with these gives the
-#: (2, 3) layout that ``_Lin.pairs`` contracts with (v × u over all three axes in one einsum).
-_CYC = np.array([[1, 2, 0], [2, 0, 1]])
 
 
 # ---- the solver plan: which joints, which levers ------------------------------------------------------
@@ -1385,3 +1087,4 @@ def solve_ik(
     residuals[root.name] = np.linalg.norm(out_root - ref_root.root_positions, axis=1)
     return IkResult(out, ref_pose, iterations, converged, failed, com_err, mk_err, residuals,
                     tuple(skel.names[j] for j in frozen), tuple(int(j) for j in plan.act_orig), com_out)
+

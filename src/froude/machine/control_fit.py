@@ -18,6 +18,7 @@ import numpy as np
 from froude.constants import GRAVITY
 from froude.errors import FitError
 from froude.machine.dynamics import Control
+from froude.machine.units import time_unit
 
 __all__ = ["LegForceFit", "fit_leg_control", "control_from_si"]
 
@@ -63,7 +64,7 @@ def control_from_si(k_N_per_m, a_m, b_m, c_m, T_c_s, m_kg, l0_m, g=GRAVITY):
     if not (m_kg > 0 and l0_m > 0 and T_c_s > 0):
         raise FitError(f"need m > 0, l0 > 0, T_c > 0 (got m={m_kg}, l0={l0_m}, T_c={T_c_s})")
     return Control(K=float(k_N_per_m) * l0_m / (m_kg * g), a=float(a_m) / l0_m,
-                   b=float(b_m) / l0_m, c=float(c_m) / l0_m, T_c=float(T_c_s) / math.sqrt(l0_m / g))
+                   b=float(b_m) / l0_m, c=float(c_m) / l0_m, T_c=float(T_c_s) / time_unit(l0_m, g))
 
 
 def fit_leg_control(tau, l_m, f_leg_N, l0_m, weights=None):

@@ -46,13 +46,12 @@ import numpy as np
 
 from froude.constants import GRAVITY
 from froude.errors import PlanError
+from froude.machine.units import time_unit
 
 __all__ = [
     "Control", "StepResult", "Trajectory", "step", "simulate", "fall_time", "energy",
     "REASONS", "OK", "BAD_INPUT", "APEX_BELOW_TOUCHDOWN", "COLLAPSE", "STALL", "NO_LIFTOFF",
     "LIFTOFF_DESCENDING", "N_PER_STANCE", "MIN_COM_HEIGHT", "MAX_STANCE_FACTOR",
-    "time_scale", "to_si_time", "to_si_length", "to_si_velocity", "to_si_force",
-    "to_si_stiffness", "froude_number",
 ]
 
 # --- invalid-reason codes (StepResult.reason) -------------------------------------------------
@@ -82,42 +81,6 @@ MIN_COM_HEIGHT = 0.2
 MAX_STANCE_FACTOR = 5.0
 #: Rows integrated together; keeps the ~40 work arrays inside L2 cache.
 CHUNK = 16384
-
-
-# --- SI conversion (trivial, but named so call sites say what they do) --------------------------
-def time_scale(l0_m, g=GRAVITY):
-    """Dimensionless time unit √(l0/g) [s] for touchdown leg length l0 [m]."""
-    return np.sqrt(np.asarray(l0_m, float) / g)
-
-
-def to_si_time(t, l0_m, g=GRAVITY):
-    """Dimensionless time → [s]."""
-    return np.asarray(t) * time_scale(l0_m, g)
-
-
-def to_si_length(x, l0_m):
-    """Dimensionless length (units of l0) → [m]."""
-    return np.asarray(x) * l0_m
-
-
-def to_si_velocity(v, l0_m, g=GRAVITY):
-    """Dimensionless velocity (units of √(g l0), U is the Froude number) → [m/s]."""
-    return np.asarray(v) * np.sqrt(g * np.asarray(l0_m, float))
-
-
-def to_si_force(f, m_kg, g=GRAVITY):
-    """Dimensionless force (body weights) → [N]."""
-    return np.asarray(f) * m_kg * g
-
-
-def to_si_stiffness(K, m_kg, l0_m, g=GRAVITY):
-    """Dimensionless stiffness K = k l0/(m g) → k [N/m]."""
-    return np.asarray(K) * m_kg * g / l0_m
-
-
-def froude_number(u_mps, l0_m, g=GRAVITY):
-    """U = u/√(g l0): horizontal speed [m/s] → dimensionless."""
-    return np.asarray(u_mps) / np.sqrt(g * np.asarray(l0_m, float))
 
 
 # --- data ---------------------------------------------------------------------------------------
@@ -150,13 +113,13 @@ class Control:
         """dict of SI values: k [N/m], a, b, c [m], T_c [s], l0 [m], m [kg]."""
         return {"k": float(self.K) * m_kg * g / l0_m, "a": float(self.a) * l0_m,
                 "b": float(self.b) * l0_m, "c": float(self.c) * l0_m,
-                "T_c": float(self.T_c) * math.sqrt(l0_m / g), "l0": float(l0_m), "m": float(m_kg)}
+                "T_c": float(self.T_c) * time_unit(l0_m, g), "l0": float(l0_m), "m": float(m_kg)}
 
     @classmethod
     def from_si(cls, k_N_per_m, a_m, b_m, c_m, T_c_s, m_kg, l0_m, g=GRAVITY):
         """Dimensionless Control from SI: k [N/m], a, b, c [m], T_c [s], m [kg], l0 [m]."""
         return cls(K=k_N_per_m * l0_m / (m_kg * g), a=a_m / l0_m, b=b_m / l0_m, c=c_m / l0_m,
-                   T_c=T_c_s / math.sqrt(l0_m / g))
+                   T_c=T_c_s / time_unit(l0_m, g))
 
 
 @dataclass(frozen=True)

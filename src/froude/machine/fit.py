@@ -46,6 +46,7 @@ from .forces import (
 )
 from .model import SimpleMachine
 from .orbit import solve_orbit
+from .units import speed_unit, time_unit
 
 __all__ = ["StanceFit", "FitResult", "fit_stance_control", "fit_machine", "fit_machine_detailed",
            "CYCLE_SCALES", "SWAY_SAMPLES"]
@@ -337,8 +338,8 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         raise NotARunningMotion(f"{src}: no complete flight phase between two contacts")
     stance_time = float(np.mean([s.duration for s in full]))
     flight_time_measured = float(np.mean([b - a for a, b in flights]))
-    # The cycle's step time is the clip's own step period (the measure ``info`` prints, from sub-frame
-    # contacts over whole strides), so the output steps at the clip's cadence. Stance is the force-based
+    # The cycle's step time is the clip's own step period (the measure ``info`` prints, timed at midstance
+    # over whole strides), so the output steps at the clip's cadence. Stance is the force-based
     # one (what the machine's leg does); the flight is the rest of the step. Averaging stance and flight
     # over different sets of stances would not add up to the step period (the issue that made outputs
     # step 5 % off the clip).
@@ -387,8 +388,8 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
 
     # Priors (dimensionless, l0 = mean touchdown leg length of the full stances).
     l0 = float(np.mean([s.l0 for s in full]))
-    T = math.sqrt(l0 / GRAVITY)
-    V = math.sqrt(GRAVITY * l0)
+    T = time_unit(l0)
+    V = speed_unit(l0)
     theta0 = float(np.mean([s.theta_touchdown for s in full]))
     U0 = (np.mean(apex_u) if apex_u else summary.mean_speed) / V
     H0 = (np.mean(apex_h) if apex_h else l0) / l0

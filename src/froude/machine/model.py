@@ -38,6 +38,7 @@ from ..io.atomic import atomic_write_text
 from ..io.jsonable import dumps
 from ..io.jsonable import jsonable as _jsonable
 from .dynamics import Control
+from .units import scale_measured, similarity, speed_unit, time_unit
 
 __all__ = ["SCHEMA", "SimpleMachine", "load_machine"]
 
@@ -103,12 +104,12 @@ class SimpleMachine:
     @property
     def time_unit(self) -> float:
         """√(l0/g) [s]."""
-        return math.sqrt(self.l0 / self.g)
+        return time_unit(self.l0, self.g)
 
     @property
     def speed_unit(self) -> float:
         """√(g l0) [m/s]."""
-        return math.sqrt(self.g * self.l0)
+        return speed_unit(self.l0, self.g)
 
     @property
     def control(self) -> Control:
@@ -140,29 +141,13 @@ class SimpleMachine:
         """
         if not (L > 0 and M > 0):
             raise FitError(f"scale factors must be > 0 (L={L}, M={M})")
-        sT = math.sqrt(L)
-
-        def scale_dict(d):
-            out = {}
-            for key, v in d.items():
-                if isinstance(v, dict):
-                    out[key] = scale_dict(v)
-                    continue
-                f = 1.0
-                if key.endswith("_s") or key.endswith("_s_list"):
-                    f = sT
-                elif key.endswith("_m_s"):
-                    f = sT
-                elif key.endswith("_m") or key.endswith("_m_list"):
-                    f = L
-                out[key] = _mul(v, f) if f != 1.0 else v
-            return out
-
+        sim = similarity(L, M)
         return replace(
             self, mass=self.mass * M, l0=self.l0 * L, ground=self.ground * L,
             lateral_foot_offset=self.lateral_foot_offset * L, lateral_sway=self.lateral_sway * L,
-            reference=scale_dict(self.reference), stances=tuple(scale_dict(s) for s in self.stances),
-            quality=scale_dict(self.quality), source=self.source + f" (scaled L={L:g}, M={M:g})",
+            reference=scale_measured(self.reference, sim, "reference"),
+            stances=tuple(scale_measured(s, sim, "stance") for s in self.stances),
+            quality=scale_measured(self.quality, sim, "quality"), source=self.source + f" (scaled L={L:g}, M={M:g})",
         )
 
     # ---- JSON ----------------------------------------------------------------------------------------
@@ -228,13 +213,5 @@ def load_machine(path) -> SimpleMachine:
     except json.JSONDecodeError as e:
         raise FitError(f"{path}:{e.lineno}: not valid JSON ({e.msg})") from None
     return SimpleMachine.from_dict(d, str(path))
-
-
-def _mul(v, f):
-    if isinstance(v, (list, tuple)):
-        return [_mul(x, f) for x in v]
-    if v is None or isinstance(v, (bool, str)):
-        return v
-    return v * f
 
 

@@ -61,6 +61,7 @@ import numpy as np
 from froude.errors import PlanError
 from froude.machine.dynamics import REASONS, Control, StepResult, Trajectory, fall_time, simulate, step
 from froude.machine.orbit import LimitCycle, cycle_record, step_map_eigenvalues
+from froude.machine.units import speed_unit, time_unit
 
 __all__ = ["Comfort", "SpeedPlan", "plan_speed_change", "plan_speed_profile", "target_cycle",
            "one_step_range", "sustainable_range", "speed_fraction_at", "POLICIES", "ENERGY_MODES"]
@@ -170,7 +171,7 @@ class SpeedPlan:
     def to_si(self, l0_m: float, g: float = 9.81) -> dict:
         """SI views for one character of touchdown leg length l0 [m]: apex speeds [m/s], apex
         heights and contact x [m], apex times and durations [s], touchdown angles [deg]."""
-        T, V = math.sqrt(l0_m / g), math.sqrt(g * l0_m)
+        T, V = time_unit(l0_m, g), speed_unit(l0_m, g)
         return {"U_m_s": self.U * V, "H_m": self.H * l0_m, "t_apex_s": self.t_apex * T,
                 "x_contact_m": self.x_contact * l0_m, "t_stance_s": self.t_stance * T,
                 "t_flight_s": self.t_flight * T, "step_length_m": self.step_length * l0_m,

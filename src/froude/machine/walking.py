@@ -9,7 +9,7 @@ Pollard's eq. 2, with the same control for both legs (a symmetric gait)::
 
 along the leg from its contact point to the COM, in the sagittal plane: x forward, y up, ground y = 0.
 Units are those of the running machine (touchdown leg length l0 = 1, g = 1, m = 1; see the table in
-:mod:`froude.machine.dynamics`; its ``to_si_*`` helpers convert).
+:mod:`froude.machine.dynamics`; ``froude.machine.units`` converts).
 
 One *step* runs from a touchdown to the next (the Poincaré section of the gait):
 

@@ -344,6 +344,17 @@ def _contact_mask(phi: np.ndarray, contact_phase: np.ndarray) -> np.ndarray:
     return (np.mod(p - on, 1.0) < (off - on))
 
 
+def swing_anchor(psi, psi_off, psi_on, c_off, c_on) -> tuple[np.ndarray, np.ndarray]:
+    """The one foot-anchor rule of a swing (the reference cycle's and the output's IK targets): the anchor
+    moves from the contact left (c_off, (3,) or (n, 3) [m]) to the next one (c_on) with min-jerk progress in
+    stride phase, u = (ψ − ψ_off)/(ψ_on − ψ_off). psi (n,): the frames' phases; psi_off / psi_on: the
+    phases of the liftoff and of the next touchdown (scalars or (n,)). Returns (anchor (n, 3) [m], u (n,)).
+    """
+    u = (psi - psi_off) / np.maximum(psi_on - psi_off, 1e-9)
+    w = min_jerk(u)[:, None]
+    return c_off * (1 - w) + c_on * w, u
+
+
 def _anchors(gait: Gait, psi: np.ndarray, stride: np.ndarray, F: int):
     """Anchor point of each foot per frame (F, 2, 3) [m] and whether it is known (F, 2).
 
@@ -378,10 +389,7 @@ def _anchors(gait: Gait, psi: np.ndarray, stride: np.ndarray, F: int):
             sel = (frames >= max(a, 0)) & (frames < min(b, F))
             if not sel.any():
                 continue
-            p0, p1 = psi_off[j], psi_on[j + 1]
-            u = (psi[sel] - p0) / max(p1 - p0, 1e-9)
-            w = min_jerk(u)[:, None]
-            anchors[sel, foot] = pts[j] * (1 - w) + pts[j + 1] * w
+            anchors[sel, foot], _ = swing_anchor(psi[sel], psi_off[j], psi_on[j + 1], pts[j], pts[j + 1])
             ok[sel, foot] = True
     return anchors, ok
 

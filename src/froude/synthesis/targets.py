@@ -11,7 +11,7 @@ from ..body.characters import Retarget
 from ..body.model import BodyModel
 from ..constants import UP_AXIS
 from ..core.motion import Motion
-from .cycle import ReferenceCycle, min_jerk, sample_cycle
+from .cycle import ReferenceCycle, min_jerk, sample_cycle, swing_anchor
 from .timewarp import MachinePath
 
 #: IK weights [1/m²] for a reference-sized body (scaled by (reference leg / target leg)² for others);
@@ -144,9 +144,7 @@ def _foot_anchors(path: MachinePath) -> tuple[np.ndarray, np.ndarray]:
         p = np.interp(t[sw], t, path.psi)
         p0 = _psi_at(path, t0)
         p1 = _psi_at(path, t1)
-        u = (p - p0) / np.maximum(p1 - p0, 1e-9)
-        w = min_jerk(u)[:, None]
-        out[sw, foot] = c_ext[k_sw] * (1 - w) + c_ext[k_sw + 1] * w
+        out[sw, foot], u = swing_anchor(p, p0, p1, c_ext[k_sw], c_ext[k_sw + 1])
         w_ground[sw, foot] = 1.0 - min_jerk(u / SWING_RELEASE) * min_jerk((1.0 - u) / SWING_LANDING)
     return out, w_ground
 

@@ -35,6 +35,23 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+def _take(motion, body) -> dict | None:
+    """How fit and scale take a loop or an in-place take (``body.take.running_take``): its notes and the
+    speed and cadence measured on the take so analysed (a loop's own stride, an in-place take's speed from
+    its feet); None for a take analysed as it is. ``scale`` with no change reproduces these figures."""
+    from ...body.gait import summarize
+    from ...body.take import running_take
+
+    if motion.n_frames < 3:
+        return None
+    taken, notes = running_take(motion, body)
+    if not notes:
+        return None
+    s = summarize(taken, body)
+    return {"notes": notes, "mean_speed_m_s": round(s.mean_speed, 4), "froude_U": round(s.froude, 4),
+            "step_frequency_hz": round(s.step_frequency, 4) if math.isfinite(s.step_frequency) else None}
+
+
 def info_dict(motion, body, summary, gait) -> dict:
     """The JSON-able summary of a clip (SI units)."""
     sk = motion.skeleton
@@ -106,6 +123,7 @@ def run(args) -> int:
     from ...io.jsonable import dumps, jsonable
 
     d = jsonable(info_dict(motion, body, summary, gait))
+    d["take"] = jsonable(_take(motion, body))
     if data is not None:
         from ...io.framedata import frame_table, write_frame_data
 
@@ -137,6 +155,10 @@ def run(args) -> int:
         ("double support",
          f"{_n(d['double_support_fraction'] and 100 * d['double_support_fraction'], '.0f')}% of frames"),
     ]
+    if d["take"] is not None:  # a loop or an in-place take: what fit/scale model
+        t = d["take"]
+        rows.append(("as analysed", f"{'; '.join(t['notes'])}: {_n(t['mean_speed_m_s'])} m/s, "
+                                    f"{_n(t['step_frequency_hz'])} steps/s"))
     width = max(len(k) for k, _ in rows)
     for k, v in rows:
         print(f"{k:<{width}}  {v}")

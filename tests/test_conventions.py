@@ -235,7 +235,8 @@ def test_roles_of_every_naming_family(family):
 @pytest.mark.parametrize("height", [0.5, 0.9, 2.5, 4.0, 5.0])
 def test_outputs_read_back_at_their_true_height(height, tmp_path, run_cli):
     out = tmp_path / f"h{height}.bvh"
-    code, _, err = run_cli("scale", clip("09_01"), "--height", height, "-o", out, "-q")
+    # --keep: this is about units (a 5 m runner misses the stricter skate bar by 0.02 mm, measured)
+    code, _, err = run_cli("scale", clip("09_01"), "--height", height, "-o", out, "-q", "--keep")
     assert code == 0, err
     report = json.loads(out.with_suffix(".report.json").read_text(),
                         parse_constant=lambda c: pytest.fail(f"{c} in the report JSON"))
@@ -391,41 +392,32 @@ def test_output_unit_rotations_only_and_frame_time(tmp_path, run_cli):
 
 # ---- the Bandai clips as delivered (issue 12, acceptance 2) ---------------------------------------------
 BANDAI_STRIDING = tuple(n for n in BANDAI_RUNS if n != "dataset-1_dash_normal_001")
-# The cases that miss a bar, measured 2026-11-25 (`pytest tests/test_conventions.py -k bandai_clips_as_delivered
-# -rx`): (clip, index in _CHANGES, output rate) -> the bars missed. IK and the fit on 30 Hz input (issues 12.2
-# and 13). Every other case meets every bar and must keep doing so; a case listed here that starts meeting the
-# bars fails (strict) so that it is taken off the list.
+# The cases that miss a bar, measured 2026-11-25 on the bars branch (`python benchmarks/bars_matrix.py --matrix 12`
+# prints the same table): (clip, index in _CHANGES, output rate) -> the bars missed. The stricter skate measure
+# (ball and tip near the floor) is a bar since issue 13. run_tired is a tired shuffle (double support, swing
+# feet 2-3 cm above the floor within 0.1 s of contact, a knee flip in the clip itself); the trolls' misses are
+# landings. Every other case meets every bar and must keep doing so; a case listed here that starts meeting
+# the bars fails (strict) so that it is taken off the list.
 _CHANGES = [("child", 1.0), ("troll", 1.0), ("giant", 1.0), (None, 0.7), (None, 1.2), ("accelerate", 0.5),
             ("accelerate", 1.3)]
 _BANDAI_MISSES = {
-    ("dash_active", 0, None): "foot skate 6.40 mm (<= 5); ground penetration 6.35 mm (<= 5)",
-    ("dash_active", 0, 120): "foot skate 6.70 mm (<= 5); ground penetration 6.47 mm (<= 5)",
-    ("dash_active", 1, None): "foot skate 8.95 mm (<= 5); ground penetration 11.93 mm (<= 5)",
-    ("dash_active", 1, 120): "foot skate 9.44 mm (<= 5); ground penetration 11.94 mm (<= 5)",
-    ("dash_feminine", 1, None): "ground penetration 18.08 mm (<= 5)",
-    ("dash_feminine", 1, 120): "foot skate 7.64 mm (<= 5); ground penetration 18.08 mm (<= 5)",
-    # these three moved over their bar when the step period came to be timed at midstance (cadence
-    # 0.4-1 % apart from the contact-timed one on these clips): measured 2026-11-25
-    ("dash_feminine", 0, None): "ground penetration 5.02 mm (<= 5)",
-    ("dash_feminine", 0, 120): "ground penetration 5.02 mm (<= 5)",
-    ("dash_old", 4, None): "joint jump 46.45 deg (<= 1.5 x reference 30.55)",
-    ("dash_old", 0, None): "flight gravity nan m/s^2 (9.81 +- 3%)",
-    ("dash_old", 1, None): "foot skate 9.25 mm (<= 5); ground penetration 6.86 mm (<= 5)",
-    ("dash_old", 1, 120): "foot skate 10.21 mm (<= 5); ground penetration 6.87 mm (<= 5)",
-    ("run_tired", 0, None): "flight gravity nan m/s^2 (9.81 +- 3%); joint jump 38.66 deg (<= 1.5 x reference 24.87)",
-    ("run_tired", 0, 120): "flight gravity nan m/s^2 (9.81 +- 3%); foot skate 5.23 mm (<= 5)",
-    ("run_tired", 1, None): "flight gravity nan m/s^2 (9.81 +- 3%); foot skate 8.53 mm (<= 5)",
-    ("run_tired", 1, 120): "flight gravity nan m/s^2 (9.81 +- 3%); foot skate 8.52 mm (<= 5)",
-    ("run_tired", 2, None): "flight gravity nan m/s^2 (9.81 +- 3%); joint jump 57.43 deg (<= 1.5 x reference 24.87)",
-    ("run_tired", 2, 120): "flight gravity nan m/s^2 (9.81 +- 3%); joint jump 78.96 deg (<= 1.5 x reference 24.87)",
-    ("run_tired", 3, None): "flight gravity nan m/s^2 (9.81 +- 3%)",
-    ("run_tired", 3, 120): "flight gravity nan m/s^2 (9.81 +- 3%); joint jump 49.62 deg (<= 1.5 x reference 24.87)",
-    ("run_tired", 4, None): "joint jump 82.28 deg (<= 1.5 x reference 24.87)",
-    ("run_tired", 4, 120): "joint jump 55.76 deg (<= 1.5 x reference 24.87)",
-    ("run_tired", 5, None): "refused: cannot reach U = 0.302 in 8 steps (min sustainable U = 0.499, start U = 0.604)",
-    ("run_tired", 5, 120): "refused: cannot reach U = 0.302 in 8 steps (min sustainable U = 0.499, start U = 0.604)",
-    ("run_tired", 6, None): "joint jump 91.92 deg (<= 1.5 x reference 24.87)",
-    ("run_tired", 6, 120): "joint jump 57.64 deg (<= 1.5 x reference 24.87)",
+    ("dash_active", 1, None): "foot skate (ball and tip near the floor) 33.91 mm (<= 5)",
+    ("dash_feminine", 1, None): "foot skate (ball and tip near the floor) 11.43 mm (<= 5)",
+    ("dash_feminine", 1, 120): "foot skate (ball and tip near the floor) 11.96 mm (<= 5)",
+    ("run_tired", 0, None): "joint jump 49.47 deg (<= 1.5 x reference 24.87)",
+    ("run_tired", 0, 120): "joint jump 57.64 deg (<= 1.5 x reference 24.87)",
+    ("run_tired", 1, None): "foot skate (ball and tip near the floor) 11.92 mm (<= 5); joint jump 46.68 deg",
+    ("run_tired", 1, 120): "foot skate (ball and tip near the floor) 20.48 mm (<= 5)",
+    ("run_tired", 2, None): "joint jump 78.04 deg (<= 1.5 x reference 24.87)",
+    ("run_tired", 2, 120): "foot skate (ball and tip near the floor) 23.14 mm (<= 5); joint jump 52.15 deg",
+    ("run_tired", 3, None): "foot skate (ball and tip near the floor) 190.54 mm (<= 5)",
+    ("run_tired", 3, 120): "foot skate (ball and tip near the floor) 225.89 mm (<= 5)",
+    ("run_tired", 4, None): "joint jump 89.70 deg (<= 1.5 x reference 24.87)",
+    ("run_tired", 4, 120): "joint jump 53.16 deg (<= 1.5 x reference 24.87)",
+    ("run_tired", 5, None): "foot skate (ball and tip near the floor) 130.48 mm (<= 5); joint jump 47.62 deg",
+    ("run_tired", 5, 120): "foot skate (ball and tip near the floor) 209.18 mm (<= 5); joint jump 64.27 deg",
+    ("run_tired", 6, None): "joint jump 81.64 deg (<= 1.5 x reference 24.87)",
+    ("run_tired", 6, 120): "foot skate (ball and tip near the floor) 15.89 mm (<= 5); joint jump 81.93 deg",
 }
 
 
@@ -473,9 +465,13 @@ def test_bandai_clips_as_delivered_meet_the_bars(name, change, fps):
 
 def test_bandai_loop_is_unrolled_and_walk_refused_in_one_line(run_cli, tmp_path):
     # the one-stride loop is no longer refused: it is unrolled (issue 13; tests/test_take.py)
+    # (the loop's child misses the stricter skate bar by 2.4 mm: --keep writes it; the unchanged run meets
+    # every bar and is written without)
     code, out, err = run_cli("scale", clip("dataset-1_dash_normal_001"), "--character", "child", "-o",
-                             tmp_path / "loop.bvh", "-q")
+                             tmp_path / "loop.bvh", "-q", "--keep")
     assert code == 0 and (tmp_path / "loop.bvh").exists() and "loop" in out
+    code, out, err = run_cli("scale", clip("dataset-1_dash_normal_001"), "-o", tmp_path / "same.bvh", "-q")
+    assert code == 0 and "physics bars: all met" in out
     code, out, err = run_cli("scale", clip("dataset-1_walk_normal_001"), "--character", "child", "-o",
                              tmp_path / "walk.bvh", "-q")
     last = err.strip().splitlines()[-1]

@@ -271,8 +271,17 @@ def extract_cycle(
     stance_mask = _contact_mask(np.arange(K) / K, contact_phase)
     # band 0.03 L: wider than the 0.02 L within which the physics report watches a marker slide, so a tip
     # that lifts to just under 0.02 L and comes down again is held all the while
-    marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=contact_tol, band=SLIDE_BAND_L * body.leg_length)
-    marker_from_com = _close_loop_linear(average(from_com))
+    # a marker is held if it comes as near the floor as the physics report's skate measure watches (its
+    # SKATE_REACH_L, 0.04 L: a folded rig's ball joint rests 0.033 L up, above the 0.03 L contact test)
+    from ..metrics import SKATE_REACH_L
+
+    raw_rel = marker_rel
+    marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=SKATE_REACH_L * body.leg_length,
+                                 band=SLIDE_BAND_L * body.leg_length)
+    # the body-relative foot path carries the same de-skating correction (it fades over the swing), so
+    # that IK targets blending from the ground path to it after lift-off do not jump by the correction
+    # (a 10 mm jump of a tip still near the floor, 02_03 at 50 Hz)
+    marker_from_com = _close_loop_linear(average(from_com)) + (marker_rel - raw_rel)
 
     from ..metrics import max_joint_jump_deg
 
@@ -396,6 +405,8 @@ def _anchors(gait: Gait, psi: np.ndarray, stride: np.ndarray, F: int):
 
 #: Per-sample relaxation of an unloaded marker's own de-skating correction toward the foot's common one.
 RELAX = 0.2
+#: Fraction of a tilt's rise a marker keeps from one cycle sample to the next once the tilt is over.
+TILT_RELAX = 0.5
 
 
 def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, band: float) -> np.ndarray:
@@ -412,6 +423,8 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
     """
     out = rel.copy()
     K = rel.shape[0]
+    firm = np.zeros(rel.shape[:3])  # (K, 2, 3) how firmly each marker is held (for the bones)
+    in_place = np.zeros(rel.shape[:3], bool)  # (K, 2, 3) markers held in place (loaded in a stance)
     for foot in range(2):
         idx = np.flatnonzero(stance[:, foot])
         if idx.size == 0:
@@ -421,6 +434,7 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
             gap = np.flatnonzero(np.diff(idx) > 1)
             if gap.size:
                 idx = np.concatenate([idx[gap[0] + 1 :], idx[: gap[0] + 1]])
+        idx = _with_approach(rel[:, foot], idx, stance[:, foot], contact_tol, band)
         h = rel[idx, foot][:, :, [0, 2]]  # (n, 3 markers, 2) horizontal offsets
         height = rel[idx, foot, :, 1]  # (n, 3) above the ground
         h_min = height.min(axis=0)
@@ -433,6 +447,8 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
         # re-averaging of held positions would jump); markers pressed deeper (nearer their lowest point)
         # count more, so the point that carries the foot stays put and a lightly touching one gives way
         depth = np.clip(1.0 - (height - h_min) / band, 0.0, 1.0) ** 4
+        firm[idx, foot] += depth * reaches
+        in_place[idx, foot] = loaded
         wgt = (loaded[1:] & loaded[:-1]) * 0.5 * (depth[1:] + depth[:-1])  # (n-1, 3)
         step = h[1:] - h[:-1]  # (n-1, 3, 2)
         w_sum = wgt.sum(axis=1, keepdims=True)
@@ -441,17 +457,37 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
         # Each marker then gets its own correction: while it stays loaded it cancels its own motion exactly
         # (two loaded points that move relative to each other both stay put; IK bends the toe joint to
         # match); while unloaded it relaxes back to the common one, so the foot keeps its shape in the air.
+        # A released marker relaxes only once it is clearly off the floor (above band, fully at 2 bands): a
+        # tip that yawed with the foot and was held would otherwise swing back sideways while still within
+        # the height at which the physics report watches it slide.
+        # Each sample is given its bone lengths back (_rigid_foot) before the next one holds its points, so
+        # what is held is a pose the foot can take.
         own = np.zeros((idx.size, 3, 2))
+        lift = np.zeros((idx.size, 3))  # height changes of the bones' tilting
         both = loaded[1:] & loaded[:-1]
-        for i in range(1, idx.size):  # ~50 samples of one stance
-            held = own[i - 1] - step[i - 1]
-            relaxed = own[i - 1] + RELAX * (delta[i] - own[i - 1])
-            own[i] = np.where(both[i - 1][:, None], held, relaxed)
+        rate = RELAX * np.clip((height - h_min - band) / band, 0.0, 1.0)  # (n, 3)
+        bones = _bone_lengths(rel[:, foot])
+        f_firm, f_held = firm[idx, foot], in_place[idx, foot]
+        for i in range(idx.size):  # ~50 samples of one stance
+            if i > 0:
+                held = own[i - 1] - step[i - 1]
+                relaxed = own[i - 1] + rate[i][:, None] * (delta[i] - own[i - 1])
+                own[i] = np.where(both[i - 1][:, None], held, relaxed)
+            pose = rel[idx[i], foot].copy()  # (3 markers, 3)
+            pose[:, [0, 2]] += own[i]
+            if i > 0:  # a marker a tilt raised comes back down over a few samples, not at once
+                pose[:, 1] += TILT_RELAX * np.maximum(lift[i - 1], 0.0)
+            rigid = _rigid_foot(pose[None], bones, f_firm[i][None], f_held[i][None])[0]
+            own[i] = rigid[:, [0, 2]] - rel[idx[i], foot][:, [0, 2]]
+            lift[i] = rigid[:, 1] - rel[idx[i], foot, :, 1]
         d = delta[-1]
         out[idx, foot, :, 0] += own[..., 0]
+        out[idx, foot, :, 1] += lift
         out[idx, foot, :, 2] += own[..., 1]
         rest = own[-1] - d  # what remains of the markers' own corrections at the end of the stance
-        swing = np.flatnonzero(~stance[:, foot])
+        covered = np.zeros(K, bool)
+        covered[idx] = True
+        swing = np.flatnonzero(~covered)
         if swing.size:
             start = (idx[-1] + 1) % K
             order = (np.arange(swing.size) + np.searchsorted(swing, start)) % swing.size
@@ -459,8 +495,105 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
             fade = 1.0 - min_jerk(np.linspace(0, 1, sw.size))
             corr = (d[None, :] + rest)[None] * fade[:, None, None]  # (n_sw, 3, 2)
             out[sw, foot, :, 0] += corr[..., 0]
+            out[sw, foot, :, 1] += lift[-1][None, :] * fade[:, None]  # a tilt's rise fades with them
             out[sw, foot, :, 2] += corr[..., 1]
     out[..., 1] = np.maximum(out[..., 1], 0.0)
+    return _keep_feet_rigid(out, rel, firm, in_place)
+
+
+#: At most this fraction of the cycle is added before and after a stance by _with_approach.
+APPROACH_MAX = 0.08
+
+
+def _with_approach(rel_foot: np.ndarray, idx: np.ndarray, stance_foot: np.ndarray, contact_tol: float,
+                   band: float) -> np.ndarray:
+    """A stance's samples idx (ordered in time, indices into K) with the samples just before and after it in
+    which a marker that reaches the floor is already (still) within ``band`` of its lowest point.
+
+    The reference's foot comes down still moving forward and leaves still moving: mocap feet land a few
+    millimetres before the contact test calls them down. Holding them from the moment they are that low
+    (as the physics report watches them) removes the landing sweep and the lift-off scuff as well.
+    rel_foot: (K, 3, 3) marker offsets (heights above the ground); stance_foot: (K,) bool.
+    """
+    K = rel_foot.shape[0]
+    height = rel_foot[:, :, 1]  # (K, 3)
+    h_min = height[idx].min(axis=0)
+    reaches = h_min <= contact_tol
+    if not reaches.any():
+        return idx
+    low = np.any((height <= h_min + band) & reaches, axis=1)  # (K,)
+    most = int(APPROACH_MAX * K)
+    before, after = [], []
+    k = (idx[0] - 1) % K
+    while len(before) < most and low[k] and not stance_foot[k]:
+        before.append(k)
+        k = (k - 1) % K
+    k = (idx[-1] + 1) % K
+    while len(after) < most and low[k] and not stance_foot[k] and k not in before:
+        after.append(k)
+        k = (k + 1) % K
+    return np.concatenate([np.array(before[::-1], int), idx, np.array(after, int)])
+
+
+#: Bones of the foot between its markers (ankle-ball: the foot; ball-tip: the toes): their lengths are fixed.
+FOOT_BONES = ((1, 2), (0, 1))
+#: Sweeps of the bone-length projection (each restores both bones; a few settle the chain to < 0.1 mm).
+RIGID_SWEEPS = 4
+#: Firmness of a marker off the floor (the bones' ends then share a correction equally), and of one held in
+#: place horizontally (it does not give way to one that is not).
+RIGID_MIN_FIRM = 1e-3
+RIGID_HELD_FIRM = 1e6
+
+
+def _bone_lengths(rel_foot: np.ndarray) -> np.ndarray:
+    """(3, 3) distances between one foot's markers [m] (median over the cycle), from rel_foot (K, 3, 3)."""
+    return np.median(np.linalg.norm(rel_foot[:, :, None, :] - rel_foot[:, None, :, :], axis=-1), axis=0)
+
+
+def _keep_feet_rigid(out: np.ndarray, rel: np.ndarray, firm: np.ndarray, held: np.ndarray) -> np.ndarray:
+    """_rigid_foot on every sample of both feet of a cycle's markers out (K, 2, 3, 3); rel: before de-skating."""
+    out = out.copy()
+    for foot in range(2):
+        out[:, foot] = _rigid_foot(out[:, foot], _bone_lengths(rel[:, foot]), firm[:, foot], held[:, foot])
+    out[..., 1] = np.maximum(out[..., 1], 0.0)
+    return out
+
+
+def _rigid_foot(pose: np.ndarray, length: np.ndarray, firm: np.ndarray, held: np.ndarray) -> np.ndarray:
+    """One foot's markers (N, 3, 3) (heading frame: forward, up, lateral) with their bone lengths restored.
+
+    Holding each loaded marker where it is while the reference foot rolls would keep a rising ball in its
+    place instead of swinging it back round the tip: the ball-tip distance shrank by up to 14 % (09_08), and
+    IK, unable to meet such targets, split the difference and slid the held tip 5-7 mm on a giant. So each
+    bone (FOOT_BONES, lengths ``length`` (3, 3)) gets its length back. A bone with both ends held in place
+    (held: (N, 3)) keeps them where they are and tilts: its less firm end moves up or down (firm: (N, 3),
+    how near each is to its lowest point of the stance), which is not sliding (the toes flex
+    about the ball, or the ball rolls over the tip). Otherwise the bone slides along itself horizontally, a
+    held end not at all and otherwise the firmer end less; heights stay (they decide what is on the ground).
+    """
+    hor = pose[..., [0, 2]].copy()  # (N, 3, 2)
+    height = pose[..., 1].copy()  # (N, 3)
+    firm = RIGID_MIN_FIRM + firm
+    for _ in range(RIGID_SWEEPS):
+        for i, j in FOOT_BONES:
+            d = length[i, j]
+            v = hor[:, j] - hor[:, i]
+            n = np.linalg.norm(v, axis=-1)
+            tilt = held[:, i] & held[:, j] & (n <= d)
+            rise = np.sqrt(np.maximum(d**2 - n**2, 0.0)) * np.where(height[:, j] >= height[:, i], 1.0, -1.0)
+            j_moves = firm[:, j] <= firm[:, i]
+            height[:, j] = np.where(tilt & j_moves, height[:, i] + rise, height[:, j])
+            height[:, i] = np.where(tilt & ~j_moves, height[:, j] - rise, height[:, i])
+            want = np.sqrt(np.maximum(d**2 - (height[:, j] - height[:, i]) ** 2, 0.0))  # horizontal length
+            u = v / np.maximum(n, 1e-12)[:, None]
+            change = np.where(tilt, 0.0, want - n)[:, None] * u  # j moves by +a·change, i by -(1-a)·change
+            fi = np.where(held[:, i], RIGID_HELD_FIRM, firm[:, i])
+            fj = np.where(held[:, j], RIGID_HELD_FIRM, firm[:, j])
+            b = (fi / (fi + fj))[:, None]
+            hor[:, j] += b * change
+            hor[:, i] -= (1.0 - b) * change
+    out = pose.copy()
+    out[..., 0], out[..., 1], out[..., 2] = hor[..., 0], height, hor[..., 1]
     return out
 
 

@@ -58,17 +58,78 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     com_rel = L * data["marker_from_com"]
     com_rel[..., 1] = L * data["marker_rel"][..., 1]  # heights above the ground as in the anchored path
     with_body = path.com[:, None, None, :] + np.einsum("fpki,ij->fpkj", com_rel, Rh)
-    with_body[..., UP_AXIS] = on_ground[..., UP_AXIS]
+    # In mid-swing the foot keeps at least its reference height below the COM: a machine whose COM flies
+    # higher than the reference's at that phase (a faster cycle: shorter stance, longer flight) would
+    # otherwise leave the swinging foot at the reference's height above the ground, out of the leg's reach,
+    # and the IK straightens the knee and flips it (a 60-70 deg pop at x1.5).
+    below_com = path.com[:, None, None, UP_AXIS] + L * (data["marker_from_com"][..., 1]
+                                                        - data["com_height"][:, None, None])
+    with_body[..., UP_AXIS] = np.maximum(on_ground[..., UP_AXIS], below_com)
     w = w_ground[:, :, None, None]
     markers = w * on_ground + (1.0 - w) * with_body
     root = path.com + (L * data["root_from_com"]) @ Rh
     initial = Motion(retarget.skeleton, root, rot, float(path.frame_time), None, dict(meta))
+    # The reference's root-to-COM offset × L is where the root goes for a body of the reference's
+    # proportions. A character with other proportions (a troll's trunk) carries its COM elsewhere relative
+    # to the root, and when the root is a static reference joint far from the pelvis (the Bandai rig's
+    # joint_Root, metres from the body through the pelvis offset) the error is metres: the IK would start
+    # with the feet out of reach. So the initial pose is translated to put its own COM on the machine's.
+    initial = initial.with_(root_positions=root + (path.com - retarget.body.com(initial)))
+    markers = _lift_out_of_reach(initial, retarget.body, markers)
     weight = _marker_weights(path, markers, retarget.body.leg_length) * _reach_factor(initial, retarget.body, markers)
     weight = np.maximum(weight, SWING_MARKER_WEIGHT)
     # Weights are per (leg length)^2, so the trade-off between a position error and a joint angle is the
     # same for a child and a giant (errors in metres grow with size, joint angles do not).
     per_size = (reference_leg_length / retarget.body.leg_length) ** 2
     return Targets(initial, path.com, markers, weight * per_size, np.full(T, COM_WEIGHT * per_size))
+
+
+def _leg_reach(body: BodyModel, side: str) -> np.ndarray:
+    """(3,) straight-leg distances [m] from the hip to the ankle, the ball and the tip of one foot."""
+    r, rest = body.roles, body.skeleton.rest_positions()
+    leg = np.linalg.norm(rest[r[f"{side}_knee"]] - rest[r[f"{side}_hip"]]) + np.linalg.norm(
+        rest[r[f"{side}_ankle"]] - rest[r[f"{side}_knee"]])
+    ankle_toe = np.linalg.norm(rest[r[f"{side}_toe"]] - rest[r[f"{side}_ankle"]])
+    toe_end = np.linalg.norm(body.marker_local[0 if side == "left" else 1, 2])
+    return np.array([leg, leg + ankle_toe, leg + ankle_toe + toe_end])
+
+
+#: A foot marker target farther from the hip than its straight-leg reach less LIFT_AT_MARGINS margins of
+#: REACH_MARGIN_L × L is raised until it is not (see _lift_out_of_reach) ...
+LIFT_AT_MARGINS = 2.0
+REACH_MARGIN_L = 0.03
+#: ... by at most about this fraction of L (a soft cap: the rise needed grows without bound as the
+#: horizontal distance nears the reach; beyond the cap the target stays out of reach and _reach_factor lets
+#: it go, by then above the floor band in which the physics report watches it slide).
+LIFT_MAX_L = 0.05
+
+
+def _lift_out_of_reach(initial: Motion, body: BodyModel, markers: np.ndarray) -> np.ndarray:
+    """markers (T, 2, 3, 3) [m] with every target beyond the leg's reach raised straight up until it is
+    within it (hip from the initial pose; reach from _leg_reach less LIFT_AT_MARGINS margins; soft cap
+    LIFT_MAX_L × L).
+
+    When the body has travelled farther over a planted foot than the leg allows (an acceleration's longer
+    stance, a faster run), holding the foot's points where they are ends with the knee locked and the IK
+    failing, and releasing them lets the posture swing the toe sideways while it is still on the floor (a
+    10-15 mm scuff at lift-off, 09_01 accelerated to 1.3x). Raising them instead is what a foot does at
+    toe-off: the heel, then the ball and the tip rise where they stand, so they leave the floor without
+    sliding. A target whose horizontal distance alone is out of reach is raised by the cap and released by
+    _reach_factor.
+    """
+    hips = body.joint_positions(initial, [body.roles["left_hip"], body.roles["right_hip"]])  # (T, 2, 3)
+    out = markers.copy()
+    margin = REACH_MARGIN_L * body.leg_length
+    cap = LIFT_MAX_L * body.leg_length
+    horizontal = [a for a in range(3) if a != UP_AXIS]
+    for i, side in enumerate(("left", "right")):
+        reach = _leg_reach(body, side) - LIFT_AT_MARGINS * margin  # (3,)
+        rel = markers[:, i] - hips[:, i, None, :]  # (T, 3, 3)
+        flat = np.linalg.norm(rel[..., horizontal], axis=-1)  # (T, 3)
+        lowest = -np.sqrt(np.maximum(reach[None, :] ** 2 - flat**2, 0.0))  # lowest reachable height below the hip
+        need = np.where(flat < reach[None, :], lowest - rel[..., UP_AXIS], np.inf)  # (T, 3) rise needed [m]
+        out[:, i, :, UP_AXIS] += cap * np.tanh(np.maximum(need, 0.0) / cap)
+    return out
 
 
 def _reach_factor(initial: Motion, body: BodyModel, markers: np.ndarray) -> np.ndarray:

@@ -523,7 +523,8 @@ def _with_approach(rel_foot: np.ndarray, idx: np.ndarray, stance_foot: np.ndarra
         return idx
     low = np.any((height <= h_min + band) & reaches, axis=1)  # (K,)
     most = int(APPROACH_MAX * K)
-    before, after = [], []
+    before: list[int] = []
+    after: list[int] = []
     k = (idx[0] - 1) % K
     while len(before) < most and low[k] and not stance_foot[k]:
         before.append(k)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -166,7 +167,7 @@ _OUT_KEYS = ("theta0", "b", "U", "H", "U_ref", "t_apex", "x_apex", "x_contact", 
 
 
 def _new_out(U, H, b):
-    out = {k: [] for k in _OUT_KEYS}
+    out: dict[str, Any] = {k: [] for k in _OUT_KEYS}
     out.update(U=[U], H=[H], U_ref=[U], t_apex=[0.0], x_apex=[0.0])
     out["_b"] = b
     return out
@@ -579,6 +580,7 @@ def _plan_profile(cyc, fn, duration, U_end, Us, table, comfort, mode, lead_steps
         _change_steps(cyc, out, n, U_ref, target, mode, comfort, table, "even")
     else:
         target = _theta_change(cyc, out, n, U_ref, U_end, comfort, table, "even")
+    assert target is not None  # the target orbit (b) or the one the angle-only change reached
     _run(cyc, out, HOLD, int(hold_steps), lambda k, t: (U_end, target.H), None, comfort, mode, table)
     notes = [f"profile followed at the apexes over {n} steps: U(apex) = profile(t_apex - t_start), "
              f"the last apex's speed is the profile's end value"]

@@ -342,7 +342,7 @@ def _shoot(U0, H0, t0, tau, b, ctl):
     n = len(tau)
     U, H, t, th = np.empty(n + 1), np.empty(n + 1), np.empty(n + 1), np.full(n, np.nan)
     U[0], H[0], t[0] = U0, H0, t0
-    res = []
+    res: list[StepResult] = []
     for k in range(n):
         th[k] = _theta_of(H[k], tau[k])
         r = step(U[k], H[k], th[k], replace(ctl, b=float(b[k])))

@@ -319,10 +319,10 @@ def _free_port() -> int:
 def test_unreachable_speed_says_so_in_metres_per_second(monkeypatch):
     """A speed with no running cycle (a Bandai tired run at x2, the slider's end) is refused in m/s with the
     fix, not in the cycle solver's terms."""
-    from conftest import clip
-
     from froude.errors import FitError
     from froude.prepared import Prepared
+
+    from conftest import clip
 
     s = Session(pipeline.prepare(clip("dataset-1_run_tired_001")))
     # the machine now finds a cycle up to x3 on the shared clips (continued from slower ones), so the case is

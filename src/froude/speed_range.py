@@ -3,9 +3,9 @@ refusals said in the user's terms (m/s, ×, steps)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from .pipeline import Prepared

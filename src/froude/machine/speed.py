@@ -23,7 +23,6 @@ import numpy as np
 from ..errors import FitError
 from .model import SimpleMachine
 
-
 #: When the cycle search from the fitted cycle fails at a high factor, it is continued from the cycle
 #: solved at a lower one, in steps of this much [-].
 CONTINUATION_STEP = 0.1

@@ -100,8 +100,8 @@ def bar_name(text: str) -> str:
 def judge(rep) -> tuple[list[str], list[str], dict]:
     """(short names of the bars missed, their texts, the figures) of one report, the stricter skate included."""
     texts = list(rep.check_bars())
-    if (not any(t.startswith("foot skate (ball and tip") for t in texts)
-            and not rep.foot_skate_floor_mm <= SKATE_FLOOR_MM):
+    stricter_shown = any(t.startswith("foot skate (ball and tip") for t in texts)
+    if not stricter_shown and not rep.foot_skate_floor_mm <= SKATE_FLOOR_MM:
         texts.append(f"foot skate (ball and tip near the floor) {rep.foot_skate_floor_mm:.2f} mm (<= 5)")
     names = [bar_name(t) for t in texts]
     jr = rep.max_joint_jump_deg / rep.reference_max_joint_jump_deg if rep.reference_max_joint_jump_deg else float("nan")
@@ -201,7 +201,6 @@ def matrix_13(clips: Clips, only) -> list[Row]:
 def matrix_speeds(clips: Clips, only) -> list[Row]:
     """Acceptance 13.4 as ``froude scale --speed S`` behaves: an output inside the reachable range must meet
     every bar; outside it the CLI refuses with the range (a refusal inside the range is a miss)."""
-
     rows = []
     for name in CMU_RUNS + BANDAI_RUNS:
         if only and name not in only:

@@ -20,12 +20,12 @@ LAYERS = [
     ("core", "quaternions, skeleton, motion, FK and Jacobians; constants, errors"),
     ("io", "BVH, glTF, per-frame tables, atomic writes, JSON"),
     ("body", "body model (de Leva), joint roles, gait and contacts, characters, conventions, the take"),
-    ("machine", "§4-5: dynamics, forces, fit, limit cycle, speed (§5.2), transition table and planner (§5.3)"),
+    ("machine", "§4-5: units, dynamics, orbits, forces, fit, speed (§5.2), transition table and planner (§5.3)"),
     ("synthesis", "§6 input: reference cycle, time warp, IK targets"),
-    ("ik", "§6: batched whole-body IK and the correction policy"),
+    ("ik", "§6: IK tasks, the batched whole-body solver and its kernels, the correction policy"),
     ("report", "the physics report (metrics) and plots/renders (viz)"),
     ("pipeline", "prepare / scale / accelerate / naive: orchestration; the public verbs (api)"),
-    ("apps", "command line, studio, batch, demo"),
+    ("apps", "command line, studio, batch, demo, signals"),
 ]
 #: Top-level modules (src/froude/X.py) and the layer they belong to; packages are their own layer.
 TOP_LEVEL = {
@@ -134,7 +134,7 @@ def draw(mods: dict[str, Path], count: Counter, out: Path) -> None:
         ax.add_patch(FancyArrowPatch((x0, ys), (x0, yd), connectionstyle=f"arc3,rad={rad}",
                                      arrowstyle="-|>", mutation_scale=9, lw=0.5 + 0.5 * math.log2(1 + n),
                                      color="#c0392b" if up else "#5d6d7e", alpha=0.75))
-    ax.text(x0 + w, -0.3, "arcs: imports between layers (width ~ log count); red would point up a layer",
+    ax.text(x0 + w, -0.3, "arcs: imports between layers (width ~ log of the count); red: an import up a layer",
             fontsize=7.5, ha="right", va="top", color="#444444")
     ax.set_xlim(-1.2, x0 + w + 0.2)
     ax.set_ylim(-0.6, len(LAYERS) * (box_h + gap))

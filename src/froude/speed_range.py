@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 if TYPE_CHECKING:
     from .pipeline import Prepared
 
@@ -52,14 +54,39 @@ def _speed_ok(prep: Prepared, character, s: float, numbers: dict) -> tuple[bool,
     return not fails, "; ".join(fails)
 
 
+#: After the bisection, every factor this far apart between x1 and each end is produced and checked too.
+SPEED_GRID = 0.1
+
+
+def _walk_in(ok, direction: float, end: float) -> float:
+    """The end of the interval of factors around 1 whose outputs meet the bars, walking out from 1 in steps
+    of SPEED_GRID up to ``end`` (the bisection's end): a grid factor that misses ends the interval there
+    (refined by bisection to SPEED_SEARCH_TOL). The bisection alone assumes one interval; a loop unrolled
+    from one stride can miss at x1.8 and meet the bars again at x2.1."""
+    good = 1.0
+    for g in np.arange(1.0 + direction * SPEED_GRID, end, direction * SPEED_GRID):
+        if ok(float(g)):
+            good = float(g)
+            continue
+        bad = float(g)
+        while abs(bad - good) > SPEED_SEARCH_TOL:
+            mid = 0.5 * (good + bad)
+            if ok(mid):
+                good = mid
+            else:
+                bad = mid
+        return good
+    return end
+
+
 def reachable_speed_range(prep: Prepared, character=None, **character_numbers) -> SpeedRange:
     """The range of ``scale`` speed factors whose outputs meet every physics bar, for one character.
 
     Bisection on real outputs (4 strides each, the same synthesis and IK as ``scale``) between 1 and the
     ends of SPEED_SEARCH_RANGE, to SPEED_SEARCH_TOL; the ends returned were themselves produced and
-    checked. About a dozen short outputs (a few seconds); remembered per character on ``prep``. Assumes the
-    reachable speeds form one interval around x1 (true on the shared clips: faster outputs fail by a knee
-    that pops or a cycle that does not exist, slower ones by nothing down to x0.3).
+    checked; then every SPEED_GRID step between x1 and each end is checked too (_walk_in), so that the
+    range is one interval of factors that were all seen to meet the bars (at that spacing). About thirty
+    short outputs (a few seconds); remembered per character on ``prep``.
     For the studio's speed slider and for ``scale``'s refusals.
     """
     key = ("speed_range", character if isinstance(character, (str, type(None))) else id(character),
@@ -93,7 +120,7 @@ def reachable_speed_range(prep: Prepared, character=None, **character_numbers) -
                 else:
                     bad = mid
             ends.append(good)
-        lo, hi = ends
+        lo, hi = (_walk_in(ok, far, end) for far, end in zip((-1.0, 1.0), ends))
     out = SpeedRange(lo=lo, hi=hi, lo_m_s=lo * base, hi_m_s=hi * base, base_m_s=base, probes=tuple(probes),
                      empty=not probes[0][1])
     prep.memo.speed_ranges[key] = out

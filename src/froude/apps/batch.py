@@ -36,8 +36,12 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from ..errors import FroudeError
+
+if TYPE_CHECKING:
+    from ..prepared import Prepared
 
 #: Character numbers a plan may give, as ``pipeline.scale`` / ``accelerate`` keyword arguments, with the
 #: short tags used in variation ids.
@@ -199,7 +203,7 @@ def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
                                         sarg + (("strides", n),) + fps_arg))
         for aid, aarg in acc_args:
             variations.append(Variation(f"{label}_{aid}", "accelerate", label, spec, numbers, aarg + fps_arg))
-    seen = {}
+    seen: dict[str, tuple[str, dict]] = {}
     for v in variations:
         key = v.id.lower()  # ids name files: on a case-insensitive filesystem "Tall" and "tall" are one
         if key in seen:
@@ -373,7 +377,7 @@ def find_clips(inputs, exclude=None) -> list[Clip]:
     def inside(p) -> bool:
         return ex is not None and Path(p).resolve().is_relative_to(ex)
 
-    paths = []
+    paths: list[str | Path] = []
     for item in inputs:
         item = str(item)
         if any(c in item for c in "*?["):
@@ -385,11 +389,11 @@ def find_clips(inputs, exclude=None) -> list[Clip]:
             if inside(item):
                 raise BatchError(f"{item}: is the output folder {exclude} or inside it: outputs are not inputs "
                                  "(write the outputs elsewhere, e.g. a subfolder)")
-            hits = sorted(p for p in Path(item).rglob("*")
-                          if p.suffix.lower() == ".bvh" and p.is_file() and not inside(p))
-            if not hits:
+            found = sorted(p for p in Path(item).rglob("*")
+                           if p.suffix.lower() == ".bvh" and p.is_file() and not inside(p))
+            if not found:
                 raise BatchError(f"{item}: no .bvh file in this folder" + (" outside the output folder" if ex else ""))
-            paths += hits
+            paths += found
         elif Path(item).is_file():
             if inside(item):
                 raise BatchError(f"{item}: is inside the output folder {exclude}: outputs are not inputs")
@@ -498,7 +502,7 @@ def clean_stale_temporaries(outdir) -> int:
 class Prepped:
     """A prepare task's result: the Prepared clip or the one-line reason it failed, and its time [s]."""
 
-    prep: object
+    prep: Prepared | None  # None when the clip failed (error says why)
     error: str
     seconds: float
 
@@ -531,8 +535,12 @@ def run_task(prepped: Prepped, task: Task, plan: Plan, outdir: str) -> dict:
     v = task.variation
     out = Path(outdir) / task.output
     try:
-        fn = pipeline.scale if v.kind == "scale" else pipeline.accelerate
-        res = fn(prepped.prep, v.character, **dict(v.numbers), **dict(v.args))
+        assert prepped.prep is not None  # a failed prepare returned above
+        kwargs: dict[str, Any] = {**dict(v.numbers), **dict(v.args)}
+        if v.kind == "scale":
+            res = pipeline.scale(prepped.prep, v.character, **kwargs)
+        else:
+            res = pipeline.accelerate(prepped.prep, v.character, **kwargs)
         bvh, rep = pipeline.write_result(res, out)
         row.update(result_figures(res), status="ok", reason="")
     except Exception as e:  # noqa: BLE001
@@ -591,8 +599,9 @@ _ARG_COLUMNS = {"speed": "speed_factor", "target_speed": "target_speed_m_s", "to
 
 def base_row(task: Task, status: str = "pending", reason: str = "") -> dict:
     v = task.variation
-    row = {"clip": task.clip.id, "variation": v.id, "kind": v.kind, "character": v.character_label,
-           "output": task.output, "status": status, "reason": reason}
+    row: dict[str, Any] = {"clip": task.clip.id, "variation": v.id, "kind": v.kind,
+                           "character": v.character_label, "output": task.output, "status": status,
+                           "reason": reason}
     row.update(dict(v.numbers))
     row.update({_ARG_COLUMNS.get(k, k): x for k, x in v.args if k not in ("lead_steps", "hold_steps")})
     return row

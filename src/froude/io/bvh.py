@@ -119,7 +119,11 @@ class _Parser:
         return value
 
     def parse_hierarchy(self):
-        names, parents, offsets, channels, end_sites = [], [], [], [], []
+        names: list[str] = []
+        parents: list[int] = []
+        offsets: list = []
+        channels: list = []
+        end_sites: list = []
         tok = self.peek()
         if tok is None:
             raise BvhError("empty file: no HIERARCHY section", self.path, 1)
@@ -141,7 +145,7 @@ class _Parser:
         name_tok = self.next("a joint name")
         name = name_tok.text
         # Names may contain spaces in some exporters: join words up to the brace on the same line.
-        while self.peek() is not None and self.peek().text != "{" and self.peek().line == name_tok.line:
+        while (nxt := self.peek()) is not None and nxt.text != "{" and nxt.line == name_tok.line:
             name += " " + self.next("joint name").text
         shown = _show(name)
         if name in names:

@@ -492,7 +492,7 @@ def _integrate_stance_scalar(px, py, vx, vy, K, a, b, c, Tc, n_per_stance, max_s
     fmax = f_prev = K * g1
     f_before = f_after = math.nan
     just_max = True
-    nodes = [(0.0, px, py, vx, vy, ax1, ay1)] if record else None
+    nodes = [(0.0, px, py, vx, vy, ax1, ay1)]  # kept only with ``record``
     nan = math.nan
     out = {"t": nan, "px": nan, "py": nan, "vx": nan, "vy": nan, "fmax": nan, "reason": NO_LIFTOFF}
     k = 0
@@ -567,7 +567,7 @@ def _integrate_stance_scalar(px, py, vx, vy, K, a, b, c, Tc, n_per_stance, max_s
         if record:
             nodes.append((k * h, px, py, vx, vy, ax1, ay1))
     if record:
-        out["nodes"] = nodes
+        out["nodes"] = nodes  # type: ignore[assignment]  # the one list-valued entry
     return out
 
 
@@ -603,8 +603,8 @@ def _step_flat(U, H, th, K, a, b, c, Tc, n_per_stance, max_stance, chunk):
     if 0 < rows.size <= SMALL_BATCH:
         # A few rows (a finite-difference Jacobian, a line search): the plain-float twin per row is
         # faster than NumPy on short arrays (measured: 8 rows 10 ms batched, 8 x 0.5 ms per row).
-        for i in rows:
-            i = int(i)
+        for row in rows:
+            i = int(row)
             res = _integrate_stance_scalar(-float(std[i]), float(ctd[i]), float(U[i]), -float(t_fall[i]),
                                            float(K[i]), float(a[i]), float(b[i]), float(c[i]),
                                            float(Tc[i]), n_per_stance, max_stance)
@@ -660,8 +660,8 @@ def step(U, H, theta0, control, *, n_per_stance=N_PER_STANCE, max_stance=MAX_STA
     arrs = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in
                                  (U, H, theta0, *control.as_tuple())))
     shape = arrs[0].shape
-    flat = [np.ascontiguousarray(x).reshape(-1) for x in arrs]
-    out = _step_flat(*flat, n_per_stance, max_stance, max(int(chunk), 1))
+    u, h, th, K, a, b, c, Tc = (np.ascontiguousarray(x).reshape(-1) for x in arrs)
+    out = _step_flat(u, h, th, K, a, b, c, Tc, n_per_stance, max_stance, max(int(chunk), 1))
     return StepResult(**{k: out[k].reshape(shape) for k in _STEP_FIELDS})
 
 

@@ -105,7 +105,7 @@ def solve_orbit(evaluate, z0, s, h, *, tol=1e-10, max_iter=30, resolutions=(16, 
     fine = False
     nrm = np.inf
     R = r = None
-    best = (np.inf, None, None, None)  # (residual, z, rows, R) of the best fine-resolution point
+    best: tuple = (np.inf, None, None, None)  # (residual, z, rows, R) of the best fine-resolution point
     for _ in range(max_iter):
         n = resolutions[1] if fine else resolutions[0]
         need_jac = (not fine) or J is None
@@ -145,6 +145,7 @@ def solve_orbit(evaluate, z0, s, h, *, tol=1e-10, max_iter=30, resolutions=(16, 
         return z, r, calls, R0
     if not (fine and nrm <= tol):
         raise FitError(f"no periodic {what} found within {max_iter} simulator calls (residual {nrm:.2g})")
+    assert R is not None  # converged, so evaluated at least once
     return z, r, calls, R[0]
 
 

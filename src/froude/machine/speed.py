@@ -23,23 +23,49 @@ import numpy as np
 from ..errors import FitError
 from .model import SimpleMachine
 
+#: When the cycle search from the fitted cycle fails at a high factor, it is continued from the cycle
+#: solved at a lower one, in steps of this much [-].
+CONTINUATION_STEP = 0.1
+
 
 def faster_machine(machine: SimpleMachine, s: float) -> SimpleMachine:
     """The machine's periodic cycle at s × its mean speed with stance time / s and the step time kept.
 
-    Dimensionless fields change; SI fields (l0, mass, reference measurements) are those of ``machine``.
-    Raises FitError if no such cycle exists (the message says why).
+    The search starts from the fitted cycle; beyond about x1.6 that start is too far (the search leaves the
+    feasible region: the leg lifts off still falling), so it is continued from the cycles solved at
+    x1.1, x1.2, ... up to s (each the start of the next). Dimensionless fields change; SI fields (l0, mass,
+    reference measurements) are those of ``machine``. Raises FitError if no cycle exists (why).
     """
+    if not s > 0:
+        raise FitError(f"speed factor must be > 0, got {s}")
+    try:
+        return _solve_faster(machine, s, machine)
+    except FitError as first:
+        if s <= 1.0 + CONTINUATION_STEP:
+            raise
+        start, last = machine, 1.0
+        for f in np.arange(1.0 + CONTINUATION_STEP, s, CONTINUATION_STEP):
+            try:
+                start, last = _solve_faster(machine, float(f), start, last), float(f)
+            except FitError:
+                raise first from None
+        try:
+            return _solve_faster(machine, s, start, last)
+        except FitError:
+            raise first from None
+
+
+def _solve_faster(machine: SimpleMachine, s: float, start: SimpleMachine, s_start: float = 1.0) -> SimpleMachine:
+    """The cycle search at s × the speed of ``machine`` (stance / s, step time kept), started from the cycle
+    ``start`` solved at s_start × the speed."""
     from .dynamics import N_PER_STANCE
     from .fit import _cycle_search
 
-    if not s > 0:
-        raise FitError(f"speed factor must be > 0, got {s}")
     t_stance = machine.t_stance / s
     t_flight = machine.step_time - t_stance
     if not t_flight > 0:
         raise FitError(f"a stance of {t_stance:.3f} leaves no flight in a step of {machine.step_time:.3f}")
-    z0 = np.array([s * machine.U, machine.H, machine.theta0, machine.K, machine.a, machine.b, machine.c])
+    z0 = np.array([s / s_start * start.U, start.H, start.theta0, start.K, start.a, start.b, start.c])
     T_c = machine.T_c / s
     z, row, calls, res = _cycle_search(z0, T_c, (t_stance, t_flight, s * machine.mean_speed), N_PER_STANCE)
     U, H, th, K, a, b, c = (float(v) for v in z)

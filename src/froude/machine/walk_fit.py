@@ -223,6 +223,7 @@ def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40):
         if not w.valid:
             return None, w
         nx = w.next
+        assert nx is not None  # a valid step has its next state
         R = np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3],
                       (w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
                       (w.step_length / w.t_step - tgt[2]) / tgt[2]])

@@ -448,6 +448,8 @@ RELAX = 0.2
 TILT_RELAX = 0.5
 
 
+# Long because the per-sample correction δ runs forward through a stance, each sample's depending on the
+# previous one's loaded markers, and then fades over the swing: one sequential pass per foot.
 def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, band: float) -> np.ndarray:
     """Remove the reference's foot sliding in stance by translating each foot rigidly.
 

@@ -106,6 +106,8 @@ REACH_MARGIN_L = 0.03
 #: horizontal distance nears the reach; beyond the cap the target stays out of reach and _reach_factor lets
 #: it go, by then above the floor band in which the physics report watches it slide).
 LIFT_MAX_L = 0.05
+#: Softness [× L] of the limit to which an out-of-reach swing target is drawn in (_lift_out_of_reach).
+SWING_SOFT_L = 0.01
 
 
 def _lift_out_of_reach(initial: Motion, body: BodyModel, markers: np.ndarray) -> np.ndarray:
@@ -133,6 +135,19 @@ def _lift_out_of_reach(initial: Motion, body: BodyModel, markers: np.ndarray) ->
         lowest = -np.sqrt(np.maximum(reach[None, :] ** 2 - flat**2, 0.0))  # lowest reachable height below the hip
         need = np.where(flat < reach[None, :], lowest - rel[..., UP_AXIS], np.inf)  # (T, 3) rise needed [m]
         out[:, i, :, UP_AXIS] += cap * np.tanh(np.maximum(need, 0.0) / cap)
+        # A target off the floor (a swinging foot) that is still out of reach is drawn in toward the hip
+        # (a soft minimum of its distance and the reach): a faster run's swing targets reach 0.94 L from
+        # the hip, and a leg straightened after them flips its knee from frame to frame (x1.7).
+        rel = out[:, i] - hips[:, i, None, :]
+        d = np.linalg.norm(rel, axis=-1)  # (T, 3)
+        soft = SWING_SOFT_L * body.leg_length
+        d_in = reach[None, :] - soft * np.logaddexp(0.0, (reach[None, :] - d) / soft)
+        # only for a foot wholly off the floor (its lowest target 2-4 caps up): near a contact the stance
+        # weights and the lift above decide, and drawing in a raised heel at lift-off turns the toes
+        lowest_target = out[:, i, :, UP_AXIS].min(axis=1, keepdims=True)  # (T, 1)
+        off_floor = min_jerk((lowest_target - 2.0 * cap) / (2.0 * cap))
+        scale = 1.0 + off_floor * (np.minimum(d_in / np.maximum(d, 1e-9), 1.0) - 1.0)
+        out[:, i] = hips[:, i, None, :] + rel * scale[..., None]
     return out
 
 

@@ -182,12 +182,13 @@ def _stride_phase(t, t_td, t_lo, feet, A, phase_events, contact_phase, tr, T_uni
     room_after = 0.4 * fl_after
     on_t = np.maximum(on_t, t_td - room_before)
     off_t = np.minimum(off_t, t_lo + room_after)
-    times, psis = [], []
+    knots_t: list[float] = []
+    knots_psi: list[float] = []
     for i in range(n):
-        times += [on_t[i], t_td[i], t_lo[i], off_t[i]]
-        psis += [psi_td[i] - ext_before[i], psi_td[i], psi_lo[i], psi_lo[i] + ext_after[i]]
+        knots_t += [on_t[i], t_td[i], t_lo[i], off_t[i]]
+        knots_psi += [psi_td[i] - ext_before[i], psi_td[i], psi_lo[i], psi_lo[i] + ext_after[i]]
     last_f = feet[-1]
     next_td_psi = k[-1] + (1.0 if last_f == 1 - A else phase_events[2])
-    times = np.array([t_td[0] - fl_before[0]] + times + [t_lo[-1] + fl_after[-1]])
-    psis = np.array([p[(1 - A, "lo")] - 1.0] + psis + [next_td_psi])
+    times = np.array([t_td[0] - fl_before[0]] + knots_t + [t_lo[-1] + fl_after[-1]])
+    psis = np.array([p[(1 - A, "lo")] - 1.0] + knots_psi + [next_td_psi])
     return np.interp(t, times, psis), times, psis, on_t, off_t

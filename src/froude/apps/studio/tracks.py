@@ -72,6 +72,7 @@ class Track:
         """The capsules of this skeleton (``froude render``'s): the same widths, head and sides."""
         from ...viz.render import build_rig
 
+        assert self.body is not None, "a track without a body model is drawn as lines"
         return build_rig(self.body)
 
     def borrow_rig(self, other: Track) -> bool:

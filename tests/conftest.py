@@ -59,6 +59,22 @@ def clip(name: str) -> Path:
     return MOCAP / f"{name}.bvh"
 
 
+class _Prepared(dict):
+    """Running clips prepared (loaded, fitted) on first use; a missing clip skips the test that asks."""
+
+    def __missing__(self, name: str):
+        from froude import pipeline
+
+        self[name] = pipeline.prepare(clip(name))
+        return self[name]
+
+
+@pytest.fixture(scope="module")
+def prepared():
+    """Each clip's ``pipeline.prepare`` once per test module: ``prepared["09_01"]``."""
+    return _Prepared()
+
+
 def clip_params(names=None):
     """pytest parameters over real clips; a single skipping parameter when the data is absent."""
     names = list(names or ALL_CLIPS)

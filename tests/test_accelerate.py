@@ -14,20 +14,6 @@ from froude.machine.table import grid_around, load_or_build_table
 
 from conftest import RUNNING, clip, clip_params
 
-
-class _Prepared(dict):
-    """Running clips fitted on first use (once per module); a missing clip skips the test that asks."""
-
-    def __missing__(self, name: str):
-        self[name] = pipeline.prepare(clip(name))
-        return self[name]
-
-
-@pytest.fixture(scope="module")
-def prepared():
-    return _Prepared()
-
-
 #: (clip, factor) -> the bar missed, measured (benchmarks/bars_matrix.py --matrix 13).
 ACCELERATE_MISSES = {
     ("09_04", 0.5): "joint jump 19.99 deg (<= 1.5 x reference 13.11): a toe at a lift-off",

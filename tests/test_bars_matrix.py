@@ -30,15 +30,6 @@ FAST_MISSES = {
 }
 
 
-class _Prepared(dict):
-    def __missing__(self, name: str):
-        self[name] = pipeline.prepare(clip(name))
-        return self[name]
-
-
-@pytest.fixture(scope="module")
-def prepared():
-    return _Prepared()
 
 
 def _fast_cases():

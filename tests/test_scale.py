@@ -22,18 +22,6 @@ PRESETS = ["child", "troll", "giant", "small"]
 SPEEDS = [0.7, 1.0, 1.2]
 
 
-class _Prepared(dict):
-    """Running clips fitted on first use (once per module); a missing clip skips the test that asks."""
-
-    def __missing__(self, name: str):
-        self[name] = pipeline.prepare(clip(name))
-        return self[name]
-
-
-@pytest.fixture(scope="module")
-def prepared():
-    """Each running clip fitted once for the whole module."""
-    return _Prepared()
 
 
 #: Outputs that miss a bar, measured on this branch (benchmarks/bars_matrix.py --matrix 13 gives the same

@@ -68,15 +68,20 @@ def _walk_in(ok, direction: float, end: float) -> float:
         if ok(float(g)):
             good = float(g)
             continue
-        bad = float(g)
-        while abs(bad - good) > SPEED_SEARCH_TOL:
-            mid = 0.5 * (good + bad)
-            if ok(mid):
-                good = mid
-            else:
-                bad = mid
-        return good
+        return _bisect(ok, good, float(g))
     return end
+
+
+def _bisect(ok, good: float, bad: float) -> float:
+    """The factor between ``good`` (meets the bars) and ``bad`` (misses) where ok flips, to SPEED_SEARCH_TOL;
+    the value returned is one that was checked and met them."""
+    while abs(bad - good) > SPEED_SEARCH_TOL:
+        mid = 0.5 * (good + bad)
+        if ok(mid):
+            good = mid
+        else:
+            bad = mid
+    return good
 
 
 def reachable_speed_range(prep: Prepared, character=None, **character_numbers) -> SpeedRange:
@@ -109,17 +114,7 @@ def reachable_speed_range(prep: Prepared, character=None, **character_numbers) -
     else:
         ends = []
         for far in SPEED_SEARCH_RANGE:
-            good, bad = 1.0, far
-            if ok(far):
-                ends.append(far)
-                continue
-            while abs(bad - good) > SPEED_SEARCH_TOL:
-                mid = 0.5 * (good + bad)
-                if ok(mid):
-                    good = mid
-                else:
-                    bad = mid
-            ends.append(good)
+            ends.append(far if ok(far) else _bisect(ok, 1.0, far))
         lo, hi = (_walk_in(ok, far, end) for far, end in zip((-1.0, 1.0), ends))
     out = SpeedRange(lo=lo, hi=hi, lo_m_s=lo * base, hi_m_s=hi * base, base_m_s=base, probes=tuple(probes),
                      empty=not probes[0][1])

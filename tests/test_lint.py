@@ -55,9 +55,9 @@ def test_public_names_are_listed_once():
     for name in froude.__all__:
         assert getattr(froude, name) is not None
     # every error a user can meet is exported, and is a FroudeError
-    errors = {n for n in froude.__all__ if n.endswith("Error") or n == "NotARunningMotion"}
+    errors = {n for n in froude.__all__ if n.endswith("Error") or n.startswith("NotA")}
     assert errors == {"BvhError", "CharacterError", "FitError", "FroudeError", "IkError", "JointMapError",
-                      "NotARunningMotion", "OutputError", "PlanError"}
+                      "NotARunningMotion", "NotAWalkingMotion", "OutputError", "PlanError"}
     assert all(issubclass(getattr(froude, n), froude.FroudeError) for n in errors)
 
 

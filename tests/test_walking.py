@@ -134,9 +134,9 @@ def test_machine_json_round_trip_and_similarity(name, walk_fits, tmp_path):
 
 
 def test_fit_refuses_a_run():
-    from froude.errors import NotARunningMotion
+    from froude.errors import NotAWalkingMotion
 
-    with pytest.raises(NotARunningMotion, match="not a walk"):
+    with pytest.raises(NotAWalkingMotion, match="not a walk"):
         fit_walking_detailed(load_bvh(clip("09_01")), source="09_01")
 
 
@@ -183,8 +183,8 @@ def test_machine_path_tiles_a_periodic_walk(name, walk_fits):
 
 
 def test_fit_refuses_a_walk_without_a_complete_step():
-    from froude.errors import NotARunningMotion
+    from froude.errors import NotAWalkingMotion
 
     m = load_bvh(clip("02_01")).cut(0, 100)  # 0.83 s: two touchdowns, no complete step
-    with pytest.raises(NotARunningMotion, match="no complete walking step"):
+    with pytest.raises(NotAWalkingMotion, match="no complete walking step"):
         fit_walking_detailed(m, source="02_01[:100]")

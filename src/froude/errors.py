@@ -24,6 +24,11 @@ class NotARunningMotion(FroudeError):
     """The motion has no flight phase, no forward progression or too few stances to fit."""
 
 
+class NotAWalkingMotion(FroudeError):
+    """The walking machine cannot be fitted to the motion: it is not a walk (it runs, stays in place) or has
+    no complete walking step (a touchdown, the other foot's liftoff, the next touchdown)."""
+
+
 class FitError(FroudeError):
     """The simple machine could not be fitted to the motion."""
 

@@ -42,7 +42,7 @@ from ..body.gait import detect_gait, summarize
 from ..body.model import BodyModel
 from ..constants import GRAVITY, UP_AXIS, heading_frame
 from ..core.motion import Motion
-from ..errors import FitError, NotARunningMotion
+from ..errors import FitError, NotAWalkingMotion
 from .dynamics import Control
 from .forces import CUTOFF_HZ, ground_force, smooth_com
 from .walk_model import WalkingMachine
@@ -373,7 +373,7 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
                          source: str | None = None) -> WalkFitResult:
     """Fit the simple walking machine to a walking motion (see module doc).
 
-    Raises NotARunningMotion when the clip is not a walk (with the gait's reason) or has too few
+    Raises NotAWalkingMotion when the clip is not a walk (with the gait's reason) or has too few
     complete steps, FitError when no periodic cycle is found.
     """
     src = source or str(motion.meta.get("source") or "motion")
@@ -385,7 +385,7 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     gait = detect_gait(motion, body, markers)
     summary = summarize(motion, body, com, gait)
     if summary.kind != "walking":
-        raise NotARunningMotion(f"{src}: not a walk ({summary.reason})")
+        raise NotAWalkingMotion(f"{src}: not a walk ({summary.reason})")
     dt = motion.frame_time
     F = motion.n_frames
     times = np.arange(F) * dt
@@ -417,7 +417,7 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
             steps.append((trail[-1], j, nxt[0]))
     full = [sg for sg in geo if not sg.partial]
     if len(steps) < 1 or len(full) < 1:
-        raise NotARunningMotion(f"{src}: no complete walking step (touchdown, the other foot's liftoff, "
+        raise NotAWalkingMotion(f"{src}: no complete walking step (touchdown, the other foot's liftoff, "
                                 "the next touchdown) inside the clip")
 
     t_td = np.array([geo[j].t_touchdown for _, j, _ in steps])

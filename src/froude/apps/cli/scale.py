@@ -97,12 +97,12 @@ def run(args) -> int:
     t0 = time.perf_counter()
 
     from ... import pipeline
-    from ...errors import FitError, FroudeError, NotARunningMotion
+    from ...errors import FitError, FroudeError, NotARunningMotion, NotAWalkingMotion
     from ...speed_range import reachable_speed_range
 
     try:
         prep = prepare_clip(args)
-    except (FitError, NotARunningMotion) as e:
+    except (FitError, NotARunningMotion, NotAWalkingMotion) as e:
         if args.method != "naive":
             raise
         return _naive_any_clip(args, out, data, goal, e, t0)

@@ -41,7 +41,8 @@ _LAZY = {
 #: The public names, written out so that tools see them (tests/test_lint.py checks it equals _LAZY's keys).
 __all__ = [
     "BodyModel", "BvhError", "CharacterError", "FitError", "FroudeError", "Gait", "GaitSummary", "IkError",
-    "JointMapError", "Motion", "NotARunningMotion", "NotAWalkingMotion", "OutputError", "PlanError", "Result", "Skeleton", "Stance",
+    "JointMapError", "Motion", "NotARunningMotion", "NotAWalkingMotion", "OutputError", "PlanError", "Result",
+    "Skeleton", "Stance",
     "accelerate", "detect_gait", "find_roles", "fit", "ground_reaction_force", "load", "load_bvh",
     "load_joint_map", "sample_path", "save", "save_bvh", "scale", "summarize",
 ]
@@ -66,8 +67,16 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from .body.model import BodyModel, JointMapError, find_roles, load_joint_map
     from .core.motion import Motion
     from .core.skeleton import Skeleton
-    from .errors import (BvhError, CharacterError, FitError, FroudeError, IkError, NotARunningMotion,
-                         NotAWalkingMotion, PlanError)
+    from .errors import (
+        BvhError,
+        CharacterError,
+        FitError,
+        FroudeError,
+        IkError,
+        NotARunningMotion,
+        NotAWalkingMotion,
+        PlanError,
+    )
     from .io.atomic import OutputError
     from .io.bvh import load_bvh, save_bvh
     from .samples import sample_path

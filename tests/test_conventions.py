@@ -263,6 +263,45 @@ def test_every_preset_reads_back_at_its_height(preset, name, tmp_path, run_cli):
     assert info["skeleton"]["length_scale_m_per_unit"] == load_bvh(clip(name)).meta["length_scale"]  # its unit
 
 
+@pytest.mark.parametrize("change", [("--character", "giant"), ("--character", "child"), ("--height", "0.5"),
+                                    ("--height", "5.0")])
+@pytest.mark.parametrize("name", ["02_01", "dataset-1_walk_normal_001"])
+def test_walks_read_back_at_their_true_height(name, change, tmp_path, run_cli):
+    """A walk has no flight to weigh its unit: the walking cadence (dimensionless, the same for every size)
+    does, so a 3 m giant's or a 0.5 m walker's output is not read as a 1.35 m actor in another unit."""
+    from froude.body.characters import load_character
+
+    out = tmp_path / "walk.bvh"
+    code, _, err = run_cli("scale", clip(name), *change, "-o", out, "-q", "--keep")  # --keep: units, not bars
+    assert code == 0, err
+    code, text, err = run_cli("info", out, "--json")
+    info = json.loads(text)
+    height = load_character(change[1]).height if change[0] == "--character" else float(change[1])
+    assert info["skeleton"]["height_m"] == pytest.approx(height, rel=0.01), info["skeleton"]
+    assert info["skeleton"]["length_scale_m_per_unit"] == load_bvh(clip(name)).meta["length_scale"]
+
+
+@pytest.mark.parametrize("name", ["02_01", "07_01", "dataset-1_walk_normal_001"])
+def test_real_walks_weigh_their_unit_by_cadence(name):
+    m = load_bvh(clip(name))
+    assert "walking cadence" in m.meta["units"] and not m.meta["units_ambiguous"], m.meta["units"]
+    cadence = float(m.meta["units"].split("walking cadence of ")[1].split()[0])
+    assert 0.4 < cadence < 0.7  # human walking's dynamically similar step frequency
+
+
+def test_cadence_decides_where_stature_cannot():
+    # a 3 m walker in CMU units (1.35 m if the file were inches) stepping at a giant's 1.29 steps/s
+    leg = 1.70 / conventions.UNITS[4][1]
+    s, name, why, ambiguous = conventions.choose_unit(3.0 / conventions.UNITS[4][1], None, step_hz=1.29,
+                                                      leg_units=leg)
+    assert name == "CMU units" and "walking cadence" in why
+    # the same file stepping 2.2x as fast cannot be a 3 m walker: a smaller unit is chosen (inches: the
+    # 1.35 m actor, or centimetres: a 0.53 m toddler; both step like that)
+    s, name, why, ambiguous = conventions.choose_unit(3.0 / conventions.UNITS[4][1], None, step_hz=1.29 * 2.2,
+                                                      leg_units=leg)
+    assert s < conventions.UNITS[4][1] and "walking cadence" in why
+
+
 def _figure_heights_px(png, panels: int) -> list[int]:
     """Drawn height [px] of the figure in each of ``panels`` side-by-side panels of a rendered still: the
     rows holding the figure's bluish-grey capsules (the ground, its shadow and the labels are neutral grey

@@ -35,6 +35,16 @@ STATURE_RANGE_M = (0.35, 6.5)
 TYPICAL_STATURE_M = 1.70
 #: A flight gravity this close (ratio) to 9.81 m/s² decides the unit; the units differ by >= 1.77x.
 GRAVITY_DECIDES = 1.33
+#: Without a flight, the walking step frequency made dimensionless, f·√(L/g) with L the leg length, weighs
+#: the units (dynamic similarity: a child's and a giant's walks share it). Measured human walking spans
+#: about 0.4-0.7 (1.3-2.3 steps/s at L = 0.9 m; REFERENCE.md): centre and spread in log terms.
+WALK_STEP_FREQ_HAT = 0.55
+WALK_STEP_FREQ_LOG_SD = 0.2
+#: Spread (log) of statures around TYPICAL_STATURE_M when weighed with the cadence: wide (0.5 m children to
+#: 5 m giants are ordinary outputs), so that the cadence, which does not depend on size, decides.
+STATURE_LOG_SD = 0.8
+#: A unit whose score (squared log distances) is within this of the best one is a plausible alternative.
+UNIT_SCORE_MARGIN = 2.0
 #: At most this many frames (from the middle of the clip) are analysed: long clips load fast.
 MAX_FRAMES = 2400
 
@@ -181,13 +191,41 @@ def flight_gravity_units(com: np.ndarray, foot_low: np.ndarray, leg_length: floa
     return float(g), len(per_phase)
 
 
-def choose_unit(stature_units: float, gravity_units: float | None) -> tuple[float, str, str, bool]:
+def step_frequency_hz(foot_xyz: np.ndarray, com: np.ndarray, frame_time: float) -> float | None:
+    """Steps per second from foot plants, measured without knowing the unit, or None (fewer than 3 plants,
+    or a take with no travel).
+
+    foot_xyz: (F, 2, 3) a point of each foot; com: (F, 3) [file units, +Y up]. A foot is planted while its
+    horizontal speed stays below a third of the COM's mean horizontal speed for at least 0.1 s: a
+    scale-free test (heights are not used: floors in captures tilt and drift by a few centimetres).
+    """
+    dt = frame_time
+    v_com = np.linalg.norm((com[-1] - com[0])[[0, 2]]) / (dt * (len(com) - 1))
+    if not v_com > 0:
+        return None
+    v_foot = np.linalg.norm(np.gradient(foot_xyz[..., [0, 2]], dt, axis=0), axis=-1)  # (F, 2)
+    min_frames = max(2, int(round(0.1 / dt)))
+    touchdowns = []
+    for k in range(foot_xyz.shape[1]):
+        down = np.concatenate([[False], v_foot[:, k] < v_com / 3, [False]])
+        edges = np.flatnonzero(np.diff(down.astype(np.int8)))
+        touchdowns += [a for a, b in zip(edges[::2], edges[1::2]) if b - a >= min_frames and a > 0]
+    if len(touchdowns) < 3:
+        return None
+    t = np.sort(np.asarray(touchdowns)) * dt
+    return float((len(t) - 1) / (t[-1] - t[0])) if t[-1] > t[0] else None
+
+
+def choose_unit(stature_units: float, gravity_units: float | None, *, step_hz: float | None = None,
+                leg_units: float | None = None) -> tuple[float, str, str, bool]:
     """(metres per unit, unit name, a sentence saying why, ambiguous?) from the stature and the flight
     gravity measured in file units.
 
     Among the units giving a stature in STATURE_RANGE_M, the flight gravity (when the motion flies)
     picks the one making it 9.81 m/s²: this does not depend on the character's size. Without a flight
-    the most human stature wins and the choice is flagged ambiguous when another unit is plausible.
+    the unit wins whose stature is most human and, when the step frequency ``step_hz`` [1/s] and leg
+    length ``leg_units`` [file units] are given (a walk), whose dimensionless cadence f·√(L/g) is most like
+    human walking's; the choice is flagged ambiguous when another unit scores nearly as well.
     """
     lo, hi = STATURE_RANGE_M
     plausible = [(n, s) for n, s in UNITS if lo <= stature_units * s <= hi]
@@ -209,13 +247,28 @@ def choose_unit(stature_units: float, gravity_units: float | None) -> tuple[floa
             others = [desc(*c) for k, c in enumerate(plausible) if k != i]
             why = f"{desc(n, s)}, detected by the flight gravity" + (f"; not {', '.join(others)}" if others else "")
             return s, n, why, False
-    err = [abs(np.log(stature_units * s / TYPICAL_STATURE_M)) for _, s in plausible]
-    i = int(np.argmin(err))
+    # a walk: no flight, or "flights" so flat in every plausible unit (under g/3) that they are noise
+    no_flight = gravity_units is None or max(gravity_units * s for _, s in plausible) < GRAVITY / 3
+    walk = no_flight and step_hz is not None and leg_units is not None and leg_units > 0
+    score = [(np.log(stature_units * s / TYPICAL_STATURE_M) / STATURE_LOG_SD) ** 2 for _, s in plausible]
+    if walk:
+        assert step_hz is not None and leg_units is not None
+        f_hat = [step_hz * np.sqrt(leg_units * s / GRAVITY) for _, s in plausible]
+        score = [a + (np.log(f / WALK_STEP_FREQ_HAT) / WALK_STEP_FREQ_LOG_SD) ** 2 for a, f in zip(score, f_hat)]
+    i = int(np.argmin(score))
     n, s = plausible[i]
-    others = [desc(*c) for k, c in enumerate(plausible) if k != i and 0.5 <= stature_units * c[1] <= 5.0]
-    reason = "no flight phase to weigh" if gravity_units is None else \
-        f"the flight gravity ({gravity_units:g} units/s²) fits no unit"
-    why = f"{desc(n, s)}, detected as the most human stature ({reason})"
+    # stature alone cannot tell a 1.5 m actor from a 3.8 m giant: every human size is an alternative;
+    # with the cadence, only a unit that scores nearly as well is
+    close = [k for k in range(len(plausible)) if k != i and (not walk or score[k] - score[i] < UNIT_SCORE_MARGIN)]
+    others = [desc(*plausible[k]) for k in close if 0.5 <= stature_units * plausible[k][1] <= 5.0]
+    if walk:
+        reason = (f"no flight phase to weigh; {step_hz:.2f} steps/s, a walking cadence of "
+                  f"{f_hat[i]:.2f} in dynamically similar terms")
+        why = f"{desc(n, s)}, detected by the stature and the walking cadence ({reason})"
+    else:
+        reason = "no flight phase to weigh" if gravity_units is None else \
+            f"the flight gravity ({gravity_units:g} units/s²) fits no unit"
+        why = f"{desc(n, s)}, detected as the most human stature ({reason})"
     if others:
         why += f"; AMBIGUOUS, also possible: {', '.join(others)}: pass --length-scale if it is wrong"
     return s, n, why, bool(others)
@@ -267,8 +320,11 @@ def understand(motion: Motion, *, joint_map=None, length_scale: float | None = N
             body = BodyModel.from_skeleton(motion.skeleton, joint_map=joint_map)
             m = _analysed(motion)
             com, mk = body.com_and_markers(m)
-            g_u, _ = flight_gravity_units(com, mk[..., UP_AXIS].min(axis=2), body.leg_length, m.frame_time)
-            length_scale, name, units, ambiguous = choose_unit(body.stature, g_u)
+            foot_low = mk[..., UP_AXIS].min(axis=2)
+            g_u, _ = flight_gravity_units(com, foot_low, body.leg_length, m.frame_time)
+            hz = step_frequency_hz(mk.mean(axis=2), com, m.frame_time)
+            length_scale, name, units, ambiguous = choose_unit(body.stature, g_u, step_hz=hz,
+                                                               leg_units=body.leg_length)
         else:
             stature = motion.skeleton.standing_height()
             length_scale, name, units, ambiguous = choose_unit(stature, None)

@@ -67,8 +67,8 @@ def modelled_part(motion: Motion, summary: GaitSummary, com: np.ndarray, gait: G
     if v.size >= 2 and v.max() / v.min() - 1.0 > SPEED_CHANGE_NOTE:
         note = (f"the speed changes within the take (first stride {v[0]:.2f} m/s, last {v[-1]:.2f}, strides "
                 f"{v.min():.2f}-{v.max():.2f}): the machine runs its mean over {t0:.2f}-{t1:.2f} s, "
-                f"{summary.mean_speed:.2f} m/s, and speed factors refer to that; choose a part with "
-                "--range T0:T1 (time_range=)")
+                f"{summary.mean_speed:.2f} m/s, and speed factors refer to that; to model one part, give its "
+                "time range (froude --range T0:T1; Python time_range=(t0, t1))")
     return text, note
 
 

@@ -302,7 +302,8 @@ class Tab:
         self._publish(self.good)
         self._worker = threading.Thread(target=self._work_loop, name="froude-studio-tab", daemon=True)
         self._worker.start()
-        self._post(("range",))  # bound the speed slider to what this character can reach (~0.5 s)
+        # bound the speed slider to what this character can reach (a few seconds: ~24 short outputs, in the worker)
+        self._post(("range",))
 
     # ---- lifecycle
     def close(self) -> None:
@@ -569,8 +570,8 @@ class Tab:
         return self.session.speed_ranges.get(character)
 
     def _bound_speed(self, character: str) -> None:
-        """Work out (once per preset, ~0.5 s) the speed factors whose outputs meet every physics bar and
-        bound the speed slider to them (within its own limits)."""
+        """Work out (once per preset; a few seconds: about 24 short outputs) the speed factors whose outputs
+        meet every physics bar and bound the speed slider to them (within its own limits)."""
         from ...speed_range import reachable_speed_range
 
         rng = self.session.speed_ranges.get(character)

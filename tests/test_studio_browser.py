@@ -9,6 +9,7 @@ session. Screenshots of each state go to $FROUDE_STUDIO_SHOTS (else a tmp dir; t
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import os
@@ -124,6 +125,43 @@ def _heights_px(png: Path) -> dict:
     return out
 
 
+@contextlib.contextmanager
+def running_studio(args: list[str], timeout_s: float):
+    """``froude view ARGS`` in a subprocess on a free port: yields (process, page URL) once it serves, and at
+    the end stops it with Ctrl-C (SIGINT) and checks the stop was clean (exit 0, no traceback)."""
+    port = _free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "froude", "view", *args, "--port", str(port)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    lines, url = [], []
+
+    def read_stdout():
+        for line in proc.stdout:
+            lines.append(line)
+            m = re.search(r"froude studio: (http://\S+)", line)
+            if m:
+                url.append(m.group(1))
+
+    threading.Thread(target=read_stdout, daemon=True).start()
+    try:
+        t_end = time.monotonic() + timeout_s
+        while not url and proc.poll() is None and time.monotonic() < t_end:
+            time.sleep(0.1)
+        assert url == [f"http://127.0.0.1:{port}"], f"exit {proc.poll()}; stdout {lines}"
+        yield proc, url[0]
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)  # Ctrl-C: a clean stop, exit 0, no traceback
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            raise
+    err = proc.stderr.read()
+    assert proc.returncode == 0, err[-2000:]
+    assert "Traceback" not in err, err[-2000:]
+
+
 @pytest.mark.browser
 @pytest.mark.timeout(600)
 def test_studio_as_an_animator_uses_it(tmp_path):
@@ -139,32 +177,14 @@ def test_studio_as_an_animator_uses_it(tmp_path):
     bandai = clip("dataset-1_dash_feminine_001")  # reaches x1.3 with every bar met (run_tired does not)
     shots = Path(os.environ.get("FROUDE_STUDIO_SHOTS", tmp_path / "shots"))
     shots.mkdir(parents=True, exist_ok=True)
-    port = _free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "froude", "view", "--port", str(port)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=dict(os.environ, PYTHONUNBUFFERED="1"))
-    lines, url = [], []
-
-    def read_stdout():
-        for line in proc.stdout:
-            lines.append(line)
-            m = re.search(r"froude studio: (http://\S+)", line)
-            if m:
-                url.append(m.group(1))
-
-    threading.Thread(target=read_stdout, daemon=True).start()
-    try:
-        t_end = time.monotonic() + 60
-        while not url and proc.poll() is None and time.monotonic() < t_end:
-            time.sleep(0.1)
-        assert url == [f"http://127.0.0.1:{port}"], f"exit {proc.poll()}; stdout {lines}"
+    with running_studio([], timeout_s=60) as (proc, url):
         with pw.sync_playwright() as p:
             ctx = p.chromium.launch_persistent_context(
                 str(tmp_path / "chromium-profile"), executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True,
                 viewport=VIEWPORT, accept_downloads=True)
             try:
                 page = ctx.new_page()
-                page.goto(url[0])
+                page.goto(url)
                 s0 = _wait_state(page, status="ok")
                 assert s0["clip"] == "09_01.bvh"
                 page.wait_for_function("document.title === '09_01.bvh · froude studio'", timeout=10000)
@@ -272,7 +292,7 @@ def test_studio_as_an_animator_uses_it(tmp_path):
 
                 # 7. a second tab: its own session (the sample clip, the defaults), and changes stay apart
                 page2 = ctx.new_page()
-                page2.goto(url[0])
+                page2.goto(url)
                 t0 = _wait_state(page2, status="ok")
                 assert (t0["clip"], t0["mode"], t0["speed_factor"]) == ("09_01.bvh", "scale", "1")
                 _pick(page2, "Character", "giant")
@@ -287,17 +307,6 @@ def test_studio_as_an_animator_uses_it(tmp_path):
             finally:
                 ctx.close()
         print(f"studio screenshots: {shots}")
-    finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)  # Ctrl-C: a clean stop, exit 0, no traceback
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            raise
-    err = proc.stderr.read()
-    assert proc.returncode == 0, err[-2000:]
-    assert "Traceback" not in err, err[-2000:]
 
 
 @pytest.mark.browser
@@ -313,32 +322,14 @@ def test_studio_takes_a_walk(tmp_path):
     walk = clip("02_01")
     shots = Path(os.environ.get("FROUDE_STUDIO_SHOTS", tmp_path / "shots"))
     shots.mkdir(parents=True, exist_ok=True)
-    port = _free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "froude", "view", str(walk), "--port", str(port)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=dict(os.environ, PYTHONUNBUFFERED="1"))
-    lines, url = [], []
-
-    def read_stdout():
-        for line in proc.stdout:
-            lines.append(line)
-            m = re.search(r"froude studio: (http://\S+)", line)
-            if m:
-                url.append(m.group(1))
-
-    threading.Thread(target=read_stdout, daemon=True).start()
-    try:
-        t_end = time.monotonic() + 180  # the walking fit comes first
-        while not url and proc.poll() is None and time.monotonic() < t_end:
-            time.sleep(0.1)
-        assert url == [f"http://127.0.0.1:{port}"], f"exit {proc.poll()}; stdout {lines}"
+    with running_studio([str(walk)], timeout_s=180) as (proc, url):  # the walking fit comes first
         with pw.sync_playwright() as p:
             ctx = p.chromium.launch_persistent_context(
                 str(tmp_path / "chromium-profile"), executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True,
                 viewport=VIEWPORT, accept_downloads=True)
             try:
                 page = ctx.new_page()
-                page.goto(url[0])
+                page.goto(url)
                 s0 = _wait_state(page, status="ok", timeout=120)
                 assert s0["clip"] == walk.name
                 page.get_by_text("foot skate [mm]").first.wait_for(timeout=30000)
@@ -364,14 +355,3 @@ def test_studio_takes_a_walk(tmp_path):
             finally:
                 ctx.close()
         print(f"studio screenshots: {shots}")
-    finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            raise
-    err = proc.stderr.read()
-    assert proc.returncode == 0, err[-2000:]
-    assert "Traceback" not in err, err[-2000:]

@@ -8,6 +8,8 @@ import numpy as np
 GRAVITY = 9.81
 #: Index of the up axis in world coordinates (+Y).
 UP_AXIS = 1
+#: Indices of the two horizontal world axes (x, z), for ground-plane speeds and distances.
+HORIZONTAL_AXES = [a for a in range(3) if a != UP_AXIS]
 #: Unit up vector in world coordinates, shape (3,).
 UP = np.array([0.0, 1.0, 0.0])
 #: Gravity vector in world coordinates [m/s^2], shape (3,).

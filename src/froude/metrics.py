@@ -12,12 +12,10 @@ import numpy as np
 
 from .body.gait import Gait, detect_gait, summarize
 from .body.model import BodyModel
-from .constants import GRAVITY, UP_AXIS
+from .constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
 from .core import quat
 from .core.motion import Motion
 from .io.jsonable import dumps, jsonable
-
-_HORIZONTAL = [a for a in range(3) if a != UP_AXIS]
 
 #: The project's physics bars (docs/architecture.md, "Quality bars").
 BARS = {
@@ -161,7 +159,7 @@ def flight_gravity(com: np.ndarray, frame_time: float, flights,
         rows.append(A)
         ys.append(com[a:b, UP_AXIS])
         gs.append(-2.0 * np.polyfit(t, com[a:b, UP_AXIS], 2)[0])
-        for ax in _HORIZONTAL:
+        for ax in HORIZONTAL_AXES:
             acc_h.append(2.0 * np.polyfit(t, com[a:b, ax], 2)[0])
     sol, *_ = np.linalg.lstsq(np.concatenate(rows), np.concatenate(ys), rcond=None)
     return float(sol[-1]), [float(x) for x in gs], float(np.sqrt(np.mean(np.square(acc_h))))
@@ -235,7 +233,7 @@ def foot_skate_mm(markers: np.ndarray, gait: Gait, leg_length: float) -> float:
             starts = np.concatenate([[0], np.flatnonzero(lifted) + 1])
             stops = np.concatenate([np.flatnonzero(lifted) + 1, [idx.size]])
             for a, b in zip(starts, stops):
-                p = seg[idx[a:b], k][:, _HORIZONTAL]
+                p = seg[idx[a:b], k][:, HORIZONTAL_AXES]
                 worst = max(worst, float(np.max(np.linalg.norm(p - p[0], axis=1))))
     return 1000.0 * worst
 
@@ -268,7 +266,7 @@ def foot_skate_floor_mm(markers: np.ndarray, gait: Gait, leg_length: float) -> f
                     continue  # this point never comes down to the floor around this contact
                 low = h <= h.min() + band
                 for r0, r1 in _true_runs(low):
-                    p = seg[r0:r1][:, _HORIZONTAL]
+                    p = seg[r0:r1][:, HORIZONTAL_AXES]
                     p_rest = p[int(np.argmin(h[r0:r1]))]
                     worst = max(worst, float(np.max(np.linalg.norm(p - p_rest, axis=1))))
     return 1000.0 * worst

@@ -34,6 +34,10 @@ class SpeedRange:
         return (f"x{self.lo:.2f}-{self.hi:.2f} ({self.lo_m_s:.2f}-{self.hi_m_s:.2f} m/s; "
                 f"x1 = {self.base_m_s:.2f} m/s)")
 
+    def sentence(self) -> str:
+        """The range as refusals and bar misses say it (scale and accelerate alike)."""
+        return f"with every physics bar met this character runs {self.describe()}"
+
 
 #: The factors reachable_speed_range searches between, and how finely [-].
 SPEED_SEARCH_RANGE = (0.3, 3.0)

@@ -13,7 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..constants import GRAVITY, UP_AXIS
+from ..constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
 from ..core import quat
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
@@ -180,11 +180,11 @@ def flight_gravity_units(com: np.ndarray, foot_low: np.ndarray, leg_length: floa
     edges are left out (a jump off or a stumble).
     """
     from ..metrics import flight_gravity
+    from .gait import _runs
 
     ground = np.percentile(foot_low.min(axis=1), 5)
     air = (foot_low > ground + 0.03 * leg_length).all(axis=1)
-    d = np.diff(np.concatenate([[0], air.astype(np.int8), [0]]))
-    flights = [(a, b) for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)) if a > 0 and b < len(air)]
+    flights = [(a, b) for a, b in _runs(air) if a > 0 and b < len(air)]
     g, per_phase, _ = flight_gravity(com, frame_time, flights, min_frames=3)
     if not per_phase or not np.isfinite(g):
         return None, 0
@@ -199,17 +199,17 @@ def step_frequency_hz(foot_xyz: np.ndarray, com: np.ndarray, frame_time: float) 
     horizontal speed stays below a third of the COM's mean horizontal speed for at least 0.1 s: a
     scale-free test (heights are not used: floors in captures tilt and drift by a few centimetres).
     """
+    from .gait import _runs
+
     dt = frame_time
-    v_com = np.linalg.norm((com[-1] - com[0])[[0, 2]]) / (dt * (len(com) - 1))
+    v_com = np.linalg.norm((com[-1] - com[0])[HORIZONTAL_AXES]) / (dt * (len(com) - 1))
     if not v_com > 0:
         return None
-    v_foot = np.linalg.norm(np.gradient(foot_xyz[..., [0, 2]], dt, axis=0), axis=-1)  # (F, 2)
+    v_foot = np.linalg.norm(np.gradient(foot_xyz[..., HORIZONTAL_AXES], dt, axis=0), axis=-1)  # (F, 2)
     min_frames = max(2, int(round(0.1 / dt)))
     touchdowns = []
     for k in range(foot_xyz.shape[1]):
-        down = np.concatenate([[False], v_foot[:, k] < v_com / 3, [False]])
-        edges = np.flatnonzero(np.diff(down.astype(np.int8)))
-        touchdowns += [a for a, b in zip(edges[::2], edges[1::2]) if b - a >= min_frames and a > 0]
+        touchdowns += [a for a, b in _runs(v_foot[:, k] < v_com / 3) if b - a >= min_frames and a > 0]
     if len(touchdowns) < 3:
         return None
     t = np.sort(np.asarray(touchdowns)) * dt

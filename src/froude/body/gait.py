@@ -11,12 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..constants import GRAVITY, UP_AXIS
+from ..constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
 from ..core.motion import Motion
 from ..errors import NotARunningMotion
 from .model import SIDES, BodyModel
-
-_HORIZONTAL = [a for a in range(3) if a != UP_AXIS]
 
 
 @dataclass(frozen=True)
@@ -232,7 +230,7 @@ def detect_gait(motion: Motion, body: BodyModel, markers: np.ndarray | None = No
     L = body.leg_length
     F = motion.n_frames
     height = markers[..., UP_AXIS]  # (F, 2, 3)
-    vel = np.gradient(markers[..., _HORIZONTAL], dt, axis=0) if F > 1 else np.zeros(markers[..., :2].shape)
+    vel = np.gradient(markers[..., HORIZONTAL_AXES], dt, axis=0) if F > 1 else np.zeros(markers[..., :2].shape)
     speed = np.linalg.norm(vel, axis=-1)  # (F, 2, 3)
     h_foot = height.min(axis=2)  # (F, 2) lowest marker
     v_foot = speed.min(axis=2)  # (F, 2) slowest marker
@@ -322,13 +320,13 @@ def summarize(motion: Motion, body: BodyModel, com: np.ndarray | None = None, ga
         c, mk = body.com_and_markers(motion)
         com = c if com is None else com
         gait = detect_gait(motion, body, mk) if gait is None else gait
-    disp = com[-1, _HORIZONTAL] - com[0, _HORIZONTAL]
+    disp = com[-1, HORIZONTAL_AXES] - com[0, HORIZONTAL_AXES]
     dist = float(np.linalg.norm(disp))
     duration = motion.duration
     speed = dist / duration if duration > 0 else 0.0
     heading = np.zeros(3)
     if dist > 0:
-        heading[_HORIZONTAL] = disp / dist
+        heading[HORIZONTAL_AXES] = disp / dist
     L = body.leg_length
     period = step_period(gait, motion.n_frames, com)
     step_freq = 1.0 / period if period > 0 else np.nan
@@ -357,8 +355,8 @@ def stride_speeds(com: np.ndarray, gait: Gait, n_frames: int) -> tuple[np.ndarra
     for foot in (0, 1):
         on = sorted(s.t_on for s in gait.stances if s.foot == foot and s.start > 0)
         for a, b in zip(on[:-1], on[1:]):
-            pa = np.array([np.interp(a, np.arange(n_frames), com[:, k]) for k in _HORIZONTAL])
-            pb = np.array([np.interp(b, np.arange(n_frames), com[:, k]) for k in _HORIZONTAL])
+            pa = np.array([np.interp(a, np.arange(n_frames), com[:, k]) for k in HORIZONTAL_AXES])
+            pb = np.array([np.interp(b, np.arange(n_frames), com[:, k]) for k in HORIZONTAL_AXES])
             t_mid.append(0.5 * (a + b) * dt)
             speeds.append(float(np.linalg.norm(pb - pa) / ((b - a) * dt)))
     order = np.argsort(t_mid)

@@ -162,8 +162,7 @@ def _steady_range(prep, args) -> str:
     """The steady speeds whose outputs meet every bar for this character (a goal outside them will not)."""
     from ...speed_range import reachable_speed_range
 
-    rng = reachable_speed_range(prep, args.character, **character_kwargs(args))
-    return f"with every physics bar met this character runs steadily at {rng.describe()}"
+    return reachable_speed_range(prep, args.character, **character_kwargs(args)).sentence()
 
 
 def _plot_files(plot):

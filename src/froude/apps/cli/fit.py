@@ -74,7 +74,7 @@ def fit_table(res) -> str:
 
 
 def run(args) -> int:
-    from ...io.atomic import atomic_group, require_suffix
+    from ...io.atomic import require_suffix
 
     out = require_suffix(args.output, (".json",))
     plot = require_suffix(args.plot, (".png",), "plot") if args.plot else None
@@ -101,14 +101,21 @@ def run(args) -> int:
     for note in notes:
         say(f"note: {note}", args.quiet)
     res = fit_machine_detailed(motion, body, source=Path(args.clip).name)
+    from ...viz.fit_plot import plot_fit
+
+    return _write_fit(args, motion, res, out, plot, plot_fit, fit_table(res))
+
+
+def _write_fit(args, motion, res, out, plot, plot_fn, table: str) -> int:
+    """The machine file (and plot) of a fit, written together; then the table and what was written."""
+    from ...io.atomic import atomic_group
+
     with atomic_group():
         if plot:
-            from ...viz.fit_plot import plot_fit
-
-            plot_fit(res, plot, title=Path(args.clip).name)
+            plot_fn(res, plot, title=Path(args.clip).name)
         res.machine.save(out)
     say_loaded(motion, args.clip, args.quiet)
-    print(fit_table(res))
+    print(table)
     if plot:
         say(f"wrote {plot}", args.quiet)
     say(f"wrote {out}", args.quiet)
@@ -150,19 +157,8 @@ def walk_table(res) -> str:
 
 
 def _run_walk(args, motion, body, out, plot) -> int:
-    from ...io.atomic import atomic_group
     from ...machine.walk_fit import fit_walking_detailed
+    from ...viz.walk_plot import plot_walk_fit
 
     res = fit_walking_detailed(motion, body, source=Path(args.clip).name)
-    with atomic_group():
-        if plot:
-            from ...viz.walk_plot import plot_walk_fit
-
-            plot_walk_fit(res, plot, title=Path(args.clip).name)
-        res.machine.save(out)
-    say_loaded(motion, args.clip, args.quiet)
-    print(walk_table(res))
-    if plot:
-        say(f"wrote {plot}", args.quiet)
-    say(f"wrote {out}", args.quiet)
-    return 0
+    return _write_fit(args, motion, res, out, plot, plot_walk_fit, walk_table(res))

@@ -119,15 +119,15 @@ def run(args) -> int:
         rng = reachable_speed_range(prep, args.character, **character_kwargs(args))
         asked = goal.m_s if goal and goal.m_s else (goal.factor if goal and goal.factor else 1.0) * rng.base_m_s
         raise FroudeError(f"{Path(args.clip).name}: {asked:.2f} m/s (x{asked / rng.base_m_s:.2f}) is out of reach: "
-                          f"with every physics bar met this clip runs {rng.describe()} ({e})") from None
+                          f"{rng.sentence()} ({e})") from None
     for note in res.notes:
         say(f"note: {note}", args.quiet)
     assert res.report is not None  # the pipeline computes it by default
     fails = res.report.check_bars() if args.method == "physical" else []
     if fails and not args.keep:
         rng = reachable_speed_range(prep, args.character, **character_kwargs(args))
-        say(f"froude scale: output not written: it misses physics bars ({'; '.join(fails)}); with every bar "
-            f"met this clip runs {rng.describe()}; --keep writes it anyway")
+        say(f"froude scale: output not written: it misses physics bars ({'; '.join(fails)}); {rng.sentence()}; "
+            "--keep writes it anyway")
         return 1
     with atomic_group():
         bvh, rep, *data_written = pipeline.write_result(res, out, data, in_place=args.in_place,

@@ -16,7 +16,8 @@ from conftest import RUNNING, clip, clip_params
 
 #: (clip, factor) -> the bar missed, measured (benchmarks/bars_matrix.py --matrix 13).
 ACCELERATE_MISSES = {
-    ("09_04", 0.5): "joint jump 19.99 deg (<= 1.5 x reference 13.11): a toe at a lift-off",
+    ("09_04", 0.5): "joint jump 20.09 deg (<= 1.5 x reference 13.11): a knee at a lift-off, where the time-warped "
+                    "reference pose itself turns 14.6 deg in one frame",
 }
 
 

@@ -25,8 +25,11 @@ from ..errors import FitError
 
 #: Stride-phase samples of the cycle (per stride). 240 keeps interpolation error far below a millimetre.
 CYCLE_SAMPLES = 240
-#: A loaded foot marker is held still while within this fraction of the leg length of its lowest point.
-SLIDE_BAND_L = 0.022
+#: A loaded foot marker is held still while within this fraction of the leg length of its lowest point:
+#: wider than the physics report's 0.02 L (SKATE_BAND_L) because the output's lowest point is not the
+#: cycle's (frames fall between cycle samples, the stance is time-warped): at 0.022 L a giant's tip was let
+#: go 0.0197 L above the output's lowest point and slid 6.8 mm within the report's band (02_03).
+SLIDE_BAND_L = 0.026
 
 
 def min_jerk(u: np.ndarray) -> np.ndarray:
@@ -483,19 +486,27 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
         # thickness above the floor) and only if it reaches the floor at all
         reaches = h_min <= contact_tol
         loaded = (height <= h_min + band) & reaches
+        # a marker is held in place from its first to its last loaded sample, rises in between included: a tip
+        # that lifts a little and comes down again may not have moved (the report sees it back on the floor;
+        # 02_03, 09_06 at 1.3x)
+        span = loaded.copy()
+        for m in range(3):
+            on = np.flatnonzero(loaded[:, m])
+            if on.size:
+                span[on[0] : on[-1] + 1, m] = True
         # δ changes by minus the (weighted) mean motion of the markers loaded at both neighbouring samples,
         # so the loaded points stay put and δ is continuous whatever markers load and unload (a
         # re-averaging of held positions would jump); markers pressed deeper (nearer their lowest point)
         # count more, so the point that carries the foot stays put and a lightly touching one gives way
         depth = np.clip(1.0 - (height - h_min) / band, 0.0, 1.0) ** 4
         firm[idx, foot] += depth * reaches
-        in_place[idx, foot] = loaded
+        in_place[idx, foot] = span
         wgt = (loaded[1:] & loaded[:-1]) * 0.5 * (depth[1:] + depth[:-1])  # (n-1, 3)
         step = h[1:] - h[:-1]  # (n-1, 3, 2)
         w_sum = wgt.sum(axis=1, keepdims=True)
         mean_step = np.where(w_sum > 0, (step * wgt[..., None]).sum(axis=1) / np.maximum(w_sum, 1e-12), 0.0)
         delta = np.concatenate([np.zeros((1, 2)), -np.cumsum(mean_step, axis=0)])  # common (rigid) part
-        # Each marker then gets its own correction: while it stays loaded it cancels its own motion exactly
+        # Each marker then gets its own correction: while it is held it cancels its own motion exactly
         # (two loaded points that move relative to each other both stay put; IK bends the toe joint to
         # match); while unloaded it relaxes back to the common one, so the foot keeps its shape in the air.
         # A released marker relaxes only once it is clearly off the floor (above band, fully at 2 bands): a
@@ -505,7 +516,6 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
         # what is held is a pose the foot can take.
         own = np.zeros((idx.size, 3, 2))
         lift = np.zeros((idx.size, 3))  # height changes of the bones' tilting
-        both = loaded[1:] & loaded[:-1]
         rate = RELAX * np.clip((height - h_min - band) / band, 0.0, 1.0)  # (n, 3)
         bones = _bone_lengths(rel[:, foot])
         f_firm, f_held = firm[idx, foot], in_place[idx, foot]
@@ -513,7 +523,7 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
             if i > 0:
                 held = own[i - 1] - step[i - 1]
                 relaxed = own[i - 1] + rate[i][:, None] * (delta[i] - own[i - 1])
-                own[i] = np.where(both[i - 1][:, None], held, relaxed)
+                own[i] = np.where(span[i][:, None], held, relaxed)
             pose = rel[idx[i], foot].copy()  # (3 markers, 3)
             pose[:, [0, 2]] += own[i]
             if i > 0:  # a marker a tilt raised comes back down over a few samples, not at once
@@ -564,17 +574,20 @@ def _with_approach(rel_foot: np.ndarray, idx: np.ndarray, stance_foot: np.ndarra
         return idx
     low = np.any((height <= h_min + band) & reaches, axis=1)  # (K,)
     most = int(APPROACH_MAX * K)
-    before: list[int] = []
-    after: list[int] = []
-    k = (idx[0] - 1) % K
-    while len(before) < most and low[k] and not stance_foot[k]:
-        before.append(k)
-        k = (k - 1) % K
-    k = (idx[-1] + 1) % K
-    while len(after) < most and low[k] and not stance_foot[k] and k not in before:
-        after.append(k)
-        k = (k + 1) % K
+    # up to the farthest low sample within reach, a lift in between included: a marker that rises a little
+    # and comes down again (a toe tip that dips at lift-off, 02_03) is still on the floor for the report
+    before = _to_farthest(low & ~stance_foot, idx[0], -1, most, set())
+    after = _to_farthest(low & ~stance_foot, idx[-1], 1, most, set(before))
     return np.concatenate([np.array(before[::-1], int), idx, np.array(after, int)])
+
+
+def _to_farthest(ok: np.ndarray, start: int, step: int, most: int, taken: set) -> list[int]:
+    """Cycle samples start + step, start + 2 step, ... (mod K = len(ok)) up to the farthest of the first
+    ``most`` at which ``ok`` holds, none of them in ``taken``; empty if there is none."""
+    K = ok.shape[0]
+    ks = [(start + step * (j + 1)) % K for j in range(most)]
+    hits = [j for j, k in enumerate(ks) if ok[k] and k not in taken]
+    return [k for k in ks[: hits[-1] + 1] if k not in taken] if hits else []
 
 
 #: Bones of the foot between its markers (ankle-ball: the foot; ball-tip: the toes): their lengths are fixed.

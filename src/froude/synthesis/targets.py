@@ -24,6 +24,8 @@ SWING_MARKER_WEIGHT = 1e-2
 WEIGHT_RAMP_S = 0.04
 #: Fraction of the stance marker weight every marker of a foot keeps around its contact (see _marker_weights).
 LANDING_WEIGHT = 0.1
+#: Fraction of SWING_MARKER_WEIGHT a foot marker target out of the leg's reach keeps (see build_targets).
+OUT_OF_REACH_SWING = 0.1
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,8 +78,14 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     # with the feet out of reach. So the initial pose is translated to put its own COM on the machine's.
     initial = initial.with_(root_positions=root + (path.com - retarget.body.com(initial)))
     markers = _lift_out_of_reach(initial, retarget.body, markers)
-    weight = _marker_weights(path, markers, retarget.body.leg_length) * _reach_factor(initial, retarget.body, markers)
-    weight = np.maximum(weight, SWING_MARKER_WEIGHT)
+    reach = _reach_factor(initial, retarget.body, markers)
+    weight = _marker_weights(path, markers, retarget.body.leg_length) * reach
+    # A swinging foot's target beyond the leg's reach keeps only OUT_OF_REACH_SWING of the swing weight: the
+    # trailing foot's ground path after an acceleration's longer stance lies 1.2 L from the hip, and at the
+    # full swing weight it dragged the pelvis 26 deg off the reference pose, which sprang back in one frame
+    # when the path let go (a 20 deg hip jump, 09_04 accelerated to 1.3x). Not nothing: a foot left with no
+    # target at all may land anywhere the posture puts it (a toe 0.2 m off at lift-off, 09_01 at 1.3x).
+    weight = np.maximum(weight, SWING_MARKER_WEIGHT * (OUT_OF_REACH_SWING + (1.0 - OUT_OF_REACH_SWING) * reach))
     if cyc.order == "walking":  # a walking foot lands and leaves with a straight knee: guide it there
         from .walking import soften_swing_weights
 

@@ -23,7 +23,9 @@ SPEEDS_134 = (0.5, 0.7, 1.5, 1.8, 2.0)
 #: x1.5 outputs (acceptance 13.3's fastest column) that miss a bar, measured at 120 Hz (the clips' rate):
 #: strict xfail, so that one that starts meeting the bars comes off the list.
 FAST_MISSES = {
-    ("09_04", "small"): "joint jump 20.87 deg (<= 1.5 x reference 13.11): a toe at the first touchdown",
+    ("09_04", "child"): "joint jump 20.05 deg (<= 1.5 x reference 13.11): a knee in the late swing, where the "
+                        "time-warped reference pose itself turns 9.2 deg per frame",
+    ("09_04", "small"): "joint jump 20.88 deg (<= 1.5 x reference 13.11): a toe at the first touchdown",
 }
 
 

@@ -178,9 +178,16 @@ def test_speed_control_bounded_to_what_is_reachable(session):
         tab = studio.open_tab()
         tab._bound_speed("same")
         rng = tab.session.speed_ranges["same"]
-        assert not rng.empty and rng.hi < 2.0  # the sample cannot run at x2 with every bar met
-        assert tab.gui_speed.max == round(rng.hi, 2) and tab.gui_speed.min == 0.5
+        # the sample reaches x0.30-2.78 with every bar met: the slider keeps its own limits (x0.5-2)
+        assert not rng.empty and rng.lo <= 0.5 and rng.hi >= 2.0
+        assert tab.gui_speed.max == 2.0 and tab.gui_speed.min == 0.5
         assert "speed reachable with every bar met" in tab._status_md()
+        # a clip that reaches only x1.8: the slider ends there and the server refuses x1.9
+        from dataclasses import replace
+
+        tab.session.speed_ranges["same"] = replace(rng, hi=1.8)
+        tab._bound_speed("same")
+        assert tab.gui_speed.max == 1.8
         good = tab.good
         tab.gui_speed.value = 1.9
         with pytest.raises(FroudeError, match=r"Speed ×1.9 is beyond what same can run on this clip"):

@@ -30,6 +30,8 @@ CYCLE_SAMPLES = 240
 #: cycle's (frames fall between cycle samples, the stance is time-warped): at 0.022 L a giant's tip was let
 #: go 0.0197 L above the output's lowest point and slid 6.8 mm within the report's band (02_03).
 SLIDE_BAND_L = 0.026
+#: The ball and tip are held if they come within the report's reach plus this fraction of L (extract_cycle).
+HOLD_REACH_MARGIN_L = 0.01
 
 
 def min_jerk(u: np.ndarray) -> np.ndarray:
@@ -309,15 +311,17 @@ def extract_cycle(
     contact_phase = _contact_phases(marker_rel, phase_events, first_foot, contact_tol,
                                     max_extension=0.0 if order == "walking" else 0.15)
     stance_mask = _contact_mask(np.arange(K) / K, contact_phase)
-    # band 0.03 L: wider than the 0.02 L within which the physics report watches a marker slide, so a tip
-    # that lifts to just under 0.02 L and comes down again is held all the while
     # a marker is held if it comes as near the floor as the physics report's skate measure watches (its
-    # SKATE_REACH_L, 0.04 L: a folded rig's ball joint rests 0.033 L up, above the 0.03 L contact test)
+    # SKATE_REACH_L, 0.04 L: a folded rig's ball joint rests 0.033 L up, above the 0.03 L contact test); the
+    # ball and the tip (the report's SKATE_MARKERS) even if HOLD_REACH_MARGIN_L higher: the IK may bring an
+    # unheld ball that rests 0.047 L up under the report's reach at lift-off while it yaws with the foot
+    # about the tip (10 mm, dash_feminine's troll). Not the ankle: holding 09_03's heel, 0.049 L up, turned
+    # the foot at touchdown and slid its tip 13 mm (giant x1.5).
     from ..metrics import SKATE_REACH_L
 
     raw_rel = marker_rel
-    marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=SKATE_REACH_L * body.leg_length,
-                                 band=SLIDE_BAND_L * body.leg_length)
+    reach_tol = (SKATE_REACH_L + np.array([0.0, HOLD_REACH_MARGIN_L, HOLD_REACH_MARGIN_L])) * body.leg_length
+    marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=reach_tol, band=SLIDE_BAND_L * body.leg_length)
     # the body-relative foot path carries the same de-skating correction (it fades over the swing), so
     # that IK targets blending from the ground path to it after lift-off do not jump by the correction
     # (a 10 mm jump of a tip still near the floor, 02_03 at 50 Hz)
@@ -453,17 +457,18 @@ TILT_RELAX = 0.5
 
 # Long because the per-sample correction δ runs forward through a stance, each sample's depending on the
 # previous one's loaded markers, and then fades over the swing: one sequential pass per foot.
-def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, band: float) -> np.ndarray:
+def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float | np.ndarray,
+                    band: float) -> np.ndarray:
     """Remove the reference's foot sliding in stance by translating each foot rigidly.
 
     rel: (K, 2, 3, 3) marker offsets from the anchor (heading frame: forward, up, lateral).
-    A marker that reaches within contact_tol of the ground in a stance is loaded while it is within
-    ``band`` of its own lowest point of that stance (joint centres sit a sole's thickness above the
-    floor). The three markers of
-    a foot move together by one horizontal correction δ(φ) (so the foot keeps the reference's shape and
-    orientation, which IK can then meet exactly): from one sample to the next δ cancels the mean motion of
-    the markers loaded at both, so loaded points stay put and δ stays continuous. After the
-    stance δ fades out over the swing (min-jerk), so the cycle still closes. Heights are clamped to ≥ 0.
+    A marker that reaches within contact_tol (scalar or per marker (3,)) [m] of the ground in a stance is
+    loaded while it is within ``band`` of its own lowest point of that stance (joint centres sit a sole's
+    thickness above the floor). The three markers of a foot move together by one horizontal correction δ(φ)
+    (so the foot keeps the reference's shape and orientation, which IK can then meet exactly): from one
+    sample to the next δ cancels the mean motion of the markers loaded at both, so loaded points stay put
+    and δ stays continuous. After the stance δ fades out over the swing (min-jerk), so the cycle still
+    closes. Heights are clamped to ≥ 0.
     """
     out = rel.copy()
     K = rel.shape[0]
@@ -556,8 +561,8 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
 APPROACH_MAX = 0.08
 
 
-def _with_approach(rel_foot: np.ndarray, idx: np.ndarray, stance_foot: np.ndarray, contact_tol: float,
-                   band: float) -> np.ndarray:
+def _with_approach(rel_foot: np.ndarray, idx: np.ndarray, stance_foot: np.ndarray,
+                   contact_tol: float | np.ndarray, band: float) -> np.ndarray:
     """A stance's samples idx (ordered in time, indices into K) with the samples just before and after it in
     which a marker that reaches the floor is already (still) within ``band`` of its lowest point.
 

@@ -114,6 +114,9 @@ REACH_MARGIN_L = 0.03
 #: horizontal distance nears the reach; beyond the cap the target stays out of reach and _reach_factor lets
 #: it go, by then above the floor band in which the physics report watches it slide).
 LIFT_MAX_L = 0.05
+#: Horizontal sweep [× L] a raised ball may make by turning about the tip before the tip rises with it
+#: (_lift_out_of_reach): under the 5 mm skate bar up to L = 2.5 m.
+TOE_SWEEP_L = 0.002
 #: Softness [× L] of the limit to which an out-of-reach swing target is drawn in (_lift_out_of_reach).
 SWING_SOFT_L = 0.01
 
@@ -142,7 +145,13 @@ def _lift_out_of_reach(initial: Motion, body: BodyModel, markers: np.ndarray) ->
         flat = np.linalg.norm(rel[..., horizontal], axis=-1)  # (T, 3)
         lowest = -np.sqrt(np.maximum(reach[None, :] ** 2 - flat**2, 0.0))  # lowest reachable height below the hip
         need = np.where(flat < reach[None, :], lowest - rel[..., UP_AXIS], np.inf)  # (T, 3) rise needed [m]
-        out[:, i, :, UP_AXIS] += cap * np.tanh(np.maximum(need, 0.0) / cap)
+        rise = cap * np.tanh(np.maximum(need, 0.0) / cap)  # (T, 3)
+        # The tip rises with the ball beyond what the ball can rise by turning about it: a raised ball whose
+        # weight fades leaves the IK to turn the foot about the held tip, and a folded rig's ball joint, 30 deg
+        # above the tip, swept 7-13 mm forward on that arc within the report's floor band (dash_normal)
+        free = _ball_rise_about_tip(markers[:, i], TOE_SWEEP_L * body.leg_length)
+        rise[:, 2] = np.maximum(rise[:, 2], rise[:, 1] - free)
+        out[:, i, :, UP_AXIS] += rise
         # A target off the floor (a swinging foot) that is still out of reach is drawn in toward the hip
         # (a soft minimum of its distance and the reach): a faster run's swing targets reach 0.94 L from
         # the hip, and a leg straightened after them flips its knee from frame to frame (x1.7).
@@ -157,6 +166,22 @@ def _lift_out_of_reach(initial: Motion, body: BodyModel, markers: np.ndarray) ->
         scale = 1.0 + off_floor * (np.minimum(d_in / np.maximum(d, 1e-9), 1.0) - 1.0)
         out[:, i] = hips[:, i, None, :] + rel * scale[..., None]
     return out
+
+
+def _ball_rise_about_tip(foot: np.ndarray, sweep: float) -> np.ndarray:
+    """(T,) how far [m] the ball can rise by turning about the tip (the toes' bone rigid) before it has moved
+    ``sweep`` [m] horizontally. foot: (T, 3, 3) one foot's marker targets (ankle, ball, tip) [m].
+
+    The ball moves on a circle about the tip: from an angle θ0 above the tip's level, rising to θ1 moves it
+    d (cos θ0 − cos θ1) horizontally. Level with the tip (a CMU foot) it rises 0.26 d for 2 % of d; a folded
+    rig's ball joint, 30 deg above its tip, only 0.05 d.
+    """
+    bt = foot[:, 1] - foot[:, 2]
+    d = np.maximum(np.linalg.norm(bt, axis=-1), 1e-9)
+    s0 = np.clip(bt[:, UP_AXIS] / d, -1.0, 1.0)
+    c_min = np.sqrt(1.0 - s0**2) - sweep / d
+    s1 = np.where(c_min > 0.0, np.sqrt(np.maximum(1.0 - c_min**2, 0.0)), 1.0)
+    return d * np.maximum(s1 - s0, 0.0)
 
 
 def _reach_factor(initial: Motion, body: BodyModel, markers: np.ndarray) -> np.ndarray:

@@ -502,8 +502,8 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
         # A released marker relaxes only once it is clearly off the floor (above band, fully at 2 bands): a
         # tip that yawed with the foot and was held would otherwise swing back sideways while still within
         # the height at which the physics report watches it slide.
-        # Each sample is given its bone lengths back (_rigid_foot) before the next one holds its points, so
-        # what is held is a pose the foot can take.
+        # Each sample is given its bone lengths back (_rigid_foot's rule) before the next one holds its
+        # points, so what is held is a pose the foot can take (_hold_stance).
         both = loaded[1:] & loaded[:-1]
         rate = RELAX * np.clip((height - h_min - band) / band, 0.0, 1.0)  # (n, 3)
         own, lift = _hold_stance(rel[idx, foot], step, both, rate, delta, _bone_lengths(rel[:, foot]),
@@ -529,7 +529,6 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
     return _keep_feet_rigid(out, rel, firm, in_place)
 
 
-
 def _hold_stance(pose: np.ndarray, step: np.ndarray, both: np.ndarray, rate: np.ndarray, delta: np.ndarray,
                  length: np.ndarray, firm: np.ndarray, held: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The markers' own de-skating corrections through one stance of n samples, in time order.
@@ -537,7 +536,7 @@ def _hold_stance(pose: np.ndarray, step: np.ndarray, both: np.ndarray, rate: np.
     pose: (n, 3, 3) the foot's marker offsets (heading frame: forward, up, lateral) [m]; step: (n-1, 3, 2)
     their horizontal motion from one sample to the next [m]; both: (n-1, 3) loaded at both samples; rate:
     (n, 3) relaxation toward the common correction delta (n, 2) [m]; length: (3, 3) bone lengths [m];
-    firm, held: (n, 3) for _rigid_foot. Returns own (n, 3, 2) [m], the horizontal corrections, and lift
+    firm, held: (n, 3) as _rigid_foot takes them. Returns own (n, 3, 2) [m], the horizontal corrections, and lift
     (n, 3) [m], the height changes of the bones' tilting.
 
     Sequential (each sample's correction starts from the previous one's rigid pose), so it runs in Python
@@ -568,6 +567,7 @@ def _hold_stance(pose: np.ndarray, step: np.ndarray, both: np.ndarray, rate: np.
             own[i][k] = [rigid[k][0] - pose_l[i][k][0], rigid[k][2] - pose_l[i][k][2]]
             lift[i][k] = rigid[k][1] - pose_l[i][k][1]
     return np.array(own).reshape(n, 3, 2), np.array(lift).reshape(n, 3)
+
 
 #: At most this fraction of the cycle is added before and after a stance by _with_approach.
 APPROACH_MAX = 0.08

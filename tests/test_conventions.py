@@ -55,6 +55,8 @@ def _variants(name):
     if kind == "cmu":  # 120 Hz clips; the Bandai clips are 30 Hz already
         out["60Hz"] = functools.partial(rv.every, n=2, pose_frames=1)  # the CMU files open with a T-pose row
         out["30Hz"] = functools.partial(rv.every, n=4, pose_frames=1)
+        # the same take written at 30 Hz through an anti-alias filter, as a resampler writes it
+        out["30Hz_lowpass"] = functools.partial(rv.resampled, n=4, pose_frames=1)
     return out
 
 
@@ -124,21 +126,33 @@ def _assert_same_fit(name, path):
     assert abs(math.degrees(th - th0)) <= 0.5, (math.degrees(th), math.degrees(th0))
 
 
-@pytest.mark.parametrize("name,variant", [c for c in _cases(FIT_CLIPS) if c[-1] not in ("60Hz", "30Hz")])
+RATE_VARIANTS = ("60Hz", "30Hz", "30Hz_lowpass")
+
+
+@pytest.mark.parametrize("name,variant", [c for c in _cases(FIT_CLIPS) if c[-1] not in RATE_VARIANTS])
 def test_fit_is_the_same_in_every_convention(name, variant, tmp_root):
     """K within 3 %, θ0 within 0.5° (issue 12, acceptance 1)."""
     _assert_same_fit(name, _variant_file(name, variant, tmp_root))
 
 
-# Measured on this machine (K, θ0 of the 30 Hz variant against the 120 Hz clip): at 30 Hz the COM's
-# acceleration aliases (a 30 Hz sample of a running body's COM holds its 15-30 Hz impact content folded
-# below 15 Hz, whatever the interpolation: cubic, quintic and band-limited all gave the same), so the
-# force-threshold events move 2-6 ms and the per-stance spring fits, the prior of K, a few per cent.
+# Measured (K, θ0 of the 30 Hz thinning against the 120 Hz clip). The cause is the thinned file, not the
+# fit: the CMU COM moves 0.5-2 mm above 15 Hz (capture jitter and impacts; about 3 % of its vertical
+# spectrum), which the 8 Hz COM filter removes at 120 Hz but every-4th-frame thinning folds below 15 Hz,
+# where no filter can tell it from the motion: the 30 Hz eq. 1 force is 0.04-0.05 body weights
+# RMS off the 120 Hz one (0.10-0.15 at worst), which moves the 0.5 BW events 2-6 ms and the stance spring
+# fits 2-10 %. Over the four possible thinnings (frames 0, 1, 2, 3 mod 4) of the nine runs, 11 of 36
+# miss K 3 % or θ0 0.5° (K −8.3 to +7.4 %). The same frames low-passed before the COM is thinned bring all 36
+# within 2.9 % and 0.30°, and the take written through a resampler's anti-alias filter
+# (``rig_variants.resampled``, test below) within 3.5 % and 0.51° (every run's first thinning passes).
+# Tried in the fit and measured worse or no better: COM cutoff 5/6/7 Hz at 30 Hz (24/16/10 of 36 miss against
+# 11 at 8 Hz; a bias towards low K), a ballistic-flight reconstruction of the COM (16-33 of 36: the 120 Hz COM's own
+# flights are 0.19-0.21 body weights off ballistic, so the prior is wrong by more than the noise it would
+# remove), spring fits weighted to mid-stance (16-23 of 36).
 _RATE_SHORT = {
-    ("09_02", "30Hz"): "K +4.4 %, θ0 −0.74° (events 5 ms apart: COM acceleration aliased at 30 Hz)",
-    ("09_03", "30Hz"): "K −3.1 % (per-stance spring fits of the aliased force)",
-    ("09_06", "30Hz"): "K +7.4 % (one stance's spring fit 14.1 → 15.6 on the aliased force)",
-    ("09_07", "30Hz"): "K +4.2 % (stance time 2.7 ms short: COM acceleration aliased at 30 Hz)",
+    ("09_02", "30Hz"): "K +4.4 %, θ0 −0.74° (COM content above 15 Hz aliased by the thinning; events 5 ms apart)",
+    ("09_03", "30Hz"): "K −3.1 % (COM content above 15 Hz aliased by the thinning; spring fits 4 % apart)",
+    ("09_06", "30Hz"): "K +7.4 % (COM content above 15 Hz aliased by the thinning; one stance's spring 14.1 → 15.6)",
+    ("09_07", "30Hz"): "K +4.2 % (COM content above 15 Hz aliased by the thinning; stance 2.7 ms short)",
 }
 
 
@@ -147,12 +161,13 @@ def _rate_fit_cases():
         return [pytest.param(None, None, marks=pytest.mark.skip(reason="real clips not found"))]
     return [pytest.param(n, v, marks=pytest.mark.xfail(reason=_RATE_SHORT[(n, v)], strict=True))
             if (n, v) in _RATE_SHORT else pytest.param(n, v)
-            for n in RUNNING for v in ("60Hz", "30Hz")]
+            for n in RUNNING for v in RATE_VARIANTS]
 
 
 @pytest.mark.parametrize("name,variant", _rate_fit_cases())
 def test_fit_is_the_same_at_60_and_30_hz(name, variant, tmp_root):
-    """Every CMU run thinned to 60 and 30 Hz fits like its 120 Hz original (K 3 %, θ0 0.5°)."""
+    """Every CMU run thinned to 60 and 30 Hz, and written at 30 Hz through an anti-alias filter, fits like its
+    120 Hz original (K 3 %, θ0 0.5°)."""
     _assert_same_fit(name, _variant_file(name, variant, tmp_root))
 
 

@@ -159,9 +159,10 @@ def test_fit_is_the_same_in_every_convention(name, variant, tmp_root):
 # where no filter can tell it from the motion: the 30 Hz eq. 1 force is 0.04-0.05 body weights
 # RMS off the 120 Hz one (0.10-0.15 at worst), which moves the 0.5 BW events 2-6 ms and the stance spring
 # fits 2-10 %. Over the four possible thinnings (frames 0, 1, 2, 3 mod 4) of the nine runs, 11 of 36
-# miss K 3 % or θ0 0.5° (K −8.3 to +7.4 %). The same frames low-passed before the COM is thinned bring all 36
-# within 2.9 % and 0.30°, and the take written through a resampler's anti-alias filter
-# (``rig_variants.resampled``, test below) within 3.5 % and 0.51° (every run's first thinning passes).
+# miss K 3 % or θ0 0.5° (K −8.3 to +7.4 %; ``python benchmarks/fit_rates.py`` prints the table). The same
+# frames low-passed before the COM is thinned bring all 36 within 2.9 % and 0.30°, and the take written
+# through a resampler's anti-alias filter (``rig_variants.resampled``, test below) within 3.5 % and 0.51° (3
+# of 36 miss; every run's first take passes).
 # Tried in the fit and measured worse or no better: COM cutoff 5/6/7 Hz at 30 Hz (24/16/10 of 36 miss against
 # 11 at 8 Hz; a bias towards low K), a ballistic-flight reconstruction of the COM (16-33 of 36: the 120 Hz COM's own
 # flights are 0.19-0.21 body weights off ballistic, so the prior is wrong by more than the noise it would

@@ -313,10 +313,16 @@ def extract_cycle(
     from ..metrics import SKATE_REACH_L
 
     raw_rel = marker_rel
-    # a walking foot rolls (heel, ball, toe): one pivot at a time holds it (_remove_sliding_rolling)
-    deskate = _remove_sliding_rolling if order == "walking" else _remove_sliding
-    marker_rel = deskate(marker_rel, stance_mask, contact_tol=SKATE_REACH_L * body.leg_length,
-                         band=SLIDE_BAND_L * body.leg_length)
+    if order == "walking":  # a walking foot rolls (heel, ball, toe): one pivot at a time holds it
+        marker_rel, held_to = _remove_sliding_rolling(marker_rel, stance_mask, contact_tol=SKATE_REACH_L
+                                                      * body.leg_length, band=SLIDE_BAND_L * body.leg_length)
+        # the foot is a contact (held by the IK, anchored) for as long as its toe is held at lift-off
+        contact_phase = contact_phase.copy()
+        later = np.mod(held_to - contact_phase[:, 1], 1.0)
+        contact_phase[:, 1] += np.where((held_to >= 0) & (later < 0.5), later, 0.0)
+    else:
+        marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=SKATE_REACH_L * body.leg_length,
+                                     band=SLIDE_BAND_L * body.leg_length)
     # the body-relative foot path carries the same de-skating correction (it fades over the swing), so
     # that IK targets blending from the ground path to it after lift-off do not jump by the correction
     # (a 10 mm jump of a tip still near the floor, 02_03 at 50 Hz)
@@ -554,7 +560,8 @@ def _stance_in_time(stance_foot: np.ndarray) -> np.ndarray:
     return idx
 
 
-def _remove_sliding_rolling(rel: np.ndarray, stance: np.ndarray, contact_tol: float, band: float) -> np.ndarray:
+def _remove_sliding_rolling(rel: np.ndarray, stance: np.ndarray, contact_tol: float,
+                            band: float) -> tuple[np.ndarray, np.ndarray]:
     """Remove the reference's foot sliding from a walk's stances: the foot rolls over one pivot at a time.
 
     rel: (K, 2, 3, 3) marker offsets from the anchor (heading frame: forward, up, lateral); stance: (K, 2).
@@ -565,19 +572,27 @@ def _remove_sliding_rolling(rel: np.ndarray, stance: np.ndarray, contact_tol: fl
     the three markers of a foot move together, by one rigid motion per sample (``_rolling_correction``:
     the foot keeps the reference's shape, so the IK meets it with the reference's joint angles) that holds
     the current pivot still; after the stance the motion fades over the swing (min-jerk) so the cycle
-    closes. Heights are clamped to ≥ 0.
+    closes. Heights are clamped to ≥ 0. Returns the markers and (2,) the stride phase at which each foot's
+    hold ends (its toe lifted clear of the floor band; −1: a foot never held).
     """
     bones = [_bone_lengths(rel[:, foot]) for foot in range(2)]
     rel = np.stack([_with_bone_lengths(rel[:, foot], bones[foot]) for foot in range(2)], axis=1)
     out = rel.copy()
     K = rel.shape[0]
+    held_to = np.full(2, -1.0)
     for foot in range(2):
         idx = _stance_in_time(stance[:, foot])
         if idx.size == 0:
             continue
-        idx = _with_approach(rel[:, foot], idx, stance[:, foot], contact_tol, band)
-        yaw, shift, lift = _rolling_correction(rel[idx, foot], contact_tol, band)
+        with_before = _with_approach(rel[:, foot], idx, stance[:, foot], contact_tol, band, with_after=False)
+        # then as many samples of the swing as the lift-off may need (_rolling_correction cuts them)
+        n_end = with_before.size
+        idx = np.concatenate([with_before, (idx[-1] + 1 + np.arange(int(APPROACH_MAX * K))) % K])
+        idx = idx[: min(idx.size, K - 1)]
+        yaw, shift, lift, n_used = _rolling_correction(rel[idx, foot], contact_tol, band, n_end)
+        idx, yaw, shift, lift = idx[:n_used], yaw[:n_used], shift[:n_used], lift[:n_used]
         out[idx, foot] = _moved(rel[idx, foot], yaw, shift, lift)
+        held_to[foot] = (idx[-1] + 1) / K
         covered = np.zeros(K, bool)
         covered[idx] = True
         swing = np.flatnonzero(~covered)
@@ -587,7 +602,7 @@ def _remove_sliding_rolling(rel: np.ndarray, stance: np.ndarray, contact_tol: fl
             fade = 1.0 - min_jerk(np.linspace(0, 1, sw.size))
             out[sw, foot] = _moved(rel[sw, foot], yaw[-1] * fade, shift[-1] * fade[:, None], lift[-1] * fade)
     out[..., 1] = np.maximum(out[..., 1], 0.0)
-    return out
+    return out, held_to
 
 
 def _with_bone_lengths(foot: np.ndarray, length: np.ndarray) -> np.ndarray:
@@ -621,7 +636,7 @@ YAW_RELAX = 0.2
 
 # Long because the rigid motion of each sample depends on the previous one's (held pivot, held yaw): one
 # sequential pass over the ~120 samples of a stance.
-def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float):
+def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float, n_end: int):
     """The rigid motion per sample of a walking stance that holds the foot's pivot still.
 
     seg: (n, 3 markers, 3) one foot's marker offsets over the stance in time order (heading frame; markers
@@ -635,7 +650,11 @@ def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float):
     not sink with the reference (its toe end sinks 1-2 cm while the toes pitch up over it, a mocap end site,
     not a contact: following it down would slide the rising ball forward within the band in which the
     physics report watches it) and rises from the reference's lowest point since it took over.
-    Returns yaw (n,) [rad], shift (n, 2) [m] (forward, lateral), lift (n,) [m] for ``_moved``.
+    From sample n_end on the foot is lifting off: its pivot rises with the reference and is still held
+    horizontally until it is ``band`` above its height at n_end (a reference toe that swings forward while
+    still a centimetre up would slide within the report's band); the samples after that are not used.
+    Returns yaw (n,) [rad], shift (n, 2) [m] (forward, lateral), lift (n,) [m] for ``_moved`` and the number
+    of samples used.
     """
     n = seg.shape[0]
     height = seg[:, :, 1]
@@ -644,8 +663,20 @@ def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float):
     yaw, shift, lift = np.zeros(n), np.zeros((n, 2)), np.zeros(n)
     pivot, first = -1, -1
     lowest = np.inf  # the landing pivot: its reference's lowest height so far
-    floor = np.inf  # a later pivot: the lowest its reference has been since it took over
+    top = np.inf  # the height the lifting pivot leaves the floor band at
     for i in range(n):
+        if i >= n_end and pivot >= 0:
+            if i == n_end:
+                top = seg[i - 1, pivot, 1] + lift[i - 1] + band
+            if seg[i - 1, pivot, 1] + lift[i - 1] > top:
+                return yaw[:i], shift[:i], lift[:i], i
+            yaw[i], lift[i] = yaw[i - 1], lift[i - 1]
+            was = _moved(seg[i - 1 : i, pivot : pivot + 1], yaw[i - 1 : i], shift[i - 1 : i], lift[i - 1 : i])[0, 0]
+            now = _moved(seg[i : i + 1, pivot : pivot + 1], yaw[i : i + 1], np.zeros((1, 2)), np.zeros(1))[0, 0]
+            shift[i] = was[[0, 2]] - now[[0, 2]]
+            continue
+        if i >= n_end:
+            return yaw[:i], shift[:i], lift[:i], i
         loaded = np.flatnonzero(rise[i] <= band)
         later = loaded[loaded > pivot] if pivot >= 0 else loaded
         if later.size:
@@ -654,7 +685,6 @@ def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float):
             if pivot < 0 or up[k] + ROLL_SWITCH_BAND * band < up[pivot]:
                 pivot = k
                 first = k if first < 0 else first
-                floor = seg[max(i - 1, 0), k, 1]
         if pivot < 0 or i == 0:
             continue
         others = loaded[loaded != pivot]
@@ -673,10 +703,9 @@ def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float):
         if pivot == first:  # the landing pivot comes down to its lowest height so far, then stays there
             lowest = min(lowest, y)
             lift[i] = lowest - y
-        elif y < floor:
-            lift[i] += floor - y
-            floor = y
-    return yaw, shift, lift
+        else:  # a later pivot stays at its height until the foot lifts
+            lift[i] = lift[i - 1] - (y - seg[i - 1, pivot, 1])
+    return yaw, shift, lift, n
 
 
 #: At most this fraction of the cycle is added before and after a stance by _with_approach.
@@ -684,7 +713,7 @@ APPROACH_MAX = 0.08
 
 
 def _with_approach(rel_foot: np.ndarray, idx: np.ndarray, stance_foot: np.ndarray, contact_tol: float,
-                   band: float) -> np.ndarray:
+                   band: float, with_after: bool = True) -> np.ndarray:
     """A stance's samples idx (ordered in time, indices into K) with the samples just before and after it in
     which a marker that reaches the floor is already (still) within ``band`` of its lowest point.
 
@@ -708,7 +737,7 @@ def _with_approach(rel_foot: np.ndarray, idx: np.ndarray, stance_foot: np.ndarra
         before.append(k)
         k = (k - 1) % K
     k = (idx[-1] + 1) % K
-    while len(after) < most and low[k] and not stance_foot[k] and k not in before:
+    while with_after and len(after) < most and low[k] and not stance_foot[k] and k not in before:
         after.append(k)
         k = (k + 1) % K
     return np.concatenate([np.array(before[::-1], int), idx, np.array(after, int)])

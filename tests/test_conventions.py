@@ -453,10 +453,10 @@ _BANDAI_MISSES = {
     ("run_tired", 3, 120): "foot skate (ball and tip near the floor) 225.89 mm (<= 5)",
     ("run_tired", 4, None): "joint jump 89.70 deg (<= 1.5 x reference 24.87)",
     ("run_tired", 4, 120): "joint jump 53.16 deg (<= 1.5 x reference 24.87)",
-    ("run_tired", 5, None): "foot skate (ball and tip near the floor) 130.48 mm (<= 5); joint jump 47.62 deg",
-    ("run_tired", 5, 120): "foot skate (ball and tip near the floor) 209.18 mm (<= 5); joint jump 64.27 deg",
-    ("run_tired", 6, None): "joint jump 81.64 deg (<= 1.5 x reference 24.87)",
-    ("run_tired", 6, 120): "foot skate (ball and tip near the floor) 15.89 mm (<= 5); joint jump 81.93 deg",
+    ("run_tired", 5, None): "foot skate (ball and tip near the floor) 262.45 mm (<= 5); joint jump 47.62 deg",
+    ("run_tired", 5, 120): "foot skate (ball and tip near the floor) 197.60 mm (<= 5); joint jump 64.32 deg",
+    ("run_tired", 6, None): "joint jump 81.41 deg (<= 1.5 x reference 24.87)",
+    ("run_tired", 6, 120): "foot skate (ball and tip near the floor) 13.38 mm (<= 5); joint jump 68.23 deg",
 }
 
 

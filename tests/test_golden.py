@@ -1,4 +1,5 @@
-"""Every output of the scale / accelerate test matrices equals the saved golden one within 1e-9 m.
+"""Every output of the scale / accelerate test matrices equals the saved golden one within 1e-9 m (0.1 mm on
+a platform other than the one that made them: see make_golden's docstring).
 
 The goldens (tests/fixtures/golden/outputs.npz) are written by tests/golden/make_golden.py, which says
 when to regenerate them (an intended physics change, named in the commit) and what they hold.
@@ -38,9 +39,10 @@ def test_outputs_match_golden(clip):
         d = max(np.abs(got["root"] - want["root"]).max(), np.abs(got["sparse"] - want["sparse"]).max())
         worst.append((d, key))
     d, key = max(worst)
-    assert d <= make_golden.TOL_M, (f"{key} differs from the golden output by {d:.3g} m (golden made at "
-                                    f"{GOLDEN['_commit']}); if the change is meant, regenerate with "
-                                    "tests/golden/make_golden.py and say so in the commit")
+    tol, why = make_golden.tolerance(GOLDEN)
+    assert d <= tol, (f"{key} differs from the golden output by {d:.3g} m > {tol:g} m ({why}; made at "
+                      f"{GOLDEN['_commit']}); if the change is meant, regenerate with "
+                      "tests/golden/make_golden.py and say so in the commit")
 
 
 def test_golden_fk_matches_froude_fk():

@@ -4,6 +4,13 @@ Run ``python tests/golden/make_golden.py`` to (re)write ``tests/fixtures/golden/
 was made at is stored in the file. ``tests/test_golden.py`` recomputes every output through the public
 pipeline and compares joint world positions within ``TOL_M`` (1e-9 m).
 
+The goldens are exact on the platform that made them (same CPU features, NumPy, SciPy, BLAS: stored in
+the file as ``_platform``). Elsewhere the last bits of vectorised arithmetic differ (SIMD kernels chosen at
+run time by CPU), and the planner's Newton iterations carry such differences up to about 1e-5 m (measured:
+1.4e-5 m on an AVX-512 EPYC against goldens made on another machine; the scale outputs stayed within
+1e-9 m). So on another platform the bar is ``TOL_OTHER_PLATFORM_M`` (0.1 mm: far below what a physics or
+synthesis change moves, which is millimetres or frames), and the test says which bar it used.
+
 When a change is *meant* to move the physics (a bug fix, a new bar, another synthesis), regenerate the file
 with this script at that commit and say in the commit message which change moved the goldens. A refactor
 must never need to.
@@ -34,7 +41,8 @@ PRESETS = ("child", "troll", "giant", "small")
 SPEEDS = (0.7, 1.0, 1.2)
 FACTORS = (0.5, 1.3)
 STRIDE = 10  # every STRIDE-th frame keeps all joints
-TOL_M = 1e-9
+TOL_M = 1e-9  # [m] on the platform the goldens were made on
+TOL_OTHER_PLATFORM_M = 1e-4  # [m] elsewhere (see the module docstring)
 
 
 def cases():
@@ -105,6 +113,29 @@ def compute(mocap: Path, only=None):
     return out
 
 
+def platform_fingerprint() -> str:
+    """What decides the last bits of the arithmetic: CPU architecture and the SIMD features NumPy uses,
+    NumPy, SciPy and their BLAS."""
+    import platform
+
+    import numpy
+    import scipy
+    from numpy._core._multiarray_umath import __cpu_features__ as cpu
+
+    blas = numpy.show_config(mode="dicts")["Build Dependencies"]["blas"]
+    features = ",".join(sorted(k for k, on in cpu.items() if on))
+    return (f"{platform.machine()} numpy {numpy.__version__} scipy {scipy.__version__} "
+            f"{blas.get('name')} {blas.get('version')} [{features}]")
+
+
+def tolerance(golden) -> tuple[float, str]:
+    """(bar [m], why) for comparing with a loaded golden file: exact where it was made."""
+    made_on = str(golden["_platform"]) if "_platform" in golden else "an unrecorded platform"
+    if made_on == platform_fingerprint():
+        return TOL_M, "this platform made the goldens"
+    return TOL_OTHER_PLATFORM_M, f"goldens made on another platform ({made_on})"
+
+
 def commit() -> str:
     r = subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True, text=True)
     dirty = subprocess.run(["git", "-C", str(REPO), "status", "--porcelain", "src"], capture_output=True, text=True)
@@ -119,7 +150,7 @@ def main() -> int:
         print("make_golden: the CMU clips are not found (set FROUDE_MOCAP_DIR)", file=sys.stderr)
         return 2
     data = compute(MOCAP)
-    flat = {"_commit": np.array(commit()), "_stride": np.array(STRIDE)}
+    flat = {"_commit": np.array(commit()), "_stride": np.array(STRIDE), "_platform": np.array(platform_fingerprint())}
     for key, d in data.items():
         for name, arr in d.items():
             flat[f"{key}:{name}"] = arr

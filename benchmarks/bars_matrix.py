@@ -136,8 +136,9 @@ def run_one(clips: Clips, matrix: str, name: str, verb: str, character, factor: 
     change = (f"{verb} {factor:g}x" if verb == "accelerate" else f"{character or 'same'} x{factor:g}")
     row = Row(matrix, name, change, "own" if fps is None else f"{fps:g}", "error")
     prep = clips.get(name)
-    if isinstance(prep, Exception):
-        row.status, row.detail = "error", f"prepare: {prep}"
+    if isinstance(prep, Exception):  # the clip refused before any output (one line) or a failure
+        row.status = "refused" if "\n" not in str(prep) else "error"
+        row.detail = f"prepare: {prep}"
         return row
     try:
         if verb == "accelerate":
@@ -173,6 +174,12 @@ def matrix_12(clips: Clips, only, render_dir=None) -> list[Row]:
     for name in BANDAI_RUNS:
         if only and name not in only:
             continue
+        prep = clips.get(name)
+        if isinstance(prep, Exception):  # refused before any output (run_tired: a shuffle, not a run)
+            one_line = "\n" not in str(prep)
+            rows.append(Row("12", name, "every change", "-", "refused" if one_line else "error",
+                            [] if one_line else ["refusal not one line"], str(prep)))
+            continue
         for verb, character, factor in CHANGES_12:
             for fps in (None, 120.0):
                 rows.append(run_one(clips, "12", name, verb, character, factor, fps, render_dir))
@@ -206,8 +213,10 @@ def matrix_speeds(clips: Clips, only) -> list[Row]:
         if only and name not in only:
             continue
         prep = clips.get(name)
-        if isinstance(prep, Exception):
-            rows.append(Row("speeds", name, "-", "own", "error", ["prepare"], str(prep)))
+        if isinstance(prep, Exception):  # refused in one line before any output: no speed is offered
+            one_line = "\n" not in str(prep)
+            rows.append(Row("speeds", name, "every speed", "own", "refused" if one_line else "error",
+                            [] if one_line else ["refusal not one line"], str(prep)))
             continue
         from froude.speed_range import reachable_speed_range
 

@@ -11,13 +11,15 @@ motion in the world (to rounding), only the file's conventions change:
 - ``renamed``: Mixamo, Unreal, Character Creator, SMPL, Blender or Bandai joint names;
 - ``extra_root``: a static reference root at the origin above the old root;
 - ``six_channels``: position channels (equal to the OFFSET) on every joint;
-- ``every``: every n-th frame (120 Hz -> 30 or 60 Hz).
+- ``every``: every n-th frame (120 Hz -> 30 or 60 Hz);
+- ``resampled``: the rate divided by n through an anti-alias low-pass (SciPy's polyphase resampler).
 """
 from __future__ import annotations
 
 from dataclasses import replace
 
 import numpy as np
+from scipy.signal import resample_poly
 from scipy.spatial.transform import Rotation
 
 from conftest import OracleBvh
@@ -196,6 +198,20 @@ def every(b: OracleBvh, n: int, pose_frames: int = 0) -> OracleBvh:
     """
     return replace(b, values=np.concatenate([b.values[:pose_frames], b.values[pose_frames::n]]),
                    frame_time=b.frame_time * n)
+
+
+def resampled(b: OracleBvh, n: int, pose_frames: int = 0) -> OracleBvh:
+    """The rate divided by n as a resampler with an anti-alias filter writes it (``every`` thins without one).
+
+    Every channel (rotations unwrapped, in degrees) goes through ``scipy.signal.resample_poly(x, 1, n)``: a
+    polyphase FIR low-pass below the new Nyquist frequency, then every n-th sample; its ends are padded along
+    a line. pose_frames as in ``every``.
+    """
+    v = np.array(b.values[pose_frames:], float)
+    rot = np.array([c.endswith("rotation") for chans in b.channels for c in chans])
+    v[:, rot] = np.unwrap(v[:, rot], period=360.0, axis=0)
+    out = resample_poly(v, 1, n, axis=0, padtype="line")
+    return replace(b, values=np.concatenate([b.values[:pose_frames], out]), frame_time=b.frame_time * n)
 
 
 # ---- writing ---------------------------------------------------------------------------------------------

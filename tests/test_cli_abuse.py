@@ -410,6 +410,20 @@ def test_help_and_option_errors_import_no_numpy(args):
         assert "numpy" not in imported
 
 
+
+def test_scale_of_a_run_imports_no_scipy_nor_walking_code(tmp_path):
+    """A run's ``froude scale`` needs neither SciPy (the BVH's Euler angles are NumPy's, quat.to_euler) nor
+    the walking machine: importing them was a third of its time (benchmarks/bench_cli.py)."""
+    out = tmp_path / "o.bvh"
+    r = subprocess.run([sys.executable, "-X", "importtime", "-m", "froude", "scale", str(sample_path()), "--strides",
+                        "2", "-o", str(out), "-q"], capture_output=True, text=True)
+    imported = {line.split("|")[-1].strip() for line in r.stderr.splitlines() if line.startswith("import time:")}
+    assert r.returncode == 0 and out.is_file(), r.stderr[-2000:]
+    assert "froude.pipeline" in imported  # the check sees the work's imports
+    unwanted = sorted(m for m in imported if m.split(".")[0] == "scipy" or m.startswith(
+        ("froude.machine.walk", "froude.speed_range")))
+    assert not unwanted, unwanted
+
 def test_every_command_module_lists_its_help():
     from froude.apps.cli import SUBCOMMANDS, build_parser
 

@@ -189,6 +189,30 @@ def test_euler_round_trip_for_every_order():
         np.testing.assert_allclose(quat.to_euler(q, order), angles, atol=1e-9)
 
 
+
+@pytest.mark.parametrize("order", ["xyz", "xzy", "yxz", "yzx", "zxy", "zyx", "xyx", "zxz", "yzy"])
+def test_to_euler_matches_scipy(order):
+    """quat.to_euler (NumPy, so that writing a BVH does not import SciPy) against SciPy's as_euler as the
+    oracle: random rotations of both signs, the identity, and the middle angle at and near gimbal lock (the
+    third angle 0, the first carrying the whole turn; a joint bent exactly 90 degrees is ordinary)."""
+    import warnings
+
+    rng = np.random.default_rng(7)
+    q = rng.normal(size=(4000, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    angles = rng.uniform(-np.pi, np.pi, size=(600, 3))
+    singular = [-np.pi / 2, np.pi / 2] if order[0] != order[2] else [0.0, np.pi]
+    angles[:, 1] = np.resize(singular + [s + 5e-8 * (1 if s < 1 else -1) for s in singular], 600)
+    locked = quat.from_euler(angles, order)
+    q = np.concatenate([q, -q, quat.identity((1,)), locked, -locked])
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Gimbal lock detected")
+        ref = Rotation.from_quat(_xyzw(q)).as_euler(order.upper())
+    got = quat.to_euler(q, order)
+    assert got.shape == ref.shape
+    assert np.abs(got - ref).max() < 1e-14  # the same method: only NumPy's and libm's atan2 round differently
+    assert np.all(got[-1200:, 2] == 0.0)  # at gimbal lock the third angle is 0, as SciPy sets it
+
 def test_motion_validates_shapes():
     m = load_bvh(FIXTURES / "three_joint.bvh", clean=False)
     with pytest.raises(ValueError):

@@ -317,14 +317,14 @@ def _free_port() -> int:
 
 
 def test_unreachable_speed_says_so_in_metres_per_second(monkeypatch):
-    """A speed with no running cycle (a Bandai tired run at x2, the slider's end) is refused in m/s with the
-    fix, not in the cycle solver's terms."""
+    """A speed with no running cycle (a Bandai run at x2, the slider's end) is refused in m/s with the fix,
+    not in the cycle solver's terms."""
     from froude.errors import FitError
     from froude.prepared import Prepared
 
     from conftest import clip
 
-    s = Session(pipeline.prepare(clip("dataset-1_run_tired_001")))
+    s = Session(pipeline.prepare(clip("dataset-1_dash_old_001")))
     # the machine now finds a cycle up to x3 on the shared clips (continued from slower ones), so the case is
     # made: the cycle search refuses as it does for a speed with no cycle
     def no_cycle(self, speed):

@@ -24,7 +24,7 @@ from .body.model import BodyModel
 from .body.take import modelled_part, running_take, select_range
 from .core.motion import Motion
 from .errors import FroudeError, PlanError
-from .machine.walk_model import is_walking
+from .machine import is_walking
 from .metrics import physics_report
 from .naive import naive_clip
 from .prepared import Prepared

@@ -68,8 +68,8 @@ class Prepared:
     def faster_machine(self, speed: float):
         """``machine.speed.faster_machine(self.machine, speed)`` (a walk: the walking cycle re-solved,
         ``machine.walk_speed``), remembered per speed factor."""
+        from .machine import is_walking
         from .machine.speed import faster_machine
-        from .machine.walk_model import is_walking
         from .machine.walk_speed import walking_machines_at_speeds
 
         key = float(speed)

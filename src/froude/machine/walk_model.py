@@ -29,6 +29,7 @@ from ..constants import GRAVITY
 from ..errors import FitError
 from ..io.atomic import atomic_write_text
 from ..io.jsonable import dumps
+from . import is_walking  # re-exported: its home is the package (no walking code imported)
 from .dynamics import Control
 from .walking import WalkState
 
@@ -212,8 +213,3 @@ def load_walking_machine(path) -> WalkingMachine:
     except json.JSONDecodeError as e:
         raise FitError(f"{path}:{e.lineno}: not valid JSON ({e.msg})") from None
     return WalkingMachine.from_dict(d, str(path))
-
-
-def is_walking(machine) -> bool:
-    """Whether a fitted machine is the walking one (``froude.walking/1``) rather than the running one."""
-    return getattr(machine, "kind", "running") == "walking"

@@ -12,6 +12,7 @@ which lives in the sagittal plane, can be placed back in the world.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -501,26 +502,12 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
         # A released marker relaxes only once it is clearly off the floor (above band, fully at 2 bands): a
         # tip that yawed with the foot and was held would otherwise swing back sideways while still within
         # the height at which the physics report watches it slide.
-        # Each sample is given its bone lengths back (_rigid_foot) before the next one holds its points, so
-        # what is held is a pose the foot can take.
-        own = np.zeros((idx.size, 3, 2))
-        lift = np.zeros((idx.size, 3))  # height changes of the bones' tilting
+        # Each sample is given its bone lengths back (_rigid_foot's rule) before the next one holds its
+        # points, so what is held is a pose the foot can take (_hold_stance).
         both = loaded[1:] & loaded[:-1]
         rate = RELAX * np.clip((height - h_min - band) / band, 0.0, 1.0)  # (n, 3)
-        bones = _bone_lengths(rel[:, foot])
-        f_firm, f_held = firm[idx, foot], in_place[idx, foot]
-        for i in range(idx.size):  # ~50 samples of one stance
-            if i > 0:
-                held = own[i - 1] - step[i - 1]
-                relaxed = own[i - 1] + rate[i][:, None] * (delta[i] - own[i - 1])
-                own[i] = np.where(both[i - 1][:, None], held, relaxed)
-            pose = rel[idx[i], foot].copy()  # (3 markers, 3)
-            pose[:, [0, 2]] += own[i]
-            if i > 0:  # a marker a tilt raised comes back down over a few samples, not at once
-                pose[:, 1] += TILT_RELAX * np.maximum(lift[i - 1], 0.0)
-            rigid = _rigid_foot(pose[None], bones, f_firm[i][None], f_held[i][None])[0]
-            own[i] = rigid[:, [0, 2]] - rel[idx[i], foot][:, [0, 2]]
-            lift[i] = rigid[:, 1] - rel[idx[i], foot, :, 1]
+        own, lift = _hold_stance(rel[idx, foot], step, both, rate, delta, _bone_lengths(rel[:, foot]),
+                                 firm[idx, foot], in_place[idx, foot])
         d = delta[-1]
         out[idx, foot, :, 0] += own[..., 0]
         out[idx, foot, :, 1] += lift
@@ -540,6 +527,46 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
             out[sw, foot, :, 2] += corr[..., 1]
     out[..., 1] = np.maximum(out[..., 1], 0.0)
     return _keep_feet_rigid(out, rel, firm, in_place)
+
+
+def _hold_stance(pose: np.ndarray, step: np.ndarray, both: np.ndarray, rate: np.ndarray, delta: np.ndarray,
+                 length: np.ndarray, firm: np.ndarray, held: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The markers' own de-skating corrections through one stance of n samples, in time order.
+
+    pose: (n, 3, 3) the foot's marker offsets (heading frame: forward, up, lateral) [m]; step: (n-1, 3, 2)
+    their horizontal motion from one sample to the next [m]; both: (n-1, 3) loaded at both samples; rate:
+    (n, 3) relaxation toward the common correction delta (n, 2) [m]; length: (3, 3) bone lengths [m];
+    firm, held: (n, 3) as _rigid_foot takes them. Returns own (n, 3, 2) [m], the horizontal corrections, and lift
+    (n, 3) [m], the height changes of the bones' tilting.
+
+    Sequential (each sample's correction starts from the previous one's rigid pose), so it runs in Python
+    floats: ~50 samples of three markers, where NumPy's per-call cost would be most of the time.
+    """
+    n = pose.shape[0]
+    bones = [float(length[i, j]) for i, j in FOOT_BONES]
+    firm_l = (RIGID_MIN_FIRM + firm).tolist()
+    held_l, pose_l, step_l = held.tolist(), pose.tolist(), step.tolist()
+    both_l, rate_l, delta_l = both.tolist(), rate.tolist(), delta.tolist()
+    own = [[[0.0, 0.0] for _ in range(3)] for _ in range(n)]
+    lift = [[0.0, 0.0, 0.0] for _ in range(n)]
+    for i in range(n):
+        target = [list(p) for p in pose_l[i]]  # (3 markers, 3)
+        if i > 0:
+            for k in range(3):
+                prev = own[i - 1][k]
+                if both_l[i - 1][k]:  # loaded at both samples: cancels its own motion
+                    cur = [prev[c] - step_l[i - 1][k][c] for c in range(2)]
+                else:  # relaxes toward the common correction
+                    cur = [prev[c] + rate_l[i][k] * (delta_l[i][c] - prev[c]) for c in range(2)]
+                target[k][0] += cur[0]
+                target[k][2] += cur[1]
+                # a marker a tilt raised comes back down over a few samples, not at once
+                target[k][1] += TILT_RELAX * max(lift[i - 1][k], 0.0)
+        rigid = _rigid_pose(target, bones, firm_l[i], held_l[i])
+        for k in range(3):
+            own[i][k] = [rigid[k][0] - pose_l[i][k][0], rigid[k][2] - pose_l[i][k][2]]
+            lift[i][k] = rigid[k][1] - pose_l[i][k][1]
+    return np.array(own).reshape(n, 3, 2), np.array(lift).reshape(n, 3)
 
 
 #: At most this fraction of the cycle is added before and after a stance by _with_approach.
@@ -607,36 +634,53 @@ def _rigid_foot(pose: np.ndarray, length: np.ndarray, firm: np.ndarray, held: np
     Holding each loaded marker where it is while the reference foot rolls would keep a rising ball in its
     place instead of swinging it back round the tip: the ball-tip distance shrank by up to 14 % (09_08), and
     IK, unable to meet such targets, split the difference and slid the held tip 5-7 mm on a giant. So each
-    bone (FOOT_BONES, lengths ``length`` (3, 3)) gets its length back. A bone with both ends held in place
-    (held: (N, 3)) keeps them where they are and tilts: its less firm end moves up or down (firm: (N, 3),
-    how near each is to its lowest point of the stance), which is not sliding (the toes flex
+    bone (FOOT_BONES, lengths ``length`` (3, 3) [m]) gets its length back. A bone with both ends held in
+    place (held: (N, 3) bool) keeps them where they are and tilts: its less firm end moves up or down (firm:
+    (N, 3), how near each is to its lowest point of the stance), which is not sliding (the toes flex
     about the ball, or the ball rolls over the tip). Otherwise the bone slides along itself horizontally, a
     held end not at all and otherwise the firmer end less; heights stay (they decide what is on the ground).
+    Sample by sample (``_rigid_pose``): _remove_sliding calls it on one sample at a time, where NumPy's
+    per-call cost would be most of the time.
     """
-    hor = pose[..., [0, 2]].copy()  # (N, 3, 2)
-    height = pose[..., 1].copy()  # (N, 3)
-    firm = RIGID_MIN_FIRM + firm
+    bones = [float(length[i, j]) for i, j in FOOT_BONES]
+    firm = RIGID_MIN_FIRM + np.asarray(firm, dtype=float)
+    rows = zip(pose.tolist(), firm.tolist(), np.asarray(held, dtype=bool).tolist(), strict=True)
+    return np.array([_rigid_pose(p, bones, f, h) for p, f, h in rows]).reshape(pose.shape)
+
+
+def _rigid_pose(pose: list, bones: list, firm: list, held: list) -> list:
+    """_rigid_foot on one sample, in Python floats: pose [[forward, up, lateral] × 3 markers] [m], bones:
+    the FOOT_BONES' lengths [m], firm: 3 firmnesses (RIGID_MIN_FIRM included), held: 3 bools. Returns the
+    pose with its bone lengths restored (RIGID_SWEEPS sweeps over the bones)."""
+    x = [p[0] for p in pose]  # forward
+    y = [p[1] for p in pose]  # up
+    z = [p[2] for p in pose]  # lateral
+    rules = []  # per bone: its ends, its length, both ends held, j the less firm end, j's share of a slide
+    for (i, j), d in zip(FOOT_BONES, bones, strict=True):
+        fi = RIGID_HELD_FIRM if held[i] else firm[i]
+        fj = RIGID_HELD_FIRM if held[j] else firm[j]
+        rules.append((i, j, d, held[i] and held[j], firm[j] <= firm[i], fi / (fi + fj)))
     for _ in range(RIGID_SWEEPS):
-        for i, j in FOOT_BONES:
-            d = length[i, j]
-            v = hor[:, j] - hor[:, i]
-            n = np.linalg.norm(v, axis=-1)
-            tilt = held[:, i] & held[:, j] & (n <= d)
-            rise = np.sqrt(np.maximum(d**2 - n**2, 0.0)) * np.where(height[:, j] >= height[:, i], 1.0, -1.0)
-            j_moves = firm[:, j] <= firm[:, i]
-            height[:, j] = np.where(tilt & j_moves, height[:, i] + rise, height[:, j])
-            height[:, i] = np.where(tilt & ~j_moves, height[:, j] - rise, height[:, i])
-            want = np.sqrt(np.maximum(d**2 - (height[:, j] - height[:, i]) ** 2, 0.0))  # horizontal length
-            u = v / np.maximum(n, 1e-12)[:, None]
-            change = np.where(tilt, 0.0, want - n)[:, None] * u  # j moves by +a·change, i by -(1-a)·change
-            fi = np.where(held[:, i], RIGID_HELD_FIRM, firm[:, i])
-            fj = np.where(held[:, j], RIGID_HELD_FIRM, firm[:, j])
-            b = (fi / (fi + fj))[:, None]
-            hor[:, j] += b * change
-            hor[:, i] -= (1.0 - b) * change
-    out = pose.copy()
-    out[..., 0], out[..., 1], out[..., 2] = hor[..., 0], height, hor[..., 1]
-    return out
+        for i, j, d, both_held, j_moves, share in rules:
+            vx, vz = x[j] - x[i], z[j] - z[i]
+            n = math.sqrt(vx * vx + vz * vz)
+            if both_held and n <= d:  # tilt: the less firm end rises or sinks
+                rise = math.sqrt(max(d * d - n * n, 0.0)) * (1.0 if y[j] >= y[i] else -1.0)
+                if j_moves:
+                    y[j] = y[i] + rise
+                else:
+                    y[i] = y[j] - rise
+                continue
+            # slide along the bone: j by share·change, i by -(1 - share)·change
+            dy = y[j] - y[i]
+            scale = math.sqrt(max(d * d - dy * dy, 0.0)) - n  # horizontal length wanted - now
+            n_safe = max(n, 1e-12)
+            cx, cz = scale * (vx / n_safe), scale * (vz / n_safe)
+            x[j] += share * cx
+            z[j] += share * cz
+            x[i] -= (1.0 - share) * cx
+            z[i] -= (1.0 - share) * cz
+    return [[x[k], y[k], z[k]] for k in range(3)]
 
 
 def nlerp_rows(q: np.ndarray, i0: np.ndarray, i1: np.ndarray, w: np.ndarray, chunk: int = 32768) -> np.ndarray:

@@ -98,7 +98,6 @@ def run(args) -> int:
 
     from ... import pipeline
     from ...errors import FitError, FroudeError, NotARunningMotion, NotAWalkingMotion
-    from ...speed_range import reachable_speed_range
 
     try:
         prep = prepare_clip(args)
@@ -116,7 +115,7 @@ def run(args) -> int:
     except FitError as e:
         if args.method != "physical":
             raise
-        rng = reachable_speed_range(prep, args.character, **character_kwargs(args))
+        rng = _speed_range(prep, args)
         asked = goal.m_s if goal and goal.m_s else (goal.factor if goal and goal.factor else 1.0) * rng.base_m_s
         raise FroudeError(f"{Path(args.clip).name}: {asked:.2f} m/s (x{asked / rng.base_m_s:.2f}) is out of reach: "
                           f"{rng.sentence()} ({e})") from None
@@ -125,7 +124,7 @@ def run(args) -> int:
     assert res.report is not None  # the pipeline computes it by default
     fails = res.report.check_bars() if args.method == "physical" else []
     if fails and not args.keep:
-        rng = reachable_speed_range(prep, args.character, **character_kwargs(args))
+        rng = _speed_range(prep, args)
         say(f"froude scale: output not written: it misses physics bars ({'; '.join(fails)}); {rng.sentence()}; "
             "--keep writes it anyway")
         return 1
@@ -157,6 +156,14 @@ def _naive_any_clip(args, out, data, goal, why, t0) -> int:
     also = "".join(f" and {d}" for d in data_written)
     say(f"wrote {bvh} ({res.motion.n_frames} frames) and {rep}{also} in {time.perf_counter() - t0:.2f} s", args.quiet)
     return 0
+
+
+def _speed_range(prep, args):
+    """The reachable speeds of the asked character, for a refusal (imported only then: a run that succeeds
+    never needs it)."""
+    from ...speed_range import reachable_speed_range
+
+    return reachable_speed_range(prep, args.character, **character_kwargs(args))
 
 
 def _bound(prep, args) -> bool:

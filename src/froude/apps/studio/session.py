@@ -203,7 +203,7 @@ class Session:
 
     def _scale_message(self, params: Params, err: FroudeError) -> str:
         """The machine's refusal of a speed in the user's terms (m/s, ×) with the fix."""
-        from ...machine.walk_model import is_walking
+        from ...machine import is_walking
 
         if is_walking(self.prep.machine):  # the walking machine says it in m/s already (walk-run transition)
             return str(err).splitlines()[0]

@@ -78,8 +78,13 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     # with the feet out of reach. So the initial pose is translated to put its own COM on the machine's.
     initial = initial.with_(root_positions=root + (path.com - retarget.body.com(initial)))
     markers = _lift_out_of_reach(initial, retarget.body, markers)
+    weighed = path
+    if cyc.order == "walking":  # a walk starts and ends with a foot on the ground that is no step's
+        from .walking import with_edge_contacts
+
+        weighed = with_edge_contacts(path)
     reach = _reach_factor(initial, retarget.body, markers)
-    weight = _marker_weights(path, markers, retarget.body.leg_length) * reach
+    weight = _marker_weights(weighed, markers, retarget.body.leg_length) * reach
     # A swinging foot's target beyond the leg's reach keeps only OUT_OF_REACH_SWING of the swing weight: the
     # trailing foot's ground path after an acceleration's longer stance lies 1.2 L from the hip, and at the
     # full swing weight it dragged the pelvis 26 deg off the reference pose, which sprang back in one frame

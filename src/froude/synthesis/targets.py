@@ -78,7 +78,12 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     body = retarget.body
     hips = body.joint_positions(initial, [body.roles["left_hip"], body.roles["right_hip"]])  # (T, 2, 3) [m]
     markers = _lift_out_of_reach(hips, body, markers)
-    weight = _marker_weights(path, markers, body.leg_length) * _reach_factor(hips, body, markers)
+    weighed = path
+    if cyc.order == "walking":  # a walk starts and ends with a foot on the ground that is no step's
+        from .walking import with_edge_contacts
+
+        weighed = with_edge_contacts(path)
+    weight = _marker_weights(weighed, markers, body.leg_length) * _reach_factor(hips, body, markers)
     weight = np.maximum(weight, SWING_MARKER_WEIGHT)
     if cyc.order == "walking":  # a walking foot lands and leaves with a straight knee: guide it there
         from .walking import soften_swing_weights

@@ -29,7 +29,7 @@ from .metrics import physics_report
 from .naive import naive_clip
 from .prepared import Prepared
 from .result import Result, report_path, write_result
-from .synthesis.cycle import extract_cycle, fit_events
+from .synthesis.cycle import extract_cycle, fit_events, loaded_events
 from .synthesis.targets import build_targets, stance_only
 from .synthesis.timewarp import MachinePath, machine_path
 
@@ -69,7 +69,9 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     else:
         require_running(summary, source)
         fit = fit_machine_detailed(motion, body, mass=mass, source=Path(source).name)
-        cycle = extract_cycle(motion, body, gait, com, markers, events=fit_events(fit.machine, motion))
+        # the fit's events; else the load's (a clip whose feet rest on the floor unloaded: loaded_events)
+        events = fit_events(fit.machine, motion) or loaded_events(gait, com, motion.frame_time)
+        cycle = extract_cycle(motion, body, gait, com, markers, events=events)
     machine = fit.machine
     modelled, note = modelled_part(motion, summary, com, gait)
     return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source, fit,

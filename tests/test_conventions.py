@@ -463,6 +463,11 @@ _BANDAI_MISSES = {
     ("dash_active", 1, None): "foot skate (ball and tip near the floor) 33.91 mm (<= 5)",
     ("dash_feminine", 1, None): "foot skate (ball and tip near the floor) 11.43 mm (<= 5)",
     ("dash_feminine", 1, 120): "foot skate (ball and tip near the floor) 11.96 mm (<= 5)",
+    ("run_tired", 0, None): "foot skate (ball and tip near the floor) 41.01 mm (<= 5): first frames",
+    ("run_tired", 0, 120): "foot skate (ball and tip near the floor) 38.65 mm (<= 5): first frames",
+    ("run_tired", 1, None): "foot skate (ball and tip near the floor) 9.33 mm (<= 5)",
+    ("run_tired", 1, 120): "foot skate (ball and tip near the floor) 11.59 mm (<= 5)",
+    ("run_tired", 3, 120): "foot skate (ball and tip near the floor) 29.91 mm (<= 5): first frames",
 }
 
 

@@ -1,4 +1,4 @@
-"""The one periodic-orbit solver of the running machine, and the one record of a periodic cycle.
+"""The one orbit solver of the machines, and the one record of a periodic running cycle.
 
 A periodic running cycle is a fixed point of the step map: apex (U, H) → next apex (U', H') with the
 residual r(z) = (U' − U, H' − H, extra rows) = 0 over some unknowns z (apex state, touchdown angle,
@@ -10,8 +10,11 @@ energy conservation ties U' − U to H' − H — is fine):
 
     y⁺ = argmin ‖y‖  s.t.  J_y y = J_y y_k − r_k,    J_y = J diag(s)
 
-Used by the fit (§4: the cycle matching the measured timing), the speed re-solve (§5.2), the planner's
-target orbits (§5.3) and ``find_limit_cycle``. Dimensionless throughout (``machine.units``).
+Used by the running fit (§4: the cycle matching the measured timing), the speed re-solve (§5.2), the
+planner's target orbits (§5.3, inside the comfort box) and ``find_limit_cycle``; by the walking fit and
+its speed re-solve (one candidate at a time through :func:`rowwise`); and by the planner's one-step
+solves (inputs of one step that hit a reference apex: the same Newton on a square system, whose
+minimum-norm step is the plain Newton step). Dimensionless throughout (``machine.units``).
 """
 from __future__ import annotations
 
@@ -79,39 +82,159 @@ def cycle_record(U, H, th, ctl, residual, iterations=0, eigenvalues=True, **extr
                       iterations=iterations, residual=float(residual), eigenvalues=eig, **extra)
 
 
-def solve_orbit(evaluate, z0, s, h, *, tol=1e-10, max_iter=30, resolutions=(16, N_PER_STANCE), switch=1e-7,
-                accept=None, what="running cycle"):
+@dataclass(frozen=True)
+class Rows:
+    """Rows of a one-candidate-at-a-time evaluation (:func:`rowwise`): valid (m,) bool, reason (m,) int
+    (``REASONS``-style codes of the evaluator), items: the evaluator's own record of each row."""
+
+    valid: np.ndarray
+    reason: np.ndarray
+    items: tuple
+
+
+def rowwise(evaluate_one, n_rows: int):
+    """A batched ``evaluate`` for :func:`solve_orbit` from one that takes one candidate at a time.
+
+    evaluate_one(z (d,), n) → (R (n_rows,), record with ``valid`` (bool) and ``reason`` (int)); R is
+    ignored where the record is invalid. Returns evaluate(Z (m, d), n) → (R (m, n_rows), :class:`Rows`).
+    For simulators without a batched path (the walking step map).
+    """
+    def evaluate(Z, n):
+        R = np.full((len(Z), n_rows), np.nan)
+        items = []
+        for i, z in enumerate(Z):
+            Ri, rec = evaluate_one(z, n)
+            if rec.valid:
+                R[i] = Ri
+            items.append(rec)
+        return R, Rows(valid=np.array([bool(w.valid) for w in items]),
+                       reason=np.array([int(w.reason) for w in items]), items=tuple(items))
+    return evaluate
+
+
+def _fd_steps(z, h, free, hi):
+    """(nf,) forward-difference steps of the free unknowns: +h, or −h where z + h would pass ``hi``."""
+    return h[free] if hi is None else np.where(z[free] + h[free] <= hi[free], h[free], -h[free])
+
+
+def _jacobian(evaluate, z, R0, given, free, h, hi, n, what, reasons):
+    """Forward-difference Jacobian (r, nf) of the residual at z over the ``free`` unknowns, and the number
+    of evaluate calls it took (0 when the perturbed rows came with z's: ``given`` = (R (nf, r), valid
+    (nf,)); None evaluates them here).
+
+    Each unknown steps by :func:`_fd_steps`; a perturbed row that is invalid (z sits at the edge of the
+    feasible region) is taken again on the other side of z. Raises FitError when both sides are invalid."""
+    hs = _fd_steps(z, h, free, hi)
+    Z = np.repeat(z[None, :], free.size, axis=0)
+    Z[np.arange(free.size), free] += hs
+    calls = 0
+    if given is None:
+        RJ, rJ = evaluate(Z, n)
+        given, calls = (RJ, rJ.valid), 1
+    RJ, bad = given[0], ~np.asarray(given[1], bool)
+    if bad.any():
+        Z[bad, free[bad]] -= 2 * hs[bad]  # the other side of z
+        hs = np.where(bad, -hs, hs)
+        RB, rB = evaluate(Z[bad], n)
+        calls += 1
+        ok = np.asarray(rB.valid, bool)
+        if not ok.all():
+            raise FitError(f"no {what} found: the search left the feasible region "
+                           f"({reasons[int(np.asarray(rB.reason)[~ok][0])]})")
+        RJ = np.array(RJ, float)
+        RJ[bad] = RB
+    return ((RJ - R0) / hs[:, None]).T, calls
+
+
+def _min_norm_point(Js, rhs, y_box):
+    """The minimum-norm y (nf,) with Js y = rhs (least squares where it has no solution), inside the box
+    y_box = (y_lo, y_hi) (nf,) each, or None.
+
+    In the box: unknowns that would leave it are held at the bound they cross and the rest solve again
+    (an active set that only grows: at most nf solves). Clipping the free point instead would step off
+    the linearised constraint set, and Newton then stalls against the bound."""
+    y, *_ = np.linalg.lstsq(Js, rhs, rcond=1e-12)
+    if y_box is None:
+        return y
+    held = np.zeros(y.size, bool)
+    for _ in range(y.size):
+        out = ~held & ((y < y_box[0]) | (y > y_box[1]))
+        if not out.any():
+            break
+        held |= out
+        y = np.clip(y, *y_box)
+        if held.all():
+            break
+        y_free, *_ = np.linalg.lstsq(Js[:, ~held], rhs - Js[:, held] @ y[held], rcond=1e-12)
+        y[~held] = y_free
+    return np.clip(y, *y_box)
+
+
+def _damped_point(z_prev, R_prev, J, s, free, k, lo, hi):
+    """z_prev moved by the Levenberg–Marquardt increment −(JᵀJ + μ I)⁻¹ Jᵀ R in the scaled coordinates, μ =
+    10^(k−7) × the mean of diag(JᵀJ) (k: the rejections so far), clipped into the box."""
+    Js = J * s[free][None, :]
+    A = Js.T @ Js
+    mu = 10.0 ** (k - 7) * (float(np.trace(A)) / A.shape[0] or 1.0)
+    z = z_prev.copy()
+    z[free] -= s[free] * np.linalg.solve(A + mu * np.eye(A.shape[0]), Js.T @ R_prev)
+    return z if lo is None and hi is None else np.clip(z, lo, hi)
+
+
+# Long because the coarse Newton, the fine chord, the rejected-step retries (halving or damping) and the
+# fall-back to the best point share the iterate, its predecessor, its residual and the Jacobian; split apart
+# they would pass all of them around. The pieces that stand alone are helpers (_fd_steps, _jacobian,
+# _min_norm_point, _damped_point).
+def solve_orbit(evaluate, z0, s, h, *, lo=None, hi=None, tol=1e-10, max_iter=30,
+                resolutions=(16, N_PER_STANCE), switch=1e-7, chord=True, batched=True, max_halvings=None,
+                damped=False, accept=None, what="running cycle", reasons=REASONS):
     """Minimum-norm Newton for a periodic orbit near the priors (see module doc).
 
-    evaluate(Z (m, d), n) → (R (m, r), rows with a ``valid`` (m,) field): the residual rows of each
-    candidate z at simulator resolution n (RK4 steps per stance). z0: (d,) priors; s: (d,) scales (0:
-    held at the prior); h: (d,) forward-difference steps.
-    resolutions (coarse, fine): Newton with a batched forward-difference Jacobian at the coarse
-    resolution down to ``switch``, then chord iterations at the fine one that reuse the last Jacobian and
-    need only one row per iteration (a fresh fine Jacobian only if the chord stalls); a rejected step is
-    halved. Both equal: plain Newton at that resolution after the first converged coarse pass.
-    accept: when the iterations end above ``tol`` (an integration-error floor), the best point seen is
-    still returned if its residual is at most ``accept`` (None: ``tol`` is the bar).
-    Returns (z (d,), rows of the last evaluation (row 0 is z), evaluations, R (r,) at z).
-    Raises FitError naming ``what`` when the search leaves the valid region or does not converge.
+    evaluate(Z (m, d), n) → (R (m, r), rows with ``valid`` (m,) and ``reason`` (m,) fields): the residual
+    rows of each candidate z at simulator resolution n (RK4 steps per stance; :func:`rowwise` builds one
+    from a one-candidate evaluator). z0: (d,) priors; s: (d,) scales (0: held at the prior); h: (d,)
+    forward-difference steps (see :func:`_jacobian` for their side). lo, hi: (d,) box bounds or None:
+    every iterate is clipped into the box (the priors may lie outside it; the start is clipped).
+    resolutions (coarse, fine): Newton with a forward-difference Jacobian at the coarse resolution down to
+    ``switch``, then at the fine one either chord iterations that reuse the last Jacobian and need only
+    one row per iteration (``chord``; a fresh fine Jacobian only if the chord stalls) or Newton with a
+    fresh Jacobian each iteration. A step that does not lower max|R| is halved, or with ``damped`` replaced
+    by a Levenberg–Marquardt increment from the last point, damped 10× more at each rejection (for
+    ill-conditioned Jacobians, where the Newton direction itself is poor); after ``max_halvings`` such
+    retries in a row the search ends. Undamped steps end the search, so the point found is still the
+    minimum-norm one. batched: evaluate the Jacobian rows in the same call as their
+    point (one call per iteration for a vectorised simulator; False evaluates the point first, for
+    :func:`rowwise` evaluators, where a rejected point would waste them). max_iter counts those calls.
+    accept: when the iterations end above ``tol`` (an integration-error floor), the best point seen at
+    the fine resolution is still returned if its residual is at most ``accept`` (None: ``tol`` is the bar).
+    Returns (z (d,), rows of z's evaluation (row 0 is z), evaluate calls, R (r,) at z).
+    Raises FitError naming ``what`` (and the reason, by ``reasons`` of the evaluator's codes) when the
+    search leaves the valid region or does not converge.
     """
     z0 = np.asarray(z0, float)
     s, h = np.asarray(s, float), np.asarray(h, float)
+    lo = None if lo is None else np.asarray(lo, float)
+    hi = None if hi is None else np.asarray(hi, float)
     free = np.flatnonzero(s > 0)
     nf = free.size
-    z = z0.copy()
-    z_prev, nrm_prev, J = None, np.inf, None
-    calls = 0
+    z = z0.copy() if lo is None and hi is None else np.clip(z0, lo, hi)
+    y_box = None  # the box in the scaled coordinates of the free unknowns
+    if lo is not None or hi is not None:
+        y_box = tuple((np.full(nf, sign * np.inf) if b is None else (b[free] - z0[free]) / s[free])
+                      for b, sign in ((lo, -1.0), (hi, 1.0)))
+    z_prev, nrm_prev, J, R_prev = None, np.inf, None, None
+    calls = halvings = 0
     fine = False
     nrm = np.inf
     R = r = None
     best: tuple = (np.inf, None, None, None)  # (residual, z, rows, R) of the best fine-resolution point
-    for _ in range(max_iter):
+    while calls < max_iter:
         n = resolutions[1] if fine else resolutions[0]
-        need_jac = (not fine) or J is None
-        Z = np.repeat(z[None, :], nf + 1 if need_jac else 1, axis=0)
-        if need_jac:
-            Z[1 + np.arange(nf), free] += h[free]
+        need_jac = not (fine and chord) or J is None
+        with_jac = need_jac and batched
+        Z = np.repeat(z[None, :], nf + 1 if with_jac else 1, axis=0)
+        if with_jac:
+            Z[1 + np.arange(nf), free] += _fd_steps(z, h, free, hi)
         R, r = evaluate(Z, n)
         calls += 1
         nrm = float(np.max(np.abs(R[0]))) if r.valid[0] else np.inf
@@ -121,29 +244,40 @@ def solve_orbit(evaluate, z0, s, h, *, tol=1e-10, max_iter=30, resolutions=(16, 
             if fine and not need_jac:
                 J = None  # the chord stalled: take a fresh full-resolution Jacobian here
                 z, z_prev, nrm_prev = z_prev, None, np.inf
+            elif max_halvings is not None and halvings >= max_halvings:
+                break
             else:
-                z = z_prev + 0.5 * (z - z_prev)  # rejected Newton step: halve it
+                halvings += 1
+                z = (_damped_point(z_prev, R_prev, J, s, free, halvings, lo, hi) if damped
+                     else z_prev + 0.5 * (z - z_prev))  # rejected Newton step: halve it
             continue
+        halvings = 0
         if fine and nrm <= tol:
             break
         if not fine and nrm <= switch:
             fine, z_prev, nrm_prev = True, None, np.inf  # coarse fixed point found; J kept for the chord
             continue
         if need_jac:
-            if not np.all(r.valid):
+            if not r.valid[0]:
                 raise FitError(f"no {what} found: the search left the feasible region "
-                               f"({REASONS[int(r.reason[~r.valid][0])]})")
-            J = ((R[1:] - R[0]) / h[free][:, None]).T  # (r, nf)
-        z_prev, nrm_prev = z, nrm
+                               f"({reasons[int(np.asarray(r.reason)[0])]})")
+            given = (R[1:], r.valid[1:]) if with_jac else None
+            J, c = _jacobian(evaluate, z, R[0], given, free, h, hi, n, what, reasons)
+            calls += c
+        z_prev, nrm_prev, R_prev = z, nrm, R[0]
         Js = J * s[free][None, :]
         y = (z[free] - z0[free]) / s[free]
-        y_new, *_ = np.linalg.lstsq(Js, Js @ y - R[0], rcond=1e-12)
+        y_new = _min_norm_point(Js, Js @ y - R[0], y_box)
         z = z.copy()
         z[free] = z0[free] + s[free] * y_new
+        if y_box is not None:
+            z = np.clip(z, lo, hi)  # (the point is in the box; this only removes rounding)
     if not (fine and nrm <= tol) and accept is not None and best[0] <= accept:
         nrm, z, r, R0 = best
         return z, r, calls, R0
     if not (fine and nrm <= tol):
+        if max_halvings is not None and halvings >= max_halvings:
+            raise FitError(f"no periodic {what} found: the search stalled at residual {nrm_prev:.2g}")
         raise FitError(f"no periodic {what} found within {max_iter} simulator calls (residual {nrm:.2g})")
     assert R is not None  # converged, so evaluated at least once
     return z, r, calls, R[0]

@@ -45,6 +45,7 @@ from ..core.motion import Motion
 from ..errors import FitError, NotAWalkingMotion
 from .dynamics import Control
 from .forces import CUTOFF_HZ, ground_force, smooth_com
+from .orbit import rowwise, solve_orbit
 from .walk_model import WalkingMachine
 from .walking import N_PER_STANCE, REASONS, WalkState, record_step, simulate_walk, walk_step
 
@@ -206,69 +207,39 @@ class WalkFitResult:
     steps: np.ndarray
 
 
-def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40):
-    """Minimum-norm Newton for the periodic walking cycle matching targets (see module doc).
+def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40 * 32):
+    """The periodic walking cycle matching targets nearest the priors (``machine.orbit.solve_orbit``, see
+    the module doc): Newton with a fresh Jacobian every iteration at ``n_per_stance``, one candidate at a
+    time (the walking step map has no batched path), a rejected step halved up to 30 times.
 
-    z0: (9,) priors; T_c held; targets (t_stance, t_double, mean_speed) dimensionless.
-    Returns (z, WalkStep, iterations, residual max-norm).
+    z0: (10,) priors; T_c held; targets (t_stance, t_double, mean_speed) dimensionless. max_iter counts
+    evaluations of the iterates and of their Jacobians (40 Newton iterations of a point, a Jacobian and
+    up to 30 halvings).
+    Returns (z, WalkStep, simulator evaluations, residual max-norm).
     """
     s = np.array([CYCLE_SCALES[v] for v in _VARS])
     s[5] *= abs(z0[5])
     h = 1e-7 * np.maximum(np.abs(z0), 1.0)
     tgt = np.asarray(targets, float)
 
-    def evaluate(z):
+    def evaluate(z, n):
         ctl = Control(K=z[5], a=z[6], b=z[7], c=z[8], T_c=T_c)
-        w = walk_step(WalkState(*z[:4]), z[4], ctl, roll=roll, l_td=z[9], n_per_stance=n_per_stance)
+        w = walk_step(WalkState(*z[:4]), z[4], ctl, roll=roll, l_td=z[9], n_per_stance=n)
         if not w.valid:
             return None, w
         nx = w.next
         assert nx is not None  # a valid step has its next state
-        R = np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3],
-                      (w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
-                      (w.step_length / w.t_step - tgt[2]) / tgt[2]])
-        return R, w
+        return np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3],
+                         (w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
+                         (w.step_length / w.t_step - tgt[2]) / tgt[2]]), w
 
-    z = z0.copy()
-    R, w = evaluate(z)
-    if R is None:
-        raise FitError(f"the measured walking step is not a valid machine step: {REASONS[w.reason]}")
-    nrm = float(np.max(np.abs(R)))
-    it = 0
-    for it in range(1, max_iter + 1):  # noqa: B007 (the iteration count is returned)
-        if nrm <= tol:
-            break
-        J = np.empty((R.size, z.size))
-        for j in range(z.size):
-            zj = z.copy()
-            zj[j] += h[j]
-            Rj, wj = evaluate(zj)
-            if Rj is None:
-                zj[j] -= 2 * h[j]
-                Rj, wj = evaluate(zj)
-                if Rj is None:
-                    raise FitError(f"no walking cycle found: the search left the feasible region "
-                                   f"({REASONS[wj.reason]})")
-                J[:, j] = (R - Rj) / h[j]
-            else:
-                J[:, j] = (Rj - R) / h[j]
-        Js = J * s[None, :]
-        y = (z - z0) / s
-        y_new, *_ = np.linalg.lstsq(Js, Js @ y - R, rcond=1e-12)
-        dz = z0 + s * y_new - z
-        for _ in range(30):
-            Rt, wt = evaluate(z + dz)
-            if Rt is not None and float(np.max(np.abs(Rt))) < nrm:
-                break
-            dz *= 0.5
-        else:
-            raise FitError(f"no periodic walking cycle found: the search stalled at residual {nrm:.2g}")
-        z = z + dz
-        R, w = Rt, wt
-        nrm = float(np.max(np.abs(R)))
-    if not nrm <= tol:
-        raise FitError(f"no periodic walking cycle found within {max_iter} iterations (residual {nrm:.2g})")
-    return z, w, it, nrm
+    _, w0 = evaluate(z0, n_per_stance)
+    if not w0.valid:
+        raise FitError(f"the measured walking step is not a valid machine step: {REASONS[w0.reason]}")
+    z, rows, calls, R = solve_orbit(rowwise(evaluate, 7), z0, s, h, tol=tol, max_iter=max_iter,
+                                    resolutions=(n_per_stance, n_per_stance), chord=False, batched=False,
+                                    max_halvings=30, what="walking cycle", reasons=REASONS)
+    return z, rows.items[0], calls, float(np.max(np.abs(R)))
 
 
 def stance_force_profile(rec, tau, *, frame_time=None, cutoff_hz=CUTOFF_HZ, time_unit=1.0):

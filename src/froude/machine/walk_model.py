@@ -48,7 +48,8 @@ class WalkingMachine:
     the trailing touchdown point), s (time since the trailing touchdown); theta0 [rad] and l_td (leg
     length at touchdown) place the landing foot; roll: centre-of-pressure travel per unit τ; K, a, b, c,
     T_c: eq. 2 control of both legs; t_stance, t_double (one double support), t_step; step_length;
-    mean_speed (the Froude number U of the gait); periodicity: max |next − state| at the cycle.
+    mean_speed (the Froude number U of the gait); periodicity: max |next − state| at the cycle; iterations:
+    simulator evaluations of the cycle searches (``machine.orbit.solve_orbit``: points and Jacobians).
     SI: mass [kg], l0 [m] (mean touchdown leg length COM → touchdown point), g [m/s²].
     reference / quality / fit: measured figures, fit-quality figures and the control fit (SI, BW).
     """

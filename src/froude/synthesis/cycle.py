@@ -314,8 +314,16 @@ def extract_cycle(
     from ..metrics import SKATE_REACH_L
 
     raw_rel = marker_rel
-    marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=SKATE_REACH_L * body.leg_length,
-                                 band=SLIDE_BAND_L * body.leg_length)
+    if order == "walking":  # a walking foot rolls (heel, ball, toe): one pivot at a time holds it
+        marker_rel, held_to = _remove_sliding_rolling(marker_rel, stance_mask, contact_tol=SKATE_REACH_L
+                                                      * body.leg_length, band=SLIDE_BAND_L * body.leg_length)
+        # the foot is a contact (held by the IK, anchored) for as long as its toe is held at lift-off
+        contact_phase = contact_phase.copy()
+        later = np.mod(held_to - contact_phase[:, 1], 1.0)
+        contact_phase[:, 1] += np.where((held_to >= 0) & (later < 0.5), later, 0.0)
+    else:
+        marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=SKATE_REACH_L * body.leg_length,
+                                     band=SLIDE_BAND_L * body.leg_length)
     # the body-relative foot path carries the same de-skating correction (it fades over the swing), so
     # that IK targets blending from the ground path to it after lift-off do not jump by the correction
     # (a 10 mm jump of a tip still near the floor, 02_03 at 50 Hz)
@@ -468,14 +476,9 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
     firm = np.zeros(rel.shape[:3])  # (K, 2, 3) how firmly each marker is held (for the bones)
     in_place = np.zeros(rel.shape[:3], bool)  # (K, 2, 3) markers held in place (loaded in a stance)
     for foot in range(2):
-        idx = np.flatnonzero(stance[:, foot])
+        idx = _stance_in_time(stance[:, foot])  # the stance may wrap around φ = 0
         if idx.size == 0:
             continue
-        # the stance may wrap around φ = 0: order its samples in time
-        if stance[0, foot] and stance[-1, foot]:
-            gap = np.flatnonzero(np.diff(idx) > 1)
-            if gap.size:
-                idx = np.concatenate([idx[gap[0] + 1 :], idx[: gap[0] + 1]])
         idx = _with_approach(rel[:, foot], idx, stance[:, foot], contact_tol, band)
         h = rel[idx, foot][:, :, [0, 2]]  # (n, 3 markers, 2) horizontal offsets
         height = rel[idx, foot, :, 1]  # (n, 3) above the ground
@@ -529,6 +532,164 @@ def _remove_sliding(rel: np.ndarray, stance: np.ndarray, contact_tol: float, ban
     return _keep_feet_rigid(out, rel, firm, in_place)
 
 
+def _stance_in_time(stance_foot: np.ndarray) -> np.ndarray:
+    """The samples (K,) of one foot's stance in time order (a stance may wrap around φ = 0)."""
+    idx = np.flatnonzero(stance_foot)
+    if idx.size and stance_foot[0] and stance_foot[-1]:
+        gap = np.flatnonzero(np.diff(idx) > 1)
+        if gap.size:
+            idx = np.concatenate([idx[gap[0] + 1 :], idx[: gap[0] + 1]])
+    return idx
+
+
+def _remove_sliding_rolling(rel: np.ndarray, stance: np.ndarray, contact_tol: float,
+                            band: float) -> tuple[np.ndarray, np.ndarray]:
+    """Remove the reference's foot sliding from a walk's stances: the foot rolls over one pivot at a time.
+
+    rel: (K, 2, 3, 3) marker offsets from the anchor (heading frame: forward, up, lateral); stance: (K, 2).
+    A walking foot rolls from the heel over the ball onto the toe, and the reference's markers, held each
+    on its own as _remove_sliding does for a run, contradict each other while it rolls: a toe segment
+    pitching up over its tip moves the ball forward, so a held ball and a held tip flattened the toes
+    under a rising heel and let them spring back at lift-off (toe joint jumps of 35-54 deg on 07_01). Here
+    the three markers of a foot move together, by one rigid motion per sample (``_rolling_correction``:
+    the foot keeps the reference's shape, so the IK meets it with the reference's joint angles) that holds
+    the current pivot still; after the stance the motion fades over the swing (min-jerk) so the cycle
+    closes. Heights are clamped to ≥ 0. Returns the markers and (2,) the stride phase at which each foot's
+    hold ends (its toe lifted clear of the floor band; −1: a foot never held).
+    """
+    bones = [_bone_lengths(rel[:, foot]) for foot in range(2)]
+    rel = np.stack([_with_bone_lengths(rel[:, foot], bones[foot]) for foot in range(2)], axis=1)
+    out = rel.copy()
+    K = rel.shape[0]
+    held_to = np.full(2, -1.0)
+    for foot in range(2):
+        idx = _stance_in_time(stance[:, foot])
+        if idx.size == 0:
+            continue
+        with_before = _with_approach(rel[:, foot], idx, stance[:, foot], contact_tol, band, with_after=False)
+        # then as many samples of the swing as the lift-off may need (_rolling_correction cuts them)
+        n_end = with_before.size
+        idx = np.concatenate([with_before, (idx[-1] + 1 + np.arange(int(APPROACH_MAX * K))) % K])
+        idx = idx[: min(idx.size, K - 1)]
+        yaw, shift, lift, n_used = _rolling_correction(rel[idx, foot], contact_tol, band, n_end)
+        idx, yaw, shift, lift = idx[:n_used], yaw[:n_used], shift[:n_used], lift[:n_used]
+        out[idx, foot] = _moved(rel[idx, foot], yaw, shift, lift)
+        held_to[foot] = (idx[-1] + 1) / K
+        covered = np.zeros(K, bool)
+        covered[idx] = True
+        swing = np.flatnonzero(~covered)
+        if swing.size:
+            start = (idx[-1] + 1) % K
+            sw = swing[(np.arange(swing.size) + np.searchsorted(swing, start)) % swing.size]
+            fade = 1.0 - min_jerk(np.linspace(0, 1, sw.size))
+            out[sw, foot] = _moved(rel[sw, foot], yaw[-1] * fade, shift[-1] * fade[:, None], lift[-1] * fade)
+    out[..., 1] = np.maximum(out[..., 1], 0.0)
+    return out, held_to
+
+
+def _with_bone_lengths(foot: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """One foot's markers (N, 3, 3) [m] with the foot's bones (ankle-ball, ball-tip) at the lengths ``length``
+    (3, 3) [m] along their own directions, about the ball (the averaged cycle's bones change length by a few
+    millimetres: a foot held at one point would slide at the others)."""
+    out = foot.copy()
+    for k in (0, 2):
+        v = foot[:, k] - foot[:, 1]
+        out[:, k] = foot[:, 1] + v * (length[1, k] / np.maximum(np.linalg.norm(v, axis=-1), 1e-12))[:, None]
+    return out
+
+
+def _moved(seg: np.ndarray, yaw: np.ndarray, shift: np.ndarray, lift: np.ndarray) -> np.ndarray:
+    """seg (n, m, 3) (heading frame: forward, up, lateral) turned by yaw (n,) [rad] about the up axis through
+    the origin, then moved by shift (n, 2) [m] (forward, lateral) and lift (n,) [m] (up)."""
+    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
+    out = seg.copy()
+    out[..., 0] = c * seg[..., 0] - s * seg[..., 2] + shift[:, None, 0]
+    out[..., 2] = s * seg[..., 0] + c * seg[..., 2] + shift[:, None, 1]
+    out[..., 1] = seg[..., 1] + lift[:, None]
+    return out
+
+
+#: The pivot of a rolling foot passes to a marker nearer the toes once that marker is this fraction of the
+#: holding band nearer its own lowest point than the pivot is to its own (hysteresis against mocap noise).
+ROLL_SWITCH_BAND = 0.1
+#: Per-sample relaxation of a rolling foot's held yaw back to the reference's once only its pivot is down.
+YAW_RELAX = 0.2
+
+
+# Long because the rigid motion of each sample depends on the previous one's (held pivot, held yaw): one
+# sequential pass over the ~120 samples of a stance.
+def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float, n_end: int):
+    """The rigid motion per sample of a walking stance that holds the foot's pivot still.
+
+    seg: (n, 3 markers, 3) one foot's marker offsets over the stance in time order (heading frame; markers
+    from the heel end: ankle, ball, tip). A marker that reaches the floor (its lowest point within
+    contact_tol) bears load while within ``band`` of its lowest point; the pivot is the loaded marker
+    nearest its lowest point, and it only moves toward the toes (a walking foot rolls heel → ball → toe).
+    The pivot is held horizontally where it is. While another marker is loaded too, the foot's yaw is
+    held (the reference's foot turns a few degrees about its toe while the ball is still low: the ball
+    would slide sideways); with the pivot alone down the yaw relaxes back to the reference's. Vertically the
+    first pivot (the landing one) comes down to its lowest height so far and stays there; a later pivot does
+    not sink with the reference (its toe end sinks 1-2 cm while the toes pitch up over it, a mocap end site,
+    not a contact: following it down would slide the rising ball forward within the band in which the
+    physics report watches it) and rises from the reference's lowest point since it took over.
+    From sample n_end on the foot is lifting off: its pivot rises with the reference and is still held
+    horizontally until it is ``band`` above its height at n_end (a reference toe that swings forward while
+    still a centimetre up would slide within the report's band); the samples after that are not used.
+    Returns yaw (n,) [rad], shift (n, 2) [m] (forward, lateral), lift (n,) [m] for ``_moved`` and the number
+    of samples used.
+    """
+    n = seg.shape[0]
+    height = seg[:, :, 1]
+    h_min = height.min(axis=0)
+    rise = np.where(h_min <= contact_tol, height - h_min, np.inf)  # (n, 3) unloaded: never a pivot
+    yaw, shift, lift = np.zeros(n), np.zeros((n, 2)), np.zeros(n)
+    pivot, first = -1, -1
+    lowest = np.inf  # the landing pivot: its reference's lowest height so far
+    top = np.inf  # the height the lifting pivot leaves the floor band at
+    for i in range(n):
+        if i >= n_end and pivot >= 0:
+            if i == n_end:
+                top = seg[i - 1, pivot, 1] + lift[i - 1] + band
+            if seg[i - 1, pivot, 1] + lift[i - 1] > top:
+                return yaw[:i], shift[:i], lift[:i], i
+            yaw[i], lift[i] = yaw[i - 1], lift[i - 1]
+            was = _moved(seg[i - 1 : i, pivot : pivot + 1], yaw[i - 1 : i], shift[i - 1 : i], lift[i - 1 : i])[0, 0]
+            now = _moved(seg[i : i + 1, pivot : pivot + 1], yaw[i : i + 1], np.zeros((1, 2)), np.zeros(1))[0, 0]
+            shift[i] = was[[0, 2]] - now[[0, 2]]
+            continue
+        if i >= n_end:
+            return yaw[:i], shift[:i], lift[:i], i
+        loaded = np.flatnonzero(rise[i] <= band)
+        later = loaded[loaded > pivot] if pivot >= 0 else loaded
+        if later.size:
+            up = height[i] - height[: i + 1].min(axis=0)  # (3,) risen since each marker's lowest so far
+            k = int(later[np.argmin(up[later])])
+            if pivot < 0 or up[k] + ROLL_SWITCH_BAND * band < up[pivot]:
+                pivot = k
+                first = k if first < 0 else first
+        if pivot < 0 or i == 0:
+            continue
+        others = loaded[loaded != pivot]
+        if others.size:  # the yaw of the line from the pivot to the farthest other loaded marker is held
+            q = int(others[np.argmax(np.abs(others - pivot))])
+            a, b = (seg[j, q, [0, 2]] - seg[j, pivot, [0, 2]] for j in (i - 1, i))
+            yaw[i] = yaw[i - 1] - (np.arctan2(b[1], b[0]) - np.arctan2(a[1], a[0]) + np.pi) % (2 * np.pi) + np.pi
+        else:
+            yaw[i] = (1.0 - YAW_RELAX) * yaw[i - 1]
+        # the pivot where it was: its previous position moved as then, less its new position turned as now
+        was = _moved(seg[i - 1 : i, pivot : pivot + 1], yaw[i - 1 : i], shift[i - 1 : i], lift[i - 1 : i])[0, 0]
+        now = _moved(seg[i : i + 1, pivot : pivot + 1], yaw[i : i + 1], np.zeros((1, 2)), np.zeros(1))[0, 0]
+        shift[i] = was[[0, 2]] - now[[0, 2]]
+        y = seg[i, pivot, 1]
+        lift[i] = lift[i - 1]
+        if pivot == first:  # the landing pivot comes down to its lowest height so far, then stays there
+            lowest = min(lowest, y)
+            lift[i] = lowest - y
+        else:  # a later pivot stays at its height until the foot lifts
+            lift[i] = lift[i - 1] - (y - seg[i - 1, pivot, 1])
+    return yaw, shift, lift, n
+
+
 def _hold_stance(pose: np.ndarray, step: np.ndarray, both: np.ndarray, rate: np.ndarray, delta: np.ndarray,
                  length: np.ndarray, firm: np.ndarray, held: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The markers' own de-skating corrections through one stance of n samples, in time order.
@@ -574,7 +735,7 @@ APPROACH_MAX = 0.08
 
 
 def _with_approach(rel_foot: np.ndarray, idx: np.ndarray, stance_foot: np.ndarray, contact_tol: float,
-                   band: float) -> np.ndarray:
+                   band: float, with_after: bool = True) -> np.ndarray:
     """A stance's samples idx (ordered in time, indices into K) with the samples just before and after it in
     which a marker that reaches the floor is already (still) within ``band`` of its lowest point.
 
@@ -598,7 +759,7 @@ def _with_approach(rel_foot: np.ndarray, idx: np.ndarray, stance_foot: np.ndarra
         before.append(k)
         k = (k - 1) % K
     k = (idx[-1] + 1) % K
-    while len(after) < most and low[k] and not stance_foot[k] and k not in before:
+    while with_after and len(after) < most and low[k] and not stance_foot[k] and k not in before:
         after.append(k)
         k = (k + 1) % K
     return np.concatenate([np.array(before[::-1], int), idx, np.array(after, int)])

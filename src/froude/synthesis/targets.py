@@ -76,7 +76,13 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     # with the feet out of reach. So the initial pose is translated to put its own COM on the machine's.
     initial = initial.with_(root_positions=root + (path.com - retarget.body.com(initial)))
     markers = _lift_out_of_reach(initial, retarget.body, markers)
-    weight = _marker_weights(path, markers, retarget.body.leg_length) * _reach_factor(initial, retarget.body, markers)
+    weighed = path
+    if cyc.order == "walking":  # a walk starts and ends with a foot on the ground that is no step's
+        from .walking import with_edge_contacts
+
+        weighed = with_edge_contacts(path)
+    weight = _marker_weights(weighed, markers, retarget.body.leg_length) * _reach_factor(initial, retarget.body,
+                                                                                         markers)
     weight = np.maximum(weight, SWING_MARKER_WEIGHT)
     if cyc.order == "walking":  # a walking foot lands and leaves with a straight knee: guide it there
         from .walking import soften_swing_weights

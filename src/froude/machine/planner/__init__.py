@@ -19,7 +19,8 @@ the push; the planner keeps |δb| ≤ ``Comfort.b_band`` (0.08 l0; the real clip
 Policy (:func:`plan_speed_change`):
 
 * target: a periodic orbit of the machine at U_t (:func:`target_cycle`), the one nearest the start
-  cycle in fall time, b and apex height (scales 0.05, 0.01, 0.02), found by continuation;
+  cycle in fall time, b and apex height (scales 0.05, 0.01, 0.02; minimum-norm Newton of the one orbit
+  solver, ``machine.orbit.solve_orbit``, inside the comfort band), found by continuation;
 * reference speeds: U_ref(k) = U0 + (U_t − U0) s(k/n) for the n change steps, s = ``"ease"``
   (smoothstep 3x² − 2x³: gentle start and end, peak change 1.5× the mean) or ``"even"`` (equal ΔU);
   monotone, so apex speeds never overshoot;
@@ -30,7 +31,8 @@ Policy (:func:`plan_speed_change`):
   ends on a periodic orbit of the fitted control (whichever it reaches: θ0 only barely moves the
   energy), the intermediate speeds follow U_ref in the least-squares sense and monotonically;
 * ``energy="auto"`` (default): θ0 only when that works within the comfort bounds, else θ0 + δb;
-* lead steps (before) and hold steps (after) track the start and target fixed points exactly.
+* lead steps (before) and hold steps (after) track the start and target fixed points exactly (Newton
+  per step on the same solver).
 
 Numerics. The change steps are solved together by constrained Gauss–Newton with *multiple
 shooting* (inputs and apex states are unknowns tied by continuity constraints; the per-step maps

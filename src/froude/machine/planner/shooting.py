@@ -9,15 +9,19 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from froude.errors import PlanError
-from froude.machine.dynamics import REASONS, Control, StepResult, step
-from froude.machine.orbit import LimitCycle, cycle_record, step_map_eigenvalues
+from froude.errors import FitError, PlanError
+from froude.machine.dynamics import N_PER_STANCE, REASONS, Control, StepResult, step
+from froude.machine.orbit import LimitCycle, cycle_record, solve_orbit, step_map_eigenvalues
 
 #: Newton tolerance on the reference hit, max(|U' − U_ref|, |H' − H_ref|) ...
 _TOL = 1e-11
 #: ... and the largest residual still accepted when iterations stall there (the RK4 step map of
 #: a passive runner conserves energy only to ~1e-9, which puts a floor under periodic orbits).
 _ACCEPT = 1e-8
+#: The change steps' continuity and speed constraints are met to this (or as far as Newton still lowers them):
+#: the plan is re-simulated step by step, and the step maps (|λ| up to ≈ 3.5) amplify what is left over 8
+#: steps (1e-11 became a 4e-8 overshoot of the last apex, a non-monotone plan).
+_TOL_SHOOT = 1e-14
 
 
 @dataclass(frozen=True)
@@ -95,7 +99,7 @@ def _why_not(r, i, cyc: LimitCycle, comfort: Comfort) -> str:
     return f"apex height H' = {r.H_next[i]:.3g} outside the band"
 
 
-# --- exact evaluation and Newton ---------------------------------------------------------------------
+# --- exact evaluation and the solver ---------------------------------------------------------------------
 #: Rows up to this count go one by one through the simulator's scalar path: measured ≈ 0.5 ms per
 #: row against ≈ 10 ms for *any* small vectorised batch (NumPy call overhead on ~100 RK4 nodes).
 _SMALL = 24
@@ -114,55 +118,21 @@ def _steps(U, H, theta0, b, control: Control) -> StepResult:
                          for f in _STEP_FIELDS})
 
 
-def _newton(resid, x0, lo, hi, free, *, tol=_TOL, max_iter=40, h=1e-7):
-    """Drive resid(x) → 0 over the ``free`` coordinates of x, kept inside the box [lo, hi].
+#: Simulator calls of one solve: 40 Newton iterations of a point, its Jacobian and up to 14 damped retries
+#: (the ill-conditioned θ0-only orbits converge linearly through the retries and need most of them).
+_MAX_CALLS = 40 * 16
 
-    resid(X (m, d)) → (R (m, r), valid (m,) bool). Forward-difference Jacobian (one extra row per free
-    coordinate, stepping inward at the box's upper edge or where a row is invalid) and
-    Levenberg–Marquardt steps (damping raised ×10 until max|R| decreases, lowered after success):
-    plain Newton when the Jacobian is well conditioned, safe when it is (near) rank deficient —
-    e.g. the passive spring-mass runner, whose energy conservation ties U' − U to H' − H.
-    Returns (x (d,), R (r,) or None, converged bool).
-    """
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    x = np.clip(np.asarray(x0, float), lo, hi)
-    R, v = resid(x[None])
-    if not v[0]:
-        return x, None, False
-    R = R[0]
-    mu = 1e-10
-    for _ in range(max_iter):
-        nrm = float(np.max(np.abs(R)))
-        if nrm <= tol:
-            return x, R, True
-        hs = np.where(x[free] + h <= hi[free], h, -h)
-        X = np.repeat(x[None], len(free), axis=0)
-        X[np.arange(len(free)), free] += hs
-        RJ, vJ = resid(X)
-        if not vJ.all():
-            X[~vJ, free[~vJ]] -= 2 * hs[~vJ]
-            hs = np.where(vJ, hs, -hs)
-            RJ2, vJ2 = resid(X[~vJ])
-            RJ[~vJ], vJ[~vJ] = RJ2, vJ2
-            if not vJ.all():
-                return x, R, False
-        J = ((RJ - R[None]) / hs[:, None]).T  # (r, nf)
-        JtJ, g = J.T @ J, J.T @ R
-        scale = float(np.trace(JtJ)) / len(free) or 1.0
-        for _ in range(14):
-            dx = -np.linalg.solve(JtJ + mu * scale * np.eye(len(free)), g)
-            xt = x.copy()
-            xt[free] += dx
-            xt = np.clip(xt, lo, hi)
-            Rt, vt = resid(xt[None])
-            if vt[0] and float(np.max(np.abs(Rt[0]))) < nrm:
-                x, R = xt, Rt[0]
-                mu = max(mu * 0.1, 1e-12)
-                break
-            mu *= 10.0
-        else:
-            break  # no decrease at any damping: a floor (integration error) or a dead end
-    return x, R, float(np.max(np.abs(R))) <= _ACCEPT
+
+def _solve(evaluate, z0, s, h, lo, hi, what):
+    """``orbit.solve_orbit`` as the planner runs it: Newton with a fresh Jacobian every iteration at the
+    simulator's full resolution (``_steps``), iterates inside the box [lo, hi], a rejected step retried
+    with Levenberg–Marquardt damping (the θ0-only orbits' Jacobian is nearly singular: the fitted control
+    hardly changes the apex energy), tolerance _TOL, a stall at most _ACCEPT still accepted.
+    Returns (z (d,), R (r,)); raises FitError when no root is found."""
+    z, _, _, R = solve_orbit(evaluate, z0, s, h, lo=lo, hi=hi, tol=_TOL, accept=_ACCEPT, max_iter=_MAX_CALLS,
+                             resolutions=(N_PER_STANCE, N_PER_STANCE), chord=False, batched=False,
+                             max_halvings=14, damped=True, what=what)
+    return z, R
 
 
 # --- target cycle ---------------------------------------------------------------------------------
@@ -184,26 +154,25 @@ _ORBIT_SCALES = np.array([0.05, 0.01, 0.02])
 
 def _orbit(cyc: LimitCycle, U_t, prior, energy, comfort):
     """Periodic orbit at apex speed U_t nearest prior (τ, b, H) in the scaled norm (minimum-norm
-    Newton from the prior; scales _ORBIT_SCALES). energy "b": τ, b and H free; "theta": b fixed.
-    Returns (LimitCycle or None, problems list)."""
+    Newton from the prior, ``orbit.solve_orbit``; scales _ORBIT_SCALES), inside the comfort box of b and
+    H (τ in 0..10). energy "b": τ, b and H free; "theta": b fixed. Returns (LimitCycle or None, problems
+    list)."""
     ctl = cyc.control
-    s = _ORBIT_SCALES
 
-    def resid(Xs):
-        X = Xs * s
-        r = _steps(U_t, X[:, 2], _theta_of(X[:, 2], X[:, 0]), X[:, 1], ctl)
-        return np.stack([r.U_next - U_t, r.H_next - X[:, 2]], 1), r.valid
+    def evaluate(Z, n):  # n: _steps runs at full resolution
+        r = _steps(U_t, Z[:, 2], _theta_of(Z[:, 2], Z[:, 0]), Z[:, 1], ctl)
+        return np.stack([r.U_next - U_t, r.H_next - Z[:, 2]], 1), r
     _, b_b = _bounds(cyc, comfort, energy)
-    lo = np.array([0.0, b_b[0], cyc.H + comfort.H_band[0]]) / s
-    hi = np.array([10.0, b_b[1], cyc.H + comfort.H_band[1]]) / s
-    free = np.array([0, 1, 2]) if energy == "b" else np.array([0, 2])
-    x, R, ok = _newton(resid, np.asarray(prior, float) / s, lo, hi, free, h=1e-6)
-    if not ok:
-        why = "the search left the valid region" if R is None else f"residual {np.max(np.abs(R)):.2g}"
-        return None, [f"no periodic orbit within the bounds ({why})"]
-    tau, b, H = x * s
+    lo = np.array([0.0, b_b[0], cyc.H + comfort.H_band[0]])
+    hi = np.array([10.0, b_b[1], cyc.H + comfort.H_band[1]])
+    s = _ORBIT_SCALES * (1.0, 1.0 if energy == "b" else 0.0, 1.0)
+    try:
+        z, R = _solve(evaluate, np.asarray(prior, float), s, 1e-6 * _ORBIT_SCALES, lo, hi, "orbit")
+    except FitError as e:
+        return None, [f"no periodic orbit within the bounds ({e})"]
+    tau, b, H = z
     lc = cycle_record(float(U_t), float(H), float(_theta_of(H, tau)), replace(ctl, b=float(b)),
-                     np.max(np.abs(R)), eigenvalues=False)
+                      np.max(np.abs(R)), eigenvalues=False)
     return lc, _orbit_problems(lc, cyc, comfort, energy)
 
 
@@ -320,19 +289,23 @@ def _solve_step(U, H, t0, ref, th_guess, b_guess, cyc, mode, th_b, b_b):
     """Inputs (θ0, b) for one step from apex (U, H) at time t0 meeting ref(t_next) → (U_ref, H_ref).
 
     mode "theta": U' = U_ref with b fixed at b_guess; "b": (U', H') = (U_ref, H_ref).
-    Newton on the exact simulator. Returns (θ0, b, converged).
+    Newton on the exact simulator (``orbit.solve_orbit`` on a square system), inside the bands th_b, b_b.
+    Returns (θ0, b, converged); the guess when not converged.
     """
     ctl = cyc.control
 
-    def resid(X):
+    def evaluate(X, n):  # n: _steps runs at full resolution
         r = _steps(U, H, X[:, 0], X[:, 1], ctl)
         Ur, Hr = ref(t0 + r.t_fall + r.t_stance + r.t_rise)
         R = np.stack([r.U_next - Ur, r.H_next - Hr], 1)
-        return (R[:, :1] if mode == "theta" else R), r.valid
-    free = np.array([0]) if mode == "theta" else np.array([0, 1])
+        return (R[:, :1] if mode == "theta" else R), r
+    s = np.array([1.0, 0.0 if mode == "theta" else 1.0])
     lo, hi = (th_b[0], b_b[0]), (th_b[1], b_b[1])
-    x, R, ok = _newton(resid, (th_guess, b_guess), lo, hi, free)
-    return float(x[0]), float(x[1]), ok
+    try:
+        x, _ = _solve(evaluate, (th_guess, b_guess), s, np.full(2, 1e-7), lo, hi, "step")
+    except FitError:
+        return float(th_guess), float(b_guess), False
+    return float(x[0]), float(x[1]), True
 
 
 # --- multi-step optimisation of a change (multiple shooting, finite-difference Jacobian rows) -----
@@ -549,7 +522,7 @@ def _optimise_change(cyc, U0, H0, t0, n, U_ref, prior, H_t, mode, comfort, tau_s
         z, e_new = accepted
         cmax = float(np.max(np.abs(e_new["c"])))
         history.append(merit(e_new))
-        if cmax <= _TOL:
+        if cmax <= _TOL_SHOOT:
             e = e_new
             break
         if cmax > 1e-6 and len(history) >= 8 and history[-1] > 0.9 * history[-6]:

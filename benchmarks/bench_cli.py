@@ -85,6 +85,10 @@ def main() -> None:
     print(f"froude scale 4 strides {scale:.3f} s (bar <= 0.8 s): {'met' if scale <= 0.8 else 'NOT met'}")
     print(f"(load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores: figures are only comparable on an "
           "idle machine)")
+    if os.environ.get("PYTHONDONTWRITEBYTECODE"):
+        # no .pyc is written for the editable source tree, so every process compiles froude's modules again:
+        # about 0.1 s of a scale run here (measured with -X pycache_prefix), which an installed froude does not pay
+        print("(PYTHONDONTWRITEBYTECODE is set: every command above compiled froude's sources first)")
 
 
 if __name__ == "__main__":

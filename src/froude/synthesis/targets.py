@@ -75,14 +75,15 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     # joint_Root, metres from the body through the pelvis offset) the error is metres: the IK would start
     # with the feet out of reach. So the initial pose is translated to put its own COM on the machine's.
     initial = initial.with_(root_positions=root + (path.com - retarget.body.com(initial)))
-    markers = _lift_out_of_reach(initial, retarget.body, markers)
+    body = retarget.body
+    hips = body.joint_positions(initial, [body.roles["left_hip"], body.roles["right_hip"]])  # (T, 2, 3) [m]
+    markers = _lift_out_of_reach(hips, body, markers)
     weighed = path
     if cyc.order == "walking":  # a walk starts and ends with a foot on the ground that is no step's
         from .walking import with_edge_contacts
 
         weighed = with_edge_contacts(path)
-    weight = _marker_weights(weighed, markers, retarget.body.leg_length) * _reach_factor(initial, retarget.body,
-                                                                                         markers)
+    weight = _marker_weights(weighed, markers, body.leg_length) * _reach_factor(hips, body, markers)
     weight = np.maximum(weight, SWING_MARKER_WEIGHT)
     if cyc.order == "walking":  # a walking foot lands and leaves with a straight knee: guide it there
         from .walking import soften_swing_weights
@@ -116,10 +117,10 @@ LIFT_MAX_L = 0.05
 SWING_SOFT_L = 0.01
 
 
-def _lift_out_of_reach(initial: Motion, body: BodyModel, markers: np.ndarray) -> np.ndarray:
+def _lift_out_of_reach(hips: np.ndarray, body: BodyModel, markers: np.ndarray) -> np.ndarray:
     """markers (T, 2, 3, 3) [m] with every target beyond the leg's reach raised straight up until it is
-    within it (hip from the initial pose; reach from _leg_reach less LIFT_AT_MARGINS margins; soft cap
-    LIFT_MAX_L × L).
+    within it (hips (T, 2, 3) [m] of the initial pose; reach from _leg_reach less LIFT_AT_MARGINS margins;
+    soft cap LIFT_MAX_L × L).
 
     When the body has travelled farther over a planted foot than the leg allows (an acceleration's longer
     stance, a faster run), holding the foot's points where they are ends with the knee locked and the IK
@@ -129,7 +130,6 @@ def _lift_out_of_reach(initial: Motion, body: BodyModel, markers: np.ndarray) ->
     sliding. A target whose horizontal distance alone is out of reach is raised by the cap and released by
     _reach_factor.
     """
-    hips = body.joint_positions(initial, [body.roles["left_hip"], body.roles["right_hip"]])  # (T, 2, 3)
     out = markers.copy()
     margin = REACH_MARGIN_L * body.leg_length
     cap = LIFT_MAX_L * body.leg_length
@@ -157,25 +157,17 @@ def _lift_out_of_reach(initial: Motion, body: BodyModel, markers: np.ndarray) ->
     return out
 
 
-def _reach_factor(initial: Motion, body: BodyModel, markers: np.ndarray) -> np.ndarray:
-    """(T, 2, 3) in [0, 1]: 1 where a marker target is within the leg's reach from the hip, fading to 0 as
-    it approaches the straight-leg limit (thigh + shank + the foot's bones to that marker), so an
-    unreachable target is released instead of wrenching the body (the foot simply leaves a little early).
+def _reach_factor(hips: np.ndarray, body: BodyModel, markers: np.ndarray) -> np.ndarray:
+    """(T, 2, 3) in [0, 1]: 1 where a marker target is within the leg's reach from the hip (hips (T, 2, 3)
+    [m]), fading to 0 as it approaches the straight-leg limit (_leg_reach: thigh + shank + the foot's bones to
+    that marker), so an unreachable target is released instead of wrenching the body (the foot simply leaves
+    a little early).
     """
-    skel = body.skeleton
-    hips = body.joint_positions(initial, [body.roles["left_hip"], body.roles["right_hip"]])  # (T, 2, 3)
     out = np.ones(markers.shape[:3])
     margin = 0.03 * body.leg_length
     for i, side in enumerate(("left", "right")):
-        r = body.roles
-        hip = hips[:, i]  # (T, 3)
-        rest = skel.rest_positions()
-        leg = np.linalg.norm(rest[r[f"{side}_knee"]] - rest[r[f"{side}_hip"]]) + np.linalg.norm(
-            rest[r[f"{side}_ankle"]] - rest[r[f"{side}_knee"]])
-        ankle_toe = np.linalg.norm(rest[r[f"{side}_toe"]] - rest[r[f"{side}_ankle"]])
-        toe_end = np.linalg.norm(body.marker_local[i, 2])
-        reach = np.array([leg, leg + ankle_toe, leg + ankle_toe + toe_end]) - 0.5 * margin
-        d = np.linalg.norm(markers[:, i] - hip[:, None, :], axis=-1)  # (T, 3)
+        reach = _leg_reach(body, side) - 0.5 * margin
+        d = np.linalg.norm(markers[:, i] - hips[:, i, None, :], axis=-1)  # (T, 3)
         out[:, i] = min_jerk((reach[None, :] - d) / margin)
     return out
 

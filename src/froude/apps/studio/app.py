@@ -239,16 +239,20 @@ def _swatch(color, text: str, hint: str) -> str:
 def _page_script(title: str) -> str:
     """An invisible element whose error handler sets the tab's title and, once per page, installs the
     keys (Space play/pause, ←/→ a frame) and dropping a clip anywhere on the page (it goes to the
-    page's own 'Open clip' file input, so it is checked like a picked file)."""
+    page's own 'Open clip' file input, so it is checked like a picked file).
+
+    The keys are taken on the window in the capture phase and stopped there: viser's camera controls
+    listen on the document and turn the camera at 50°/s while an arrow key is held, so a frame step
+    would also swing the view (more so on a busy machine, where a press lasts longer)."""
     js = (
         f"document.title={_js_str(title)};"
         "if(!window.__froude){window.__froude=1;"
         "const btn=(t)=>[...document.querySelectorAll('button')].find(b=>b.textContent.trim()===t);"
-        "document.addEventListener('keydown',(e)=>{const a=document.activeElement;"
+        "window.addEventListener('keydown',(e)=>{const a=document.activeElement;"
         "if(a&&(a.tagName==='INPUT'||a.tagName==='TEXTAREA'||a.isContentEditable))return;"
         "let b=null;if(e.code==='Space'){b=btn('Pause')||btn('Play');}"
         "else if(e.code==='ArrowRight'){b=btn('Next frame');}else if(e.code==='ArrowLeft'){b=btn('Previous frame');}"
-        "if(b){e.preventDefault();if(a&&a.blur)a.blur();b.click();}},true);"
+        "if(b){e.preventDefault();e.stopPropagation();if(a&&a.blur)a.blur();b.click();}},true);"
         "window.addEventListener('dragover',(e)=>{e.preventDefault();});"
         "window.addEventListener('drop',(e)=>{e.preventDefault();const f=e.dataTransfer&&e.dataTransfer.files;"
         "if(!f||!f.length)return;const i=document.querySelector('input[type=file]');if(!i)return;"

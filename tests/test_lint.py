@@ -69,3 +69,16 @@ def test_help_imports_no_numpy():
             "print('numpy' in sys.modules)")
     r = _run([sys.executable, "-c", code])
     assert r.returncode == 0 and r.stdout.strip().endswith("False"), r.stdout + r.stderr
+
+
+def test_layout_rules_of_the_redesign():
+    """Issue 16's size rules: ``pipeline.py`` only orchestrates (at most 300 lines), and a function over 80
+    lines says why in a "# Long because" comment (``scripts/long_functions.py`` lists them)."""
+    sys.path.insert(0, str(REPO / "scripts"))
+    from long_functions import long_functions
+
+    src = REPO / "src" / "froude"
+    n_pipeline = len((src / "pipeline.py").read_text().splitlines())
+    assert n_pipeline <= 300, f"pipeline.py has {n_pipeline} lines (at most 300: move what is not orchestration)"
+    silent = [f"{where} {name} ({length} lines)" for length, where, name, why in long_functions(src) if not why]
+    assert not silent, "functions over 80 lines without a '# Long because' comment: " + "; ".join(silent)

@@ -14,7 +14,6 @@ import math
 from dataclasses import dataclass
 from dataclasses import replace as _replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -29,7 +28,8 @@ from .metrics import physics_report
 from .naive import naive_clip
 from .prepared import Prepared
 from .result import Result, report_path, write_result
-from .synthesis.cycle import extract_cycle, fit_events, loaded_events
+from .speed_goal import accelerate_goal, scale_factor
+from .synthesis.cycle import extract_cycle, fit_events
 from .synthesis.targets import build_targets, stance_only
 from .synthesis.timewarp import MachinePath, machine_path
 
@@ -69,14 +69,11 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     else:
         require_running(summary, source)
         fit = fit_machine_detailed(motion, body, mass=mass, source=Path(source).name)
-        # the fit's events; else the load's (a clip whose feet rest on the floor unloaded: loaded_events)
-        events = fit_events(fit.machine, motion) or loaded_events(gait, com, motion.frame_time)
-        cycle = extract_cycle(motion, body, gait, com, markers, events=events)
+        cycle = extract_cycle(motion, body, gait, com, markers, events=fit_events(fit.machine, motion))
     machine = fit.machine
     modelled, note = modelled_part(motion, summary, com, gait)
     return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source, fit,
                     modelled=modelled, notes=tuple(take_notes) + ((note,) if note else ()))
-
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,13 +138,7 @@ def plan_scale(
         raise FroudeError(f"fps must be > 0, got {fps}")
     notes = list(prep.notes)
     m_scaled = prep.machine.scaled(retarget.L, retarget.M)
-    base_speed = m_scaled.mean_speed * m_scaled.speed_unit
-    if target_speed is not None:
-        if not (np.isfinite(target_speed) and target_speed > 0):
-            raise FroudeError(f"target speed must be > 0 m/s, got {target_speed}")
-        speed = target_speed / base_speed
-    if not (np.isfinite(speed) and speed > 0):
-        raise FroudeError(f"speed factor must be > 0, got {speed}")
+    speed = scale_factor(speed, target_speed, m_scaled.mean_speed * m_scaled.speed_unit)
     lo, hi = SUPPORTED_SPEED_RANGE
     if not lo <= speed <= hi:
         notes.append(
@@ -173,8 +164,11 @@ def plan_scale(
         raise FroudeError(f"unknown method '{method}' (physical or naive)")
     if speed_model not in ("auto", "stretch", "resolve"):
         raise FroudeError(f"unknown speed model '{speed_model}' (auto, stretch or resolve)")
-    if is_walking(prep.machine):
-        return _plan_walk(prep, retarget, speed, n_steps, fps, notes)
+    if is_walking(prep.machine):  # a motion's kind chooses its machine
+        from .synthesis.walking import walk_scale_path
+
+        path, method = walk_scale_path(prep, retarget, speed, n_steps=n_steps, fps=fps)
+        return ScalePlan(prep, path, retarget, speed, tuple(notes), method, None)
     if speed_model == "resolve" or (speed_model == "auto" and speed > 1.0 + 1e-9):
         machine = prep.faster_machine(speed)
         stretch = 1.0
@@ -185,23 +179,6 @@ def plan_scale(
     path = machine_path(prep.cycle, machine.scaled(retarget.L, retarget.M), retarget.L, prep.origin,
                         stretch=stretch, n_steps=n_steps, fps=fps)
     return ScalePlan(prep, path, retarget, speed, tuple(notes), method, (machine, stretch, fps))
-
-
-def _plan_walk(prep: Prepared, retarget: Retarget, speed: float, n_steps: int, fps: float, notes) -> ScalePlan:
-    """``plan_scale`` for a walk: faster by the re-solved walking cycle, slower by §5.2's stretch (below the
-    clip's speed the re-solved cycle does not exist: ``machine.walk_speed``); past Froude 0.5 refused."""
-    from .machine.walk_speed import check_walking_speed
-    from .synthesis.walking import walk_machine_path
-
-    walk: Any = prep.machine  # a WalkingMachine (prepare chose it for the walk)
-    check_walking_speed(walk.scaled(retarget.L, retarget.M), speed)
-    if speed > 1.0 + 1e-9:  # longer and quicker steps
-        machine, stretch = prep.faster_machine(speed), 1.0
-        method = "physical (walking cycle re-solved at the new speed)"
-    else:
-        machine, stretch, method = prep.machine, speed, "physical"
-    path = walk_machine_path(prep, retarget, n_steps=n_steps, fps=fps, machine=machine, speed=stretch)
-    return ScalePlan(prep, path, retarget, speed, tuple(notes), method, None)
 
 
 def accelerate(
@@ -240,19 +217,7 @@ def accelerate(
     m = prep.machine.scaled(retarget.L, retarget.M)
     v_unit = m.speed_unit
     start_speed = m.U * v_unit  # apex speed of the cycle [m/s]
-    if (to_speed is None) == (to_factor is None):
-        raise FroudeError("give exactly one goal: a target speed [m/s] or a factor of the start speed")
-    if to_speed is not None:
-        target = to_speed
-    else:
-        assert to_factor is not None  # exactly one goal, checked above
-        target = to_factor * start_speed
-    if not (np.isfinite(target) and target > 0):
-        raise FroudeError(f"target speed must be > 0 m/s, got {target:g} (to stop, end the motion instead)")
-    if steps is not None and within is None and not (isinstance(steps, int) and steps >= 1):
-        raise FroudeError(f"steps must be a whole number >= 1, got {steps}")
-    if within is not None and not (np.isfinite(within) and within > 0):
-        raise FroudeError(f"--within must be > 0 s, got {within}")
+    target = accelerate_goal(to_speed, to_factor, start_speed, steps, within)
     try:
         plan = plan_speed_change(
             m, target / v_unit, n_steps=None if within is not None else steps,

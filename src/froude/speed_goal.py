@@ -52,3 +52,34 @@ def parse_speed(text, what: str = "speed") -> SpeedGoal:
             raise FroudeError(f"{what}: factor {m.group(1)} is outside the supported range {lo:g}x to {hi:g}x{hint}")
         raise FroudeError(f"{what}: {m.group(1)} m/s is outside the supported range {lo:g} to {hi:g} m/s")
     return SpeedGoal(factor=value) if unit == "x" else SpeedGoal(m_s=value)
+
+
+def _positive(value, message: str) -> float:
+    """``value`` as a float if it is finite and > 0; FroudeError(message) otherwise."""
+    v = float(value)
+    if not (math.isfinite(v) and v > 0):
+        raise FroudeError(message)
+    return v
+
+
+def scale_factor(speed: float, target_speed: float | None, base_speed_m_s: float) -> float:
+    """The speed factor of a ``scale``: ``target_speed`` [m/s] over the dynamically scaled speed
+    ``base_speed_m_s`` when given, else ``speed``. Raises FroudeError for a non-finite or non-positive one."""
+    if target_speed is not None:
+        speed = _positive(target_speed, f"target speed must be > 0 m/s, got {target_speed}") / base_speed_m_s
+    return _positive(speed, f"speed factor must be > 0, got {speed}")
+
+
+def accelerate_goal(to_speed: float | None, to_factor: float | None, start_speed_m_s: float,
+                    steps, within: float | None) -> float:
+    """The goal speed [m/s] of an ``accelerate``: ``to_speed``, or ``to_factor`` × the start speed (exactly
+    one), after checking it and the change's length (``steps``, whole >= 1, or ``within`` [s] > 0)."""
+    if (to_speed is None) == (to_factor is None):
+        raise FroudeError("give exactly one goal: a target speed [m/s] or a factor of the start speed")
+    target = to_speed if to_speed is not None else float(to_factor) * start_speed_m_s  # type: ignore[arg-type]
+    _positive(target, f"target speed must be > 0 m/s, got {target:g} (to stop, end the motion instead)")
+    if steps is not None and within is None and not (isinstance(steps, int) and steps >= 1):
+        raise FroudeError(f"steps must be a whole number >= 1, got {steps}")
+    if within is not None:
+        _positive(within, f"--within must be > 0 s, got {within}")
+    return float(target)

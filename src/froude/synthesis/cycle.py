@@ -191,14 +191,14 @@ def extract_cycle(
 ) -> ReferenceCycle:
     """Build the seamless reference stride cycle of a running or walking clip.
 
-    com: (F, 3) [m]; markers: (F, 2, 3, 3) [m]; events: foot events (default: from the gait; the fit's
-    force-refined events are more precise); order: "running" or "walking", the order of the foot events
-    in a stride (``EVENT_ORDERS``).
+    com: (F, 3) [m]; markers: (F, 2, 3, 3) [m]; events: foot events (the fit's force-refined events are
+    the most precise; default: a run's load events, ``loaded_events``, else the gait's marker contacts);
+    order: "running" or "walking", the order of the foot events in a stride (``EVENT_ORDERS``).
     """
     F = motion.n_frames
     dt = motion.frame_time
     if events is None:
-        events = events_from_gait(gait)
+        events = (loaded_events(gait, com, dt) if order == "running" else None) or events_from_gait(gait)
     tds = [e for e in events if e.kind == "td"]
     if len(tds) < 2 or len({e.foot for e in tds}) < 2:
         raise FitError("a stride cycle needs touchdowns of both feet in the clip")

@@ -156,6 +156,22 @@ def walk_machine_path(prep, retarget, *, n_steps: int, fps: float, machine=None,
     return steps_path(prep, retarget, StepPlan((m,) * n_steps, np.full(n_steps, float(speed))), fps)
 
 
+def walk_scale_path(prep, retarget, speed: float, *, n_steps: int, fps: float):
+    """The machine path and method name of a walk's ``scale``: faster by the re-solved walking cycle, slower
+    by §5.2's stretch (below the clip's speed the re-solved cycle does not exist: ``machine.walk_speed``);
+    past Froude 0.5 refused (``check_walking_speed``)."""
+    from ..machine.walk_speed import check_walking_speed
+
+    walk = prep.machine  # a WalkingMachine (prepare chose it for the walk)
+    check_walking_speed(walk.scaled(retarget.L, retarget.M), speed)
+    if speed > 1.0 + 1e-9:  # longer and quicker steps
+        machine, stretch = prep.faster_machine(speed), 1.0
+        method = "physical (walking cycle re-solved at the new speed)"
+    else:
+        machine, stretch, method = walk, speed, "physical"
+    return walk_machine_path(prep, retarget, n_steps=n_steps, fps=fps, machine=machine, speed=stretch), method
+
+
 def steps_path(prep, retarget, plan: StepPlan, fps: float):
     """A walk of ``plan``'s steps in the world (a ``pipeline.MachinePath``), time-warped and placed like
     ``walk_machine_path`` (which is this with one machine for every step)."""

@@ -571,7 +571,8 @@ def _remove_sliding_rolling(rel: np.ndarray, stance: np.ndarray, contact_tol: fl
         n_end = with_before.size
         idx = np.concatenate([with_before, (idx[-1] + 1 + np.arange(int(APPROACH_MAX * K))) % K])
         idx = idx[: min(idx.size, K - 1)]
-        yaw, shift, lift, n_used = _rolling_correction(rel[idx, foot], contact_tol, band, n_end)
+        yaw, shift, lift, n_used = _rolling_correction(rel[idx, foot], contact_tol, band, n_end,
+                                                       max(1, int(LIFT_OFF_SHARE * K)))
         idx, yaw, shift, lift = idx[:n_used], yaw[:n_used], shift[:n_used], lift[:n_used]
         out[idx, foot] = _moved(rel[idx, foot], yaw, shift, lift)
         held_to[foot] = (idx[-1] + 1) / K
@@ -618,7 +619,12 @@ YAW_RELAX = 0.2
 
 # Long because the rigid motion of each sample depends on the previous one's (held pivot, held yaw): one
 # sequential pass over the ~120 samples of a stance.
-def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float, n_end: int):
+#: Share of the stride over which a walking foot's pivot is raised to the top of the floor band by the end
+#: of its stance (_rolling_correction).
+LIFT_OFF_SHARE = 0.04
+
+
+def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float, n_end: int, n_rise: int):
     """The rigid motion per sample of a walking stance that holds the foot's pivot still.
 
     seg: (n, 3 markers, 3) one foot's marker offsets over the stance in time order (heading frame; markers
@@ -647,9 +653,17 @@ def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float, n_end:
     lowest = np.inf  # the landing pivot: its reference's lowest height so far
     top = np.inf  # the height the lifting pivot leaves the floor band at
     for i in range(n):
+        if i == n_end and pivot >= 0:
+            # the pivot rises to the top of its floor band by the end of the stance (min-jerk over the last
+            # n_rise samples), so the foot leaves when the reference's does; held until then
+            a = max(1, n_end - n_rise)
+            floor_h = seg[a - 1, pivot, 1] + lift[a - 1]
+            short = floor_h + band - (seg[n_end - 1, pivot, 1] + lift[n_end - 1])
+            if short > 0.0:
+                lift[a:n_end] += short * min_jerk((np.arange(a, n_end) - a + 1) / (n_end - a))
         if i >= n_end and pivot >= 0:
             if i == n_end:
-                top = seg[i - 1, pivot, 1] + lift[i - 1] + band
+                top = seg[i - 1, pivot, 1] + lift[i - 1] - 1e-9
             if seg[i - 1, pivot, 1] + lift[i - 1] > top:
                 return yaw[:i], shift[:i], lift[:i], i
             yaw[i], lift[i] = yaw[i - 1], lift[i - 1]

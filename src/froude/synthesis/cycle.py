@@ -191,14 +191,14 @@ def extract_cycle(
 ) -> ReferenceCycle:
     """Build the seamless reference stride cycle of a running or walking clip.
 
-    com: (F, 3) [m]; markers: (F, 2, 3, 3) [m]; events: foot events (default: from the gait; the fit's
-    force-refined events are more precise); order: "running" or "walking", the order of the foot events
-    in a stride (``EVENT_ORDERS``).
+    com: (F, 3) [m]; markers: (F, 2, 3, 3) [m]; events: foot events (the fit's force-refined events are
+    the most precise; default: a run's load events, ``loaded_events``, else the gait's marker contacts);
+    order: "running" or "walking", the order of the foot events in a stride (``EVENT_ORDERS``).
     """
     F = motion.n_frames
     dt = motion.frame_time
     if events is None:
-        events = events_from_gait(gait)
+        events = (loaded_events(gait, com, dt) if order == "running" else None) or events_from_gait(gait)
     tds = [e for e in events if e.kind == "td"]
     if len(tds) < 2 or len({e.foot for e in tds}) < 2:
         raise FitError("a stride cycle needs touchdowns of both feet in the clip")
@@ -876,7 +876,7 @@ def sample_cycle(cycle: ReferenceCycle, phi: np.ndarray, rotations: bool = True)
 
 
 def fit_events(machine, motion: Motion):
-    """The fit's force-refined touchdown/liftoff times as foot events (None: use the gait's)."""
+    """The fit's force-refined touchdown/liftoff times as foot events (None: they do not alternate)."""
     ev = []
     for s in getattr(machine, "stances", ()):
         foot = 0 if s.get("foot") in (0, "left") else 1
@@ -884,9 +884,44 @@ def fit_events(machine, motion: Motion):
             t = s.get(key)
             if t is not None and np.isfinite(t) and 0 < t < motion.duration:
                 ev.append(FootEvent(t / motion.frame_time, foot, kind))
-    ev.sort(key=lambda e: e.frame)
-    # events must alternate td/lo per foot and the feet alternate; otherwise trust the gait
+    return _alternating(ev)
+
+
+def _alternating(ev: list[FootEvent]) -> list[FootEvent] | None:
+    """The events sorted in time if touchdowns and liftoffs alternate (a running order), else None."""
+    ev = sorted(ev, key=lambda e: e.frame)
     for a, b in zip(ev[:-1], ev[1:]):
         if a.kind == b.kind:
             return None
     return ev or None
+
+
+#: How far outside a foot's marker contact its load may cross the fit's event threshold [s] (loaded_events).
+LOADED_EVENT_SEARCH_S = 0.15
+
+
+def loaded_events(gait: Gait, com: np.ndarray, frame_time: float) -> list[FootEvent] | None:
+    """Foot events where each contact's load crosses the fit's EVENT_THRESHOLD_BW (0.5 body weights): the
+    rising crossing nearest the marker touchdown and the falling one nearest the marker lift-off, searched
+    within the contact and up to LOADED_EVENT_SEARCH_S outside it (None: they do not alternate).
+
+    For a clip whose feet rest on the floor, barely loaded, long before the load rises and after it falls
+    (the tired Bandai jog: loaded 0.23-0.30 s of 0.33-0.50 s contacts, the load falling 0.25 s before the
+    toe leaves), the fit's events keep some marker events and do not alternate. The cycle must still be
+    phased by the load: the machine's stance is the loaded one, so the clip's loaded poses must fall in it
+    and its unloaded ones (nearly ballistic, as in the machine's flight) in the flight, where the marker
+    contact (contact_phase) still holds the feet down. Phased by the marker contacts instead, the machine's
+    0.17 s flight played the clip's 0.03-0.08 s flights and its grounded poses fell in the air: knee flips
+    of 47-90° against the clip's 25°. gait: the clip's marker contacts; com: (F, 3) [m]; frame_time [s].
+    """
+    from ..machine.forces import _crossing
+    from ..metrics import vertical_force_bw
+
+    fy_bw = vertical_force_bw(com, frame_time)
+    w = int(round(LOADED_EVENT_SEARCH_S / frame_time))
+    ev = []
+    for s in gait.stances:
+        td = None if s.start == 0 else _crossing(fy_bw, s.start - w, s.stop, True, s.start - 0.5)
+        lo = None if s.stop >= len(fy_bw) else _crossing(fy_bw, s.start, s.stop + w, False, s.stop - 0.5)
+        ev += [FootEvent(x, s.foot, kind) for x, kind in ((td, "td"), (lo, "lo")) if x is not None]
+    return _alternating(ev)

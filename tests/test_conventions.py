@@ -107,9 +107,10 @@ def test_info_is_the_same_in_every_convention(name, variant, tmp_root):
     assert got["height"] == pytest.approx(ref["height"], rel=0.06 if variant == "folded" else 0.005)
 
 
-FIT_CLIPS = ("09_01", "09_05", "02_03", "dataset-1_dash_old_001", "dataset-1_dash_active_001")
-#: A Bandai clip the fit refuses (a shuffle: its loaded stances and flights fill 79 % of its step; machine.fit)
-SHUFFLE = "dataset-1_run_tired_001"
+#: run_tired among them: its feet rest on the floor, barely loaded, long before its load rises and after it falls
+#: (loaded stances 0.23-0.30 s of 0.33-0.50 s contacts); its cycle is phased by the load (cycle.loaded_events)
+FIT_CLIPS = ("09_01", "09_05", "02_03", "dataset-1_dash_old_001", "dataset-1_dash_active_001",
+             "dataset-1_run_tired_001")
 
 
 @functools.cache
@@ -126,22 +127,6 @@ def _assert_same_fit(name, path):
     K, th = _fit(path)
     assert K == pytest.approx(K0, rel=0.03), (K, K0)
     assert abs(math.degrees(th - th0)) <= 0.5, (math.degrees(th), math.degrees(th0))
-
-
-@pytest.mark.parametrize("name,variant", _cases([SHUFFLE]))
-def test_the_shuffle_is_refused_alike_in_every_convention(name, variant, tmp_root):
-    """The tired Bandai jog is refused in one line, with the same figures, whatever the file's conventions."""
-    from froude.errors import NotARunningMotion
-    from froude.machine.fit import fit_machine_detailed
-
-    def reason(path):
-        with pytest.raises(NotARunningMotion) as e:
-            fit_machine_detailed(load_bvh(path))
-        return str(e.value).split(": ", 1)[1]
-
-    got = reason(_variant_file(name, variant, tmp_root))
-    assert "\n" not in got and "fill 79 % of its 0.43 s step" in got
-    assert got == reason(str(clip(name)))
 
 
 RATE_VARIANTS = ("60Hz", "30Hz", "30Hz_lowpass")
@@ -464,17 +449,27 @@ def test_output_unit_rotations_only_and_frame_time(tmp_path, run_cli):
 
 
 # ---- the Bandai clips as delivered (issue 12, acceptance 2) ---------------------------------------------
-BANDAI_STRIDING = tuple(n for n in BANDAI_RUNS if n not in ("dataset-1_dash_normal_001", SHUFFLE))
-# The cases that miss a bar, measured 2026-11-25 on the skate branch (`python benchmarks/bars_matrix.py --matrix 12`
+BANDAI_STRIDING = tuple(n for n in BANDAI_RUNS if n != "dataset-1_dash_normal_001")
+# The cases that miss a bar, measured 2026-11-25 on the skate branch merged with main at e44a04f (`python benchmarks/bars_matrix.py --matrix 12`
 # prints the same table): (clip, index in _CHANGES, output rate) -> the bars missed. The stricter skate measure
-# (ball and tip near the floor) is a bar since issue 13. dash_active's troll misses it at a lift-off. run_tired, a tired
-# shuffle, is refused before any work (test_the_shuffle_is_refused_in_one_line). Every other case meets every
+# (ball and tip near the floor) is a bar since issue 13. dash_active's troll misses at a lift-off; run_tired's are
+# toe tips at 0.01-0.03 L sliding as the foot leaves the floor (the child's, x0.7's: in the output's first
+# frames, the tail of the contact before the first step). Every other case meets every
 # bar and must keep doing so; a case listed here that starts meeting the bars fails (strict) so that it is taken
 # off the list.
 _CHANGES = [("child", 1.0), ("troll", 1.0), ("giant", 1.0), (None, 0.7), (None, 1.2), ("accelerate", 0.5),
             ("accelerate", 1.3)]
 _BANDAI_MISSES = {
     ("dash_active", 1, None): "foot skate (ball and tip near the floor) 32.76 mm (<= 5)",
+    ("run_tired", 0, None): "foot skate (ball and tip near the floor) 39.25 mm (<= 5)",
+    ("run_tired", 0, 120): "foot skate (ball and tip near the floor) 38.64 mm (<= 5)",
+    ("run_tired", 1, None): "foot skate (ball and tip near the floor) 60.05 mm (<= 5)",
+    ("run_tired", 1, 120): "foot skate (ball and tip near the floor) 10.82 mm (<= 5)",
+    ("run_tired", 2, None): "foot skate (ball and tip near the floor) 14.60 mm (<= 5)",
+    ("run_tired", 2, 120): "foot skate (ball and tip near the floor) 14.65 mm (<= 5)",
+    ("run_tired", 3, 120): "foot skate (ball and tip near the floor) 7.33 mm (<= 5)",
+    ("run_tired", 5, 120): "foot skate (ball and tip near the floor) 7.71 mm (<= 5)",
+    ("run_tired", 6, 120): "foot skate (ball and tip near the floor) 7.26 mm (<= 5)",
 }
 
 
@@ -518,21 +513,6 @@ def test_bandai_clips_as_delivered_meet_the_bars(name, change, fps):
         raise
     assert res.motion.fps == pytest.approx(fps or 30.0, rel=1e-3)
     assert res.report.check_bars() == []
-
-
-def test_the_shuffle_is_refused_in_one_line(run_cli, tmp_path):
-    """run_tired: every output of it missed a bar (joint jumps 47-90° against the clip's 25°, skates up to 226
-    mm), because the machine fitted to it flew 0.17 s where the clip's feet leave the floor for 0.08 s. Its
-    loaded stances (0.26 s above half its weight) and flights fill 79 % of its 0.43 s step (0.96-1.01 on every
-    other run): fit and scale say so in one line and write nothing."""
-    if BANDAI is None:
-        pytest.skip("Bandai clips not found")
-    for verb, extra, suffix in (("fit", (), ".json"), ("scale", ("--character", "child"), ".bvh")):
-        out = (tmp_path / verb).with_suffix(suffix)
-        code, _, err = run_cli(verb, clip(SHUFFLE), *extra, "-o", out)
-        errors = [ln for ln in err.strip().splitlines() if "error" in ln]
-        assert code == 2 and len(errors) == 1 and "fill 79 % of its 0.43 s step" in errors[0], err
-        assert not out.exists()
 
 
 def test_bandai_loop_is_unrolled_and_walk_scaled(run_cli, tmp_path):

@@ -200,14 +200,14 @@ def extract_cycle(
 ) -> ReferenceCycle:
     """Build the seamless reference stride cycle of a running or walking clip.
 
-    com: (F, 3) [m]; markers: (F, 2, 3, 3) [m]; events: foot events (default: from the gait; the fit's
-    force-refined events are more precise); order: "running" or "walking", the order of the foot events
-    in a stride (``EVENT_ORDERS``).
+    com: (F, 3) [m]; markers: (F, 2, 3, 3) [m]; events: foot events (the fit's force-refined events are
+    the most precise; default: a run's load events, ``loaded_events``, else the gait's marker contacts);
+    order: "running" or "walking", the order of the foot events in a stride (``EVENT_ORDERS``).
     """
     F = motion.n_frames
     dt = motion.frame_time
     if events is None:
-        events = events_from_gait(gait)
+        events = (loaded_events(gait, com, dt) if order == "running" else None) or events_from_gait(gait)
     tds = [e for e in events if e.kind == "td"]
     if len(tds) < 2 or len({e.foot for e in tds}) < 2:
         raise FitError("a stride cycle needs touchdowns of both feet in the clip")
@@ -328,12 +328,8 @@ def extract_cycle(
 
     raw_rel = marker_rel
     if order == "walking":  # a walking foot rolls (heel, ball, toe): one pivot at a time holds it
-        marker_rel, held_to = _remove_sliding_rolling(marker_rel, stance_mask, contact_tol=SKATE_REACH_L
-                                                      * body.leg_length, band=ROLL_BAND_L * body.leg_length)
-        # the foot is a contact (held by the IK, anchored) for as long as its toe is held at lift-off
-        contact_phase = contact_phase.copy()
-        later = np.mod(held_to - contact_phase[:, 1], 1.0)
-        contact_phase[:, 1] += np.where((held_to >= 0) & (later < 0.5), later, 0.0)
+        marker_rel = _remove_sliding_rolling(marker_rel, stance_mask, contact_tol=SKATE_REACH_L * body.leg_length,
+                                             band=ROLL_BAND_L * body.leg_length)
     else:
         reach_tol = (SKATE_REACH_L + np.array([0.0, HOLD_REACH_MARGIN_L, HOLD_REACH_MARGIN_L])) * body.leg_length
         marker_rel = _remove_sliding(marker_rel, stance_mask, contact_tol=reach_tol,
@@ -565,7 +561,7 @@ def _stance_in_time(stance_foot: np.ndarray) -> np.ndarray:
 
 
 def _remove_sliding_rolling(rel: np.ndarray, stance: np.ndarray, contact_tol: float,
-                            band: float) -> tuple[np.ndarray, np.ndarray]:
+                            band: float) -> np.ndarray:
     """Remove the reference's foot sliding from a walk's stances: the foot rolls over one pivot at a time.
 
     rel: (K, 2, 3, 3) marker offsets from the anchor (heading frame: forward, up, lateral); stance: (K, 2).
@@ -576,28 +572,21 @@ def _remove_sliding_rolling(rel: np.ndarray, stance: np.ndarray, contact_tol: fl
     the three markers of a foot move together, by one rigid motion per sample (``_rolling_correction``:
     the foot keeps the reference's shape, so the IK meets it with the reference's joint angles) that holds
     the current pivot still; after the stance the motion fades over the swing (min-jerk) so the cycle
-    closes. Heights are clamped to ≥ 0. Returns the markers and (2,) the stride phase at which each foot's
-    hold ends (its toe lifted clear of the floor band; −1: a foot never held).
+    closes. Heights are clamped to ≥ 0.
     """
     bones = [_bone_lengths(rel[:, foot]) for foot in range(2)]
     rel = np.stack([_with_bone_lengths(rel[:, foot], bones[foot]) for foot in range(2)], axis=1)
     out = rel.copy()
     K = rel.shape[0]
-    held_to = np.full(2, -1.0)
     for foot in range(2):
         idx = _stance_in_time(stance[:, foot])
         if idx.size == 0:
             continue
-        with_before = _with_approach(rel[:, foot], idx, stance[:, foot], contact_tol, band, with_after=False)
-        # then as many samples of the swing as the lift-off may need (_rolling_correction cuts them)
-        n_end = with_before.size
-        idx = np.concatenate([with_before, (idx[-1] + 1 + np.arange(int(APPROACH_MAX * K))) % K])
-        idx = idx[: min(idx.size, K - 1)]
-        yaw, shift, lift, n_used = _rolling_correction(rel[idx, foot], contact_tol, band, n_end,
-                                                       max(1, int(LIFT_OFF_SHARE * K)))
-        idx, yaw, shift, lift = idx[:n_used], yaw[:n_used], shift[:n_used], lift[:n_used]
+        # the landing foot is held from when it is low; the lifting one until the stance ends (it is raised
+        # clear by then)
+        idx = _with_approach(rel[:, foot], idx, stance[:, foot], contact_tol, band, with_after=False)
+        yaw, shift, lift = _rolling_correction(rel[idx, foot], contact_tol, band, max(1, int(LIFT_OFF_SHARE * K)))
         out[idx, foot] = _moved(rel[idx, foot], yaw, shift, lift)
-        held_to[foot] = (idx[-1] + 1) / K
         covered = np.zeros(K, bool)
         covered[idx] = True
         swing = np.flatnonzero(~covered)
@@ -607,7 +596,7 @@ def _remove_sliding_rolling(rel: np.ndarray, stance: np.ndarray, contact_tol: fl
             fade = 1.0 - min_jerk(np.linspace(0, 1, sw.size))
             out[sw, foot] = _moved(rel[sw, foot], yaw[-1] * fade, shift[-1] * fade[:, None], lift[-1] * fade)
     out[..., 1] = np.maximum(out[..., 1], 0.0)
-    return out, held_to
+    return out
 
 
 def _with_bone_lengths(foot: np.ndarray, length: np.ndarray) -> np.ndarray:
@@ -639,32 +628,33 @@ ROLL_SWITCH_BAND = 0.1
 YAW_RELAX = 0.2
 
 
+#: Share of the stride over which a walking foot's pivot is raised to the top of the floor band by the end
+#: of its stance (_rolling_correction): 0.04 left the ball sliding 6-7 mm on 02_01's and 07_01's giants as
+#: the toe pitched over its tip; raised earlier, the ball leaves the band before the toe has pitched far.
+LIFT_OFF_SHARE = 0.08
+
+
 # Long because the rigid motion of each sample depends on the previous one's (held pivot, held yaw): one
 # sequential pass over the ~120 samples of a stance.
-#: Share of the stride over which a walking foot's pivot is raised to the top of the floor band by the end
-#: of its stance (_rolling_correction).
-LIFT_OFF_SHARE = 0.04
-
-
-def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float, n_end: int, n_rise: int):
+def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float, n_rise: int):
     """The rigid motion per sample of a walking stance that holds the foot's pivot still.
 
     seg: (n, 3 markers, 3) one foot's marker offsets over the stance in time order (heading frame; markers
-    from the heel end: ankle, ball, tip). A marker that reaches the floor (its lowest point within
-    contact_tol) bears load while within ``band`` of its lowest point; the pivot is the loaded marker
-    nearest its lowest point, and it only moves toward the toes (a walking foot rolls heel → ball → toe).
-    The pivot is held horizontally where it is. While another marker is loaded too, the foot's yaw is
-    held (the reference's foot turns a few degrees about its toe while the ball is still low: the ball
-    would slide sideways); with the pivot alone down the yaw relaxes back to the reference's. Vertically the
-    first pivot (the landing one) comes down to its lowest height so far and stays there; a later pivot does
-    not sink with the reference (its toe end sinks 1-2 cm while the toes pitch up over it, a mocap end site,
-    not a contact: following it down would slide the rising ball forward within the band in which the
-    physics report watches it) and rises from the reference's lowest point since it took over.
-    From sample n_end on the foot is lifting off: its pivot rises with the reference and is still held
-    horizontally until it is ``band`` above its height at n_end (a reference toe that swings forward while
-    still a centimetre up would slide within the report's band); the samples after that are not used.
-    Returns yaw (n,) [rad], shift (n, 2) [m] (forward, lateral), lift (n,) [m] for ``_moved`` and the number
-    of samples used.
+    from the heel end: ankle, ball, tip). A marker
+    that reaches the floor (its lowest point within contact_tol) bears load while within ``band`` of its
+    lowest point. The pivot is the loaded marker that has risen least since its own lowest point so far
+    (by more than a tenth of the band: hysteresis), and it only moves toward the toes (a walking foot rolls
+    heel → ball → toe). The pivot is held horizontally where it is. While another marker is within two bands
+    of its lowest point, the foot's yaw is held (the reference's foot turns a few degrees about its toe while
+    the ball is still low, and its toes yaw while they come down: either slid sideways within the report's
+    band); otherwise the yaw relaxes back to the reference's. Vertically the first pivot (the landing one)
+    comes down to its lowest height so far and stays there; a later pivot keeps its height (the CMU toe end
+    site sinks 1-2 cm while the toes pitch up over it, a mocap end site, not a contact: following it down
+    would slide the rising ball forward within the band). Over the last n_rise samples of the stance the
+    pivot is raised (min-jerk) to ``band`` above its height then, so the foot leaves the floor band when the
+    reference's foot lifts (held until it was clear, the foot stayed down 40-50 ms longer than the clip's,
+    whose toe scuffs forward at lift-off, and the double support grew by up to 9 points).
+    Returns yaw (n,) [rad], shift (n, 2) [m] (forward, lateral), lift (n,) [m] for ``_moved``.
     """
     n = seg.shape[0]
     height = seg[:, :, 1]
@@ -673,28 +663,7 @@ def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float, n_end:
     yaw, shift, lift = np.zeros(n), np.zeros((n, 2)), np.zeros(n)
     pivot, first = -1, -1
     lowest = np.inf  # the landing pivot: its reference's lowest height so far
-    top = np.inf  # the height the lifting pivot leaves the floor band at
     for i in range(n):
-        if i == n_end and pivot >= 0:
-            # the pivot rises to the top of its floor band by the end of the stance (min-jerk over the last
-            # n_rise samples), so the foot leaves when the reference's does; held until then
-            a = max(1, n_end - n_rise)
-            floor_h = seg[a - 1, pivot, 1] + lift[a - 1]
-            short = floor_h + band - (seg[n_end - 1, pivot, 1] + lift[n_end - 1])
-            if short > 0.0:
-                lift[a:n_end] += short * min_jerk((np.arange(a, n_end) - a + 1) / (n_end - a))
-        if i >= n_end and pivot >= 0:
-            if i == n_end:
-                top = seg[i - 1, pivot, 1] + lift[i - 1] - 1e-9
-            if seg[i - 1, pivot, 1] + lift[i - 1] > top:
-                return yaw[:i], shift[:i], lift[:i], i
-            yaw[i], lift[i] = yaw[i - 1], lift[i - 1]
-            was = _moved(seg[i - 1 : i, pivot : pivot + 1], yaw[i - 1 : i], shift[i - 1 : i], lift[i - 1 : i])[0, 0]
-            now = _moved(seg[i : i + 1, pivot : pivot + 1], yaw[i : i + 1], np.zeros((1, 2)), np.zeros(1))[0, 0]
-            shift[i] = was[[0, 2]] - now[[0, 2]]
-            continue
-        if i >= n_end:
-            return yaw[:i], shift[:i], lift[:i], i
         loaded = np.flatnonzero(rise[i] <= band)
         later = loaded[loaded > pivot] if pivot >= 0 else loaded
         if later.size:
@@ -705,8 +674,9 @@ def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float, n_end:
                 first = k if first < 0 else first
         if pivot < 0 or i == 0:
             continue
-        others = loaded[loaded != pivot]
-        if others.size:  # the yaw of the line from the pivot to the farthest other loaded marker is held
+        near = np.flatnonzero(rise[i] <= 2.0 * band)  # near the floor: its lowest in the output may be higher
+        others = near[near != pivot]
+        if others.size:  # the yaw of the line from the pivot to the farthest other low marker is held
             q = int(others[np.argmax(np.abs(others - pivot))])
             a, b = (seg[j, q, [0, 2]] - seg[j, pivot, [0, 2]] for j in (i - 1, i))
             yaw[i] = yaw[i - 1] - (np.arctan2(b[1], b[0]) - np.arctan2(a[1], a[0]) + np.pi) % (2 * np.pi) + np.pi
@@ -723,7 +693,12 @@ def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float, n_end:
             lift[i] = lowest - y
         else:  # a later pivot stays at its height until the foot lifts
             lift[i] = lift[i - 1] - (y - seg[i - 1, pivot, 1])
-    return yaw, shift, lift, n
+    if pivot >= 0:  # raised to the top of its floor band by the end of the stance (min-jerk)
+        a = max(1, n - n_rise)
+        short = (seg[a - 1, pivot, 1] + lift[a - 1]) + band - (seg[n - 1, pivot, 1] + lift[n - 1])
+        if short > 0.0:
+            lift[a:] += short * min_jerk((np.arange(a, n) - a + 1) / (n - a))
+    return yaw, shift, lift
 
 
 def _hold_stance(pose: np.ndarray, step: np.ndarray, hold: np.ndarray, rate: np.ndarray, delta: np.ndarray,
@@ -779,7 +754,8 @@ def _with_approach(rel_foot: np.ndarray, idx: np.ndarray, stance_foot: np.ndarra
     The reference's foot comes down still moving forward and leaves still moving: mocap feet land a few
     millimetres before the contact test calls them down. Holding them from the moment they are that low
     (as the physics report watches them) removes the landing sweep and the lift-off scuff as well.
-    rel_foot: (K, 3, 3) marker offsets (heights above the ground); stance_foot: (K,) bool.
+    rel_foot: (K, 3, 3) marker offsets (heights above the ground); stance_foot: (K,) bool; with_after: False
+    for none after the stance (a walking foot is raised clear by the stance's end instead).
     """
     K = rel_foot.shape[0]
     height = rel_foot[:, :, 1]  # (K, 3)
@@ -935,7 +911,7 @@ def sample_cycle(cycle: ReferenceCycle, phi: np.ndarray, rotations: bool = True)
 
 
 def fit_events(machine, motion: Motion):
-    """The fit's force-refined touchdown/liftoff times as foot events (None: use the gait's)."""
+    """The fit's force-refined touchdown/liftoff times as foot events (None: they do not alternate)."""
     ev = []
     for s in getattr(machine, "stances", ()):
         foot = 0 if s.get("foot") in (0, "left") else 1
@@ -943,9 +919,44 @@ def fit_events(machine, motion: Motion):
             t = s.get(key)
             if t is not None and np.isfinite(t) and 0 < t < motion.duration:
                 ev.append(FootEvent(t / motion.frame_time, foot, kind))
-    ev.sort(key=lambda e: e.frame)
-    # events must alternate td/lo per foot and the feet alternate; otherwise trust the gait
+    return _alternating(ev)
+
+
+def _alternating(ev: list[FootEvent]) -> list[FootEvent] | None:
+    """The events sorted in time if touchdowns and liftoffs alternate (a running order), else None."""
+    ev = sorted(ev, key=lambda e: e.frame)
     for a, b in zip(ev[:-1], ev[1:]):
         if a.kind == b.kind:
             return None
     return ev or None
+
+
+#: How far outside a foot's marker contact its load may cross the fit's event threshold [s] (loaded_events).
+LOADED_EVENT_SEARCH_S = 0.15
+
+
+def loaded_events(gait: Gait, com: np.ndarray, frame_time: float) -> list[FootEvent] | None:
+    """Foot events where each contact's load crosses the fit's EVENT_THRESHOLD_BW (0.5 body weights): the
+    rising crossing nearest the marker touchdown and the falling one nearest the marker lift-off, searched
+    within the contact and up to LOADED_EVENT_SEARCH_S outside it (None: they do not alternate).
+
+    For a clip whose feet rest on the floor, barely loaded, long before the load rises and after it falls
+    (the tired Bandai jog: loaded 0.23-0.30 s of 0.33-0.50 s contacts, the load falling 0.25 s before the
+    toe leaves), the fit's events keep some marker events and do not alternate. The cycle must still be
+    phased by the load: the machine's stance is the loaded one, so the clip's loaded poses must fall in it
+    and its unloaded ones (nearly ballistic, as in the machine's flight) in the flight, where the marker
+    contact (contact_phase) still holds the feet down. Phased by the marker contacts instead, the machine's
+    0.17 s flight played the clip's 0.03-0.08 s flights and its grounded poses fell in the air: knee flips
+    of 47-90° against the clip's 25°. gait: the clip's marker contacts; com: (F, 3) [m]; frame_time [s].
+    """
+    from ..machine.forces import _crossing
+    from ..metrics import vertical_force_bw
+
+    fy_bw = vertical_force_bw(com, frame_time)
+    w = int(round(LOADED_EVENT_SEARCH_S / frame_time))
+    ev = []
+    for s in gait.stances:
+        td = None if s.start == 0 else _crossing(fy_bw, s.start - w, s.stop, True, s.start - 0.5)
+        lo = None if s.stop >= len(fy_bw) else _crossing(fy_bw, s.start, s.stop + w, False, s.stop - 0.5)
+        ev += [FootEvent(x, s.foot, kind) for x, kind in ((td, "td"), (lo, "lo")) if x is not None]
+    return _alternating(ev)

@@ -260,6 +260,25 @@ def _foot_anchors(path: MachinePath) -> tuple[np.ndarray, np.ndarray]:
     return out, w_ground
 
 
+def _contacts_extended(path: MachinePath, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(on, off) [s] of one foot's contacts (its steps ``cols``) with a virtual contact one stride before the
+    first and after the last, the periodic extension _foot_anchors anchors the foot on.
+
+    A clip whose feet stay down long after the load falls (run_tired: the marker contact outlasts the loaded
+    stance by 0.05-0.09 of a stride) starts the output in the tail of the previous contact: unweighted, the
+    foot there slid 31-68 mm along the floor in the first frames.
+    """
+    a, b = path.contact_on[cols], path.contact_off[cols]
+    if len(a) > 1:
+        before, after = a[1] - a[0], a[-1] - a[-2]
+    else:
+        n = len(path.foot_of_step)
+        before = after = 2.0 * (path.t_touchdown[-1] - path.t_touchdown[0]) / max(n - 1, 1)
+    if not before > 0 or not after > 0:
+        return a, b
+    return np.concatenate([[a[0] - before], a, [a[-1] + after]]), np.concatenate([[b[0] - before], b, [b[-1] + after]])
+
+
 def _psi_at(path: MachinePath, times: np.ndarray) -> np.ndarray:
     """Stride phase at arbitrary times, extrapolated linearly beyond the path."""
     t, psi = path.times, path.psi
@@ -285,13 +304,12 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float) -
         cols = np.flatnonzero(path.foot_of_step == foot)
         if cols.size == 0:
             continue
-        a = path.contact_on[cols]
-        b = path.contact_off[cols]
+        a, b = _contacts_extended(path, cols)
         # the contacts that can touch a frame: the last one starting before t + ramp, and the one before it
         k = np.searchsorted(a - WEIGHT_RAMP_S, t, side="right") - 1
         for kk in (k, k - 1):
             ok = kk >= 0
-            kc = np.clip(kk, 0, cols.size - 1)
+            kc = np.clip(kk, 0, a.size - 1)
             u = np.clip(np.minimum(t - (a[kc] - WEIGHT_RAMP_S), (b[kc] + WEIGHT_RAMP_S) - t) / WEIGHT_RAMP_S, 0.0, 1.0)
             ramp[:, foot] = np.maximum(ramp[:, foot], np.where(ok, u, 0.0))
             landing[:, foot] = np.maximum(landing[:, foot], np.where(ok & (t <= a[kc] + WEIGHT_RAMP_S), u, 0.0))

@@ -450,8 +450,9 @@ def test_output_unit_rotations_only_and_frame_time(tmp_path, run_cli):
 
 # ---- the Bandai clips as delivered (issue 12, acceptance 2) ---------------------------------------------
 BANDAI_STRIDING = tuple(n for n in BANDAI_RUNS if n != "dataset-1_dash_normal_001")
-# The cases that miss a bar, measured 2026-11-25 on the skate branch merged with main at e44a04f (`python benchmarks/bars_matrix.py --matrix 12`
-# prints the same table): (clip, index in _CHANGES, output rate) -> the bars missed. The stricter skate measure
+# The cases that miss a bar, measured 2026-11-25 on the skate branch merged with main at e44a04f
+# (`python benchmarks/bars_matrix.py --matrix 12` prints the same table)
+# (clip, index in _CHANGES, output rate) -> the bars missed. The stricter skate measure
 # (ball and tip near the floor) is a bar since issue 13. dash_active's troll misses at a lift-off; run_tired's are
 # toe tips at 0.01-0.03 L sliding as the foot leaves the floor (the child's, x0.7's: in the output's first
 # frames, the tail of the contact before the first step). Every other case meets every

@@ -450,7 +450,7 @@ def test_output_unit_rotations_only_and_frame_time(tmp_path, run_cli):
 
 # ---- the Bandai clips as delivered (issue 12, acceptance 2) ---------------------------------------------
 BANDAI_STRIDING = tuple(n for n in BANDAI_RUNS if n != "dataset-1_dash_normal_001")
-# The cases that miss a bar, measured 2026-11-25 on the skate branch merged with main at e44a04f
+# The cases that miss a bar, measured 2026-11-25 on main at ea63a2e with the landing floor's fade (tired2)
 # (`python benchmarks/bars_matrix.py --matrix 12` prints the same table)
 # (clip, index in _CHANGES, output rate) -> the bars missed. The stricter skate measure
 # (ball and tip near the floor) is a bar since issue 13. dash_active's troll misses at a lift-off; run_tired's are
@@ -461,16 +461,11 @@ BANDAI_STRIDING = tuple(n for n in BANDAI_RUNS if n != "dataset-1_dash_normal_00
 _CHANGES = [("child", 1.0), ("troll", 1.0), ("giant", 1.0), (None, 0.7), (None, 1.2), ("accelerate", 0.5),
             ("accelerate", 1.3)]
 _BANDAI_MISSES = {
-    ("dash_active", 1, None): "foot skate (ball and tip near the floor) 32.76 mm (<= 5)",
+    ("dash_active", 1, None): "foot skate (ball and tip near the floor) 32.88 mm (<= 5)",
     ("run_tired", 0, None): "foot skate (ball and tip near the floor) 39.25 mm (<= 5)",
     ("run_tired", 0, 120): "foot skate (ball and tip near the floor) 38.64 mm (<= 5)",
     ("run_tired", 1, None): "foot skate (ball and tip near the floor) 60.05 mm (<= 5)",
     ("run_tired", 1, 120): "foot skate (ball and tip near the floor) 10.82 mm (<= 5)",
-    ("run_tired", 2, None): "foot skate (ball and tip near the floor) 14.60 mm (<= 5)",
-    ("run_tired", 2, 120): "foot skate (ball and tip near the floor) 14.65 mm (<= 5)",
-    ("run_tired", 3, 120): "foot skate (ball and tip near the floor) 7.33 mm (<= 5)",
-    ("run_tired", 5, 120): "foot skate (ball and tip near the floor) 7.71 mm (<= 5)",
-    ("run_tired", 6, 120): "foot skate (ball and tip near the floor) 7.26 mm (<= 5)",
 }
 
 

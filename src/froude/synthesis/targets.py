@@ -312,7 +312,10 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float) -
             kc = np.clip(kk, 0, a.size - 1)
             u = np.clip(np.minimum(t - (a[kc] - WEIGHT_RAMP_S), (b[kc] + WEIGHT_RAMP_S) - t) / WEIGHT_RAMP_S, 0.0, 1.0)
             ramp[:, foot] = np.maximum(ramp[:, foot], np.where(ok, u, 0.0))
-            landing[:, foot] = np.maximum(landing[:, foot], np.where(ok & (t <= a[kc] + WEIGHT_RAMP_S), u, 0.0))
+            # past the ramp the floor fades out over one more ramp: cut there, it released a landing ball still
+            # 0.05 L up in one frame, which swung 10-15 mm about the held tip (run_tired, giant and accelerated)
+            fade = np.clip(1.0 - (t - a[kc] - WEIGHT_RAMP_S) / WEIGHT_RAMP_S, 0.0, 1.0)
+            landing[:, foot] = np.maximum(landing[:, foot], np.where(ok, np.minimum(u, fade), 0.0))
     height = markers[..., UP_AXIS]  # ground at 0
     lo, hi = 0.02 * leg_length, 0.05 * leg_length
     loaded = min_jerk((hi - height) / (hi - lo))  # 1 at or below lo, 0 at or above hi

@@ -86,7 +86,7 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
 
         weighed = with_edge_contacts(path)
     reach = _reach_factor(hips, body, markers)
-    weight = _marker_weights(weighed, markers, body.leg_length) * reach
+    weight = _marker_weights(weighed, markers, body.leg_length, fade=cyc.order != "walking") * reach
     # A swinging foot's target beyond the leg's reach keeps only OUT_OF_REACH_SWING of the swing weight: the
     # trailing foot's ground path after an acceleration's longer stance lies 1.2 L from the hip, and at the
     # full swing weight it dragged the pelvis 26 deg off the reference pose, which sprang back in one frame
@@ -288,7 +288,7 @@ def _psi_at(path: MachinePath, times: np.ndarray) -> np.ndarray:
     return np.where(times > t[-1], psi[-1] + (times - t[-1]) * rate, out)
 
 
-def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float) -> np.ndarray:
+def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float, fade: bool = True) -> np.ndarray:
     """(T, 2, 3) foot marker weights: high for markers that bear load, low for the rest.
 
     A foot on the ground is weighted by STANCE_MARKER_WEIGHT, ramped (min-jerk over WEIGHT_RAMP_S) around
@@ -314,8 +314,10 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float) -
             ramp[:, foot] = np.maximum(ramp[:, foot], np.where(ok, u, 0.0))
             # past the ramp the floor fades out over one more ramp: cut there, it released a landing ball still
             # 0.05 L up in one frame, which swung 10-15 mm about the held tip (run_tired, giant and accelerated)
-            fade = np.clip(1.0 - (t - a[kc] - WEIGHT_RAMP_S) / WEIGHT_RAMP_S, 0.0, 1.0)
-            landing[:, foot] = np.maximum(landing[:, foot], np.where(ok, np.minimum(u, fade), 0.0))
+            # (not for a walk: its giant's double support moved 0.020 from the clip's, over the 0.02 it keeps)
+            tail = np.clip(1.0 - (t - a[kc] - WEIGHT_RAMP_S) / WEIGHT_RAMP_S, 0.0, 1.0) if fade else 1.0
+            keep = ok & (fade | (t <= a[kc] + WEIGHT_RAMP_S))
+            landing[:, foot] = np.maximum(landing[:, foot], np.where(keep, np.minimum(u, tail), 0.0))
     height = markers[..., UP_AXIS]  # ground at 0
     lo, hi = 0.02 * leg_length, 0.05 * leg_length
     loaded = min_jerk((hi - height) / (hi - lo))  # 1 at or below lo, 0 at or above hi

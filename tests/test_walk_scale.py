@@ -19,7 +19,7 @@ CHARACTERS = ("child", "troll", "giant")
 
 #: Outputs that miss a bar or the double-support share today, measured after the rolling foot of the walking
 #: cycle (synthesis.cycle._remove_sliding_rolling: one pivot held at a time, the toe raised to the top of the
-#: floor band by the end of the stance) and the edge contacts (synthesis.walking.with_edge_contacts):
+#: floor band by the end of the stance) and the edge contacts (synthesis.targets._contacts_extended):
 #: `python docs/make_walk_table.py`.
 KNOWN_MISSES = {
     ("02_01", "child"): "ball-and-tip skate 107.9 mm: the landing foot's ball in its last swing, in the output's "

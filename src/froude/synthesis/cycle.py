@@ -663,11 +663,12 @@ def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float, n_rise
     yaw, shift, lift = np.zeros(n), np.zeros((n, 2)), np.zeros(n)
     pivot, first = -1, -1
     lowest = np.inf  # the landing pivot: its reference's lowest height so far
+    low_so_far = np.minimum.accumulate(height, axis=0)  # (n, 3) each marker's lowest height up to sample i
     for i in range(n):
         loaded = np.flatnonzero(rise[i] <= band)
         later = loaded[loaded > pivot] if pivot >= 0 else loaded
         if later.size:
-            up = height[i] - height[: i + 1].min(axis=0)  # (3,) risen since each marker's lowest so far
+            up = height[i] - low_so_far[i]  # (3,) risen since each marker's lowest so far
             k = int(later[np.argmin(up[later])])
             if pivot < 0 or up[k] + ROLL_SWITCH_BAND * band < up[pivot]:
                 pivot = k

@@ -80,13 +80,8 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     body = retarget.body
     hips = body.joint_positions(initial, [body.roles["left_hip"], body.roles["right_hip"]])  # (T, 2, 3) [m]
     markers = _lift_out_of_reach(hips, body, markers)
-    weighed = path
-    if cyc.order == "walking":  # a walk starts and ends with a foot on the ground that is no step's
-        from .walking import with_edge_contacts
-
-        weighed = with_edge_contacts(path)
     reach = _reach_factor(hips, body, markers)
-    weight = _marker_weights(weighed, markers, body.leg_length, fade=cyc.order != "walking") * reach
+    weight = _marker_weights(path, markers, body.leg_length, fade=cyc.order != "walking") * reach
     # A swinging foot's target beyond the leg's reach keeps only OUT_OF_REACH_SWING of the swing weight: the
     # trailing foot's ground path after an acceleration's longer stance lies 1.2 L from the hip, and at the
     # full swing weight it dragged the pelvis 26 deg off the reference pose, which sprang back in one frame
@@ -266,7 +261,9 @@ def _contacts_extended(path: MachinePath, cols: np.ndarray) -> tuple[np.ndarray,
 
     A clip whose feet stay down long after the load falls (run_tired: the marker contact outlasts the loaded
     stance by 0.05-0.09 of a stride) starts the output in the tail of the previous contact: unweighted, the
-    foot there slid 31-68 mm along the floor in the first frames.
+    foot there slid 31-68 mm along the floor in the first frames. A walk starts as one foot lands with the
+    other still down behind it and ends as the first lands again: those contacts are no step of the path
+    either, and held like swinging feet a toe slid 8 mm (07_01 as a troll).
     """
     a, b = path.contact_on[cols], path.contact_off[cols]
     if len(a) > 1:

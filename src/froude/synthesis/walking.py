@@ -230,38 +230,6 @@ def steps_path(prep, retarget, plan: StepPlan, fps: float):
     )
 
 
-def with_edge_contacts(path):
-    """The walking path with the contacts cut by its ends as steps too (for the foot weights only).
-
-    A walk's output starts as foot A lands, with foot B still on the ground behind it (the double support
-    of the step before), and ends as A lands again: B's stance before the first step and A's after the last
-    are not steps of the path, so the IK held B like a swinging foot and let its toe slide 8 mm (07_01 as a
-    troll). They are added one stride before B's first contact and after A's last (same on/off times less
-    or plus that foot's stride time), in time order. path: a walking MachinePath (fewer than two steps: as
-    it is); only the result's foot_of_step, contact_on and contact_off differ from it.
-    """
-    from dataclasses import replace
-
-    feet, on, off = path.foot_of_step, path.contact_on, path.contact_off
-    n = len(feet)
-    if n < 2:
-        return path
-
-    def stride(j, direction):  # a foot's stride time at its contact j, toward the end of the path
-        k = j + 2 * direction
-        if 0 <= k < n:
-            return abs(on[k] - on[j])
-        return 2.0 * abs(on[1] - on[0]) if direction > 0 else 2.0 * abs(on[-1] - on[-2])
-
-    first_b = 1  # B's first contact and A's last (the steps alternate feet)
-    last_a = n - 1 if feet[n - 1] == feet[0] else n - 2
-    all_on = np.concatenate([[on[first_b] - stride(first_b, 1)], on, [on[last_a] + stride(last_a, -1)]])
-    all_off = np.concatenate([[off[first_b] - stride(first_b, 1)], off, [off[last_a] + stride(last_a, -1)]])
-    all_feet = np.concatenate([[feet[first_b]], feet, [feet[last_a]]])
-    order = np.argsort(all_on, kind="stable")
-    return replace(path, foot_of_step=all_feet[order], contact_on=all_on[order], contact_off=all_off[order])
-
-
 #: Swing marker weight reached at touchdown and left at liftoff by ``soften_swing_weights`` [1/m²], and the
 #: share of the step time over which it ramps (geometrically, from the swing weight).
 SWING_GUIDE_WEIGHT = 0.5

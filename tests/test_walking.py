@@ -2,7 +2,8 @@
 
 Acceptance 1 of issue 17 is checked on every real walk: a periodic cycle; stance and double-support
 times within 5 % of the clip's; COM height within 1.5 cm RMS; the vertical force's two peaks and trough
-within 0.1 BW and 5 % of a step of the clip's (not met yet: marked xfail, strict, with the figures).
+within 0.1 BW and 5 % of a step of the clip's (met on 02_01 and the Bandai walk; 07_01 is a strict xfail
+with its figures).
 """
 from __future__ import annotations
 
@@ -102,9 +103,24 @@ def test_fit_on_real_walks_meets_cycle_times_and_com(name, walk_fits):
     assert np.all(np.isfinite(l)) and m.K > 0
 
 
-@pytest.mark.xfail(strict=True, reason="issue 17 acceptance 1, force landmarks: not met yet (peak/trough timing off by "
-                   "5-11 % of a step on every walk; see docs/walking.md)")
-@pytest.mark.parametrize("name", clip_params(WALKING) + clip_params(BANDAI_WALKS))
+#: Walks whose machine misses the force landmarks today (`froude fit CLIP`; docs/walking.md, Limitations).
+LANDMARK_MISSES = {
+    "07_01": "peak1 timing -10.6 % and trough +7.5 % of a step (heights +0.02, -0.05, +0.00 BW; peak2 +5.8 %): "
+             "the clip's two peaks lie 87 ms apart, 8 ms after the other foot's touchdown and 18 ms after its "
+             "liftoff, where the machine's total force has one peak, in mid double support",
+}
+
+
+def _landmark_cases():
+    out = []
+    for p in clip_params(WALKING) + clip_params(BANDAI_WALKS):
+        why = LANDMARK_MISSES.get(p) if isinstance(p, str) else None
+        out.append(pytest.param(p, marks=[pytest.mark.xfail(strict=True, reason="issue 17 acceptance 1, force "
+                                                            f"landmarks, not met on {p}: {why}")]) if why else p)
+    return out
+
+
+@pytest.mark.parametrize("name", _landmark_cases())
 def test_fit_force_peaks_and_trough_match_the_clip(name, walk_fits):
     q = walk_fits(name).machine.quality
     for key in ("peak1", "trough", "peak2"):
@@ -129,6 +145,10 @@ def test_machine_json_round_trip_and_similarity(name, walk_fits, tmp_path):
     g = m.scaled(2.0, 8.0)
     assert g.si()["step_frequency_hz"] == pytest.approx(m.si()["step_frequency_hz"] / math.sqrt(2), rel=1e-12)
     assert g.mean_speed == m.mean_speed and g.double_support_fraction == m.double_support_fraction
+    # a file written before the cubic control term has none: it reads as the quadratic control (e = 0)
+    old = json.loads(text)
+    del old["cycle"]["e"]
+    assert WalkingMachine.from_dict(old).control.e == 0.0 and back.control.e == m.e
     with pytest.raises(FitError, match="not a froude walking machine"):
         WalkingMachine.from_dict({"schema": "froude.machine/1"})
 

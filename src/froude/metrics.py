@@ -247,7 +247,9 @@ def foot_skate_floor_mm(markers: np.ndarray, gait: Gait, leg_length: float) -> f
     the ball and the tip (SKATE_MARKERS) rests at its lowest height in that window; it is on or just above
     the floor while within SKATE_BAND_L × L of that height. Over each such run of frames, sliding is the
     largest horizontal distance of the marker from where it was at its lowest point in the run. Rolling from
-    heel to toe does not slide the ball or the tip; a toe that scuffs sideways at lift-off does.
+    heel to toe does not slide the ball or the tip; a toe that scuffs sideways at lift-off does. A stance cut
+    by the clip's edge whose marker is lowest outside the stance (a landing foot's ball still in its swing
+    at the last frame, heel first) never has that marker on the floor within the clip: it is not counted.
     """
     worst = 0.0
     F = markers.shape[0]
@@ -264,6 +266,11 @@ def foot_skate_floor_mm(markers: np.ndarray, gait: Gait, leg_length: float) -> f
                 h = seg[:, UP_AXIS]
                 if h.min() > s.ground + SKATE_REACH_L * leg_length:
                     continue  # this point never comes down to the floor around this contact
+                if s.partial and not s.start <= a + int(np.argmin(h)) < s.stop:
+                    # cut by the clip's edge before the point came down (or after it rose): its lowest
+                    # point is in the swing, whose forward travel is not a slide (02_01 x0.8: a ball
+                    # 32 mm up, 166 mm of swing, in the last 20 frames)
+                    continue
                 low = h <= h.min() + band
                 for r0, r1 in _true_runs(low):
                     p = seg[r0:r1][:, HORIZONTAL_AXES]

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
+from typing import ClassVar
 
 import numpy as np
 
@@ -103,7 +104,7 @@ class Control:
     c: float = 0.0
     T_c: float = 1.0
 
-    NAMES = ("K", "a", "b", "c", "T_c")
+    NAMES: ClassVar[tuple[str, ...]] = ("K", "a", "b", "c", "T_c")
 
     def as_tuple(self):
         """(K, a, b, c, T_c)."""

@@ -3,14 +3,15 @@
 The walking counterpart of :class:`froude.machine.model.SimpleMachine`. Canonical content is
 dimensionless (l0 = 1, g = 1, m = 1; see :mod:`froude.machine.walking`): the periodic touchdown state
 (u, v, d, s), the touchdown geometry (θ0, l_td), the centre-of-pressure roll, the eq. 2 control of both
-legs (K, a, b, c, T_c) and the cycle's times. The SI view multiplies by l0 [m], m [kg] and g, so
+legs (K, a, b, c, T_c and the cubic term e of ``WalkControl``) and the cycle's times. The SI view
+multiplies by l0 [m], m [kg] and g, so
 :meth:`WalkingMachine.scaled` is dynamic similarity (Table 1): lengths × L, times × √L, speeds × √L,
 forces × M; dimensionless numbers, angles and body-weight forces unchanged.
 
 JSON (all keys always present)::
 
   schema, kind: "walking", source, mass_kg, l0_m, g_m_s2,
-  cycle: {u, v, d, s, theta0_rad, l_td, roll, K, a, b, c, T_c, t_stance, t_double, t_step, step_length,
+  cycle: {u, v, d, s, theta0_rad, l_td, roll, K, a, b, c, e, T_c, t_stance, t_double, t_step, step_length,
           mean_speed, periodicity, iterations}                                  # dimensionless
   cycle_si: {...}                                                               # derived, informative
   frame: {heading, lateral, up, ground_m}
@@ -30,13 +31,12 @@ from ..errors import FitError
 from ..io.atomic import atomic_write_text
 from ..io.jsonable import dumps
 from . import is_walking  # re-exported: its home is the package (no walking code imported)
-from .dynamics import Control
-from .walking import WalkState
+from .walking import WalkControl, WalkState
 
 __all__ = ["WALK_SCHEMA", "WalkingMachine", "is_walking", "load_walking_machine"]
 
 WALK_SCHEMA = "froude.walking/1"
-_CYCLE = ("u", "v", "d", "s", "l_td", "roll", "K", "a", "b", "c", "T_c", "t_stance", "t_double", "t_step",
+_CYCLE = ("u", "v", "d", "s", "l_td", "roll", "K", "a", "b", "c", "e", "T_c", "t_stance", "t_double", "t_step",
           "step_length", "mean_speed", "periodicity")
 
 
@@ -47,7 +47,8 @@ class WalkingMachine:
     Dimensionless (units l0, √(l0/g), √(g l0), m g): touchdown state u, v (COM velocity), d (COM ahead of
     the trailing touchdown point), s (time since the trailing touchdown); theta0 [rad] and l_td (leg
     length at touchdown) place the landing foot; roll: centre-of-pressure travel per unit τ; K, a, b, c,
-    T_c: eq. 2 control of both legs; t_stance, t_double (one double support), t_step; step_length;
+    e, T_c: the leg control of both legs (``WalkControl``: eq. 2 with a cubic term e); t_stance, t_double
+    (one double support), t_step; step_length;
     mean_speed (the Froude number U of the gait); periodicity: max |next − state| at the cycle; iterations:
     simulator evaluations of the cycle searches (``machine.orbit.solve_orbit``: points and Jacobians).
     SI: mass [kg], l0 [m] (mean touchdown leg length COM → touchdown point), g [m/s²].
@@ -65,6 +66,7 @@ class WalkingMachine:
     a: float
     b: float
     c: float
+    e: float
     T_c: float
     t_stance: float
     t_double: float
@@ -98,8 +100,8 @@ class WalkingMachine:
         return math.sqrt(self.g * self.l0)
 
     @property
-    def control(self) -> Control:
-        return Control(K=self.K, a=self.a, b=self.b, c=self.c, T_c=self.T_c)
+    def control(self) -> WalkControl:
+        return WalkControl(K=self.K, a=self.a, b=self.b, c=self.c, T_c=self.T_c, e=self.e)
 
     @property
     def state(self) -> WalkState:
@@ -189,7 +191,8 @@ class WalkingMachine:
             raise FitError(f"{where}: not a froude walking machine file (schema {got!r}, expected {WALK_SCHEMA!r})")
         try:
             c, fr = d["cycle"], d["frame"]
-            kw = {k: float(c[k]) for k in _CYCLE}
+            # files written before the cubic term have none: their control is the quadratic one (e = 0)
+            kw = {k: float(c[k] if k != "e" else c.get("e", 0.0)) for k in _CYCLE}
             return cls(**kw, theta0=float(c["theta0_rad"]), iterations=int(c["iterations"]),
                        mass=float(d["mass_kg"]), l0=float(d["l0_m"]), g=float(d["g_m_s2"]), source=str(d["source"]),
                        heading=np.asarray(fr["heading"], float), lateral=np.asarray(fr["lateral"], float),

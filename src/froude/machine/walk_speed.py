@@ -95,7 +95,7 @@ def _resolve(base: WalkingMachine, start: WalkingMachine, s: float) -> WalkingMa
     targets = (t_step, t_double, s * base.mean_speed)
     r = t_step / start.t_step  # time stretch from the start cycle to the target one
     z0 = np.array([start.u * (s * base.mean_speed / start.mean_speed), start.v, start.d, start.s * r, start.theta0,
-                   start.K, start.a, start.b, start.c, start.l_td])
+                   start.K, start.a, start.b, start.c, start.l_td, start.e])
     try:
         z, w, it, _ = _cycle_search(z0, T_c, base.roll, targets, N_PER_STANCE)
     except FitError as e:
@@ -104,7 +104,7 @@ def _resolve(base: WalkingMachine, start: WalkingMachine, s: float) -> WalkingMa
     per = float(max(abs(nx.u - z[0]), abs(nx.v - z[1]), abs(nx.d - z[2]), abs(nx.s - z[3])))
     return replace(
         base, u=float(z[0]), v=float(z[1]), d=float(z[2]), s=float(z[3]), theta0=float(z[4]), K=float(z[5]),
-        a=float(z[6]), b=float(z[7]), c=float(z[8]), l_td=float(z[9]), T_c=T_c, t_stance=w.t_stance,
+        a=float(z[6]), b=float(z[7]), c=float(z[8]), l_td=float(z[9]), e=float(z[10]), T_c=T_c, t_stance=w.t_stance,
         t_double=w.t_double, t_step=w.t_step, step_length=w.step_length, mean_speed=w.step_length / w.t_step,
         periodicity=per, iterations=int(it),
     )

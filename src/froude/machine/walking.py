@@ -5,7 +5,11 @@ Soc. B 273:2861: a point mass on two massless compliant legs, with double suppor
 the M-shaped vertical force and the vaulting COM path of human walking). Each leg is controlled as in
 Pollard's eq. 2, with the same control for both legs (a symmetric gait)::
 
-    f_i = K (l_d(τ_i) − l_i),   l_d(τ) = 1 + a + b τ + c τ²,   τ_i = (t − t_touchdown,i) / T_c
+    f_i = K (l_d(τ_i) − l_i),   l_d(τ) = 1 + a + b τ + c τ² + e τ³,   τ_i = (t − t_touchdown,i) / T_c
+
+(``WalkControl``: the running machine's ``Control`` and a cubic term e, which lets the weight-acceptance
+half of a stance differ from the push-off half: with e = 0 the fitted l_d came out symmetric about
+mid-stance, b ≈ −c, and so did the force's peaks.)
 
 along the leg from its contact point to the COM, in the sagittal plane: x forward, y up, ground y = 0.
 Units are those of the running machine (touchdown leg length l0 = 1, g = 1, m = 1; see the table in
@@ -33,14 +37,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
 from ..errors import PlanError
 from .dynamics import Control
 
-__all__ = ["WalkState", "WalkStep", "WalkTrajectory", "RecordedStep", "walk_step", "record_step", "simulate_walk",
-           "N_PER_STANCE",
+__all__ = ["WalkControl", "WalkState", "WalkStep", "WalkTrajectory", "RecordedStep", "walk_step", "record_step",
+           "simulate_walk", "N_PER_STANCE",
            "REASONS", "OK"]
 
 #: RK4 steps per nominal stance T_c.
@@ -66,6 +71,20 @@ REASONS = {
     FLIGHT: "the stance leg unloaded in single support (a flight phase: running, not walking)",
     LOW_VAULT: "the COM fell below the landing height before vaulting over the stance foot",
 }
+
+
+@dataclass(frozen=True)
+class WalkControl(Control):
+    """The walking leg control: eq. 2's (K, a, b, c, T_c) and a cubic coefficient e [l0 per unit τ³],
+    l_d = 1 + a + b τ + c τ² + e τ³ (scalar fields). A plain ``Control`` is a WalkControl with e = 0."""
+
+    e: float = 0.0
+
+    NAMES: ClassVar[tuple[str, ...]] = ("K", "a", "b", "c", "T_c", "e")
+
+    def as_tuple(self):
+        """(K, a, b, c, T_c, e)."""
+        return (self.K, self.a, self.b, self.c, self.T_c, self.e)
 
 
 @dataclass(frozen=True)
@@ -104,8 +123,8 @@ class WalkStep:
     reason: int
 
 
-def _ld(tau, a1, b, c):
-    return a1 + tau * (b + c * tau)
+def _ld(tau, a1, b, c, e):
+    return a1 + tau * (b + tau * (c + e * tau))
 
 
 class _Machine:
@@ -117,6 +136,7 @@ class _Machine:
         self.a1 = 1.0 + float(ctl.a)
         self.b = float(ctl.b)
         self.c = float(ctl.c)
+        self.e = float(getattr(ctl, "e", 0.0))  # a running Control has no cubic term
         self.Tc = float(ctl.T_c)
         self.h = self.Tc / n_per_stance
 
@@ -128,7 +148,7 @@ class _Machine:
         tau = (t - t0) / self.Tc
         dx = x - xc - self.roll * tau
         l = math.sqrt(dx * dx + y * y)
-        g = _ld(tau, self.a1, self.b, self.c) - l
+        g = _ld(tau, self.a1, self.b, self.c, self.e) - l
         f = self.K * (g if armed else max(g, 0.0))
         return f, g, dx / l, y / l
 
@@ -282,7 +302,8 @@ def walk_step(state: WalkState, theta0: float, control: Control, *, roll: float 
     """One step of the walking machine, touchdown → next touchdown (see module doc).
 
     state: the touchdown state; theta0: touchdown angle from vertical [rad]; control: the eq. 2 control
-    of both legs (scalar fields). Returns a WalkStep (``valid`` False with a ``reason`` code, never raises).
+    of both legs (a WalkControl, or a Control for e = 0; scalar fields). Returns a WalkStep (``valid``
+    False with a ``reason`` code, never raises).
     """
     return _one_step(state, float(theta0), control, n_per_stance, False, roll, l_td)[0]
 
@@ -356,7 +377,7 @@ class RecordedStep:
             tau = (t - t0) / mc.Tc
             rel = pos - np.stack([xc + mc.roll * tau, np.zeros_like(tau)], axis=1)
             l = np.linalg.norm(rel, axis=1)
-            f = mc.K * np.maximum(_ld(tau, mc.a1, mc.b, mc.c) - l, 0.0)
+            f = mc.K * np.maximum(_ld(tau, mc.a1, mc.b, mc.c, mc.e) - l, 0.0)
             force[:, i] = np.where(on[:, None], (f / l)[:, None] * rel, 0.0)
         return WalkTrajectory(t=t, pos=pos, vel=vel, force=force, contact_x=np.array([legs[0][0], legs[1][0]]),
                               t_touchdown=np.array([legs[0][1], legs[1][1]]), t_liftoff=float(t_lo),

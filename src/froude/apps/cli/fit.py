@@ -135,7 +135,8 @@ def walk_table(res) -> str:
     lines = [
         f"walking machine  u = {m.u:.4f}  v = {m.v:+.4f}  d = {m.d:.4f}  s = {m.s:.4f}  "
         f"θ0 = {math.degrees(m.theta0):.2f}°  l_td = {m.l_td:.4f}  roll = {m.roll:.4f}",
-        f"        control  K = {m.K:.2f}  a = {m.a:+.4f}  b = {m.b:+.4f}  c = {m.c:+.4f}  T_c = {m.T_c:.4f}"
+        f"        control  K = {m.K:.2f}  a = {m.a:+.4f}  b = {m.b:+.4f}  c = {m.c:+.4f}  e = {m.e:+.4f}  "
+        f"T_c = {m.T_c:.4f}"
         f"   (l0 = {m.l0:.3f} m, m = {m.mass:g} kg; periodic to {m.periodicity:.1e})",
         "",
         "                       clip    machine",

@@ -114,14 +114,13 @@ def _floor_top(markers: np.ndarray, leg_length: float, frame_time: float) -> np.
     within a stance and its margins, FLOOR_WINDOW_S either side), when that lowest height is within
     SKATE_REACH_L × L of the floor.
     """
-    from scipy.ndimage import minimum_filter1d
-
     from ..metrics import SKATE_BAND_L, SKATE_MARKERS, SKATE_REACH_L
 
     out = np.full(markers.shape[:3], -np.inf)
     half = max(1, int(round(FLOOR_WINDOW_S / frame_time)))
     for k in SKATE_MARKERS:
-        low = minimum_filter1d(markers[:, :, k, UP_AXIS], 2 * half + 1, axis=0, mode="nearest")  # (T, 2)
+        h = np.pad(markers[:, :, k, UP_AXIS], ((half, half), (0, 0)), mode="edge")
+        low = np.lib.stride_tricks.sliding_window_view(h, 2 * half + 1, axis=0).min(axis=-1)  # (T, 2)
         out[:, :, k] = np.where(low <= SKATE_REACH_L * leg_length, low + SKATE_BAND_L * leg_length, -np.inf)
     return out
 

@@ -238,6 +238,7 @@ def accelerate(
 #: sampled PERIODIC_OVERSAMPLE times finer and tiling it (see finish).
 PERIODIC_MIN_STRIDES = 6
 PERIODIC_OVERSAMPLE = 4
+IK_REPAIR_ROUNDS_WALK = 4
 
 
 def targets_of(prep: Prepared, path: MachinePath, retarget: Retarget):
@@ -267,7 +268,7 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
         motion = tile_stride(one, 2.0 * m.step_time * m.time_unit, dense_fps, targets, path.times, stride,
                              retarget.body)
     else:
-        ik = correct(targets, retarget.body)
+        ik = correct(targets, retarget.body, repair_rounds=IK_REPAIR_ROUNDS_WALK if is_walking(prep.machine) else 1)
         if not ik.ok:
             bad = np.flatnonzero(ik.failed)
             notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]

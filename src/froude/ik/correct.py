@@ -42,7 +42,7 @@ RETRY_MARKER_ERROR = 3e-3
 HELD_MARKER_WEIGHT = 1.0
 
 
-def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
+def correct(targets: Targets, body: BodyModel, on_failure: str = "flag", repair_rounds: int = 1):
     """§6: whole-body IK toward the machine COM and the foot targets, pulled toward the reference pose.
 
     All frames are solved together with the solver's fast chord iterations. Then one repair pass solves
@@ -59,38 +59,12 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
     held = _held_markers(targets)
     res = _replace(res, failed=_missed(res, held, DEFAULT_MAX_ERROR))
     assert res.com_error is not None and res.com is not None  # the ComTask is always given
-    rot = res.motion.rotations
     init_jump = _largest_joint_angle_deg(targets.initial.rotations[1:], targets.initial.rotations[:-1])
-    jump = _largest_joint_angle_deg(rot[1:], rot[:-1])
-    flip = np.zeros(len(rot), bool)
-    flip[1:] = jump > init_jump + BRANCH_JUMP_DEG
-    bad = np.flatnonzero(flip | (res.com_error > RETRY_COM_ERROR) | _missed(res, held, RETRY_MARKER_ERROR))
-    if bad.size:
-        src = np.where(flip[bad], bad - 1, bad)  # a jumped frame starts from its neighbour's solution
-        start = res.motion.with_(root_positions=res.motion.root_positions[src], rotations=rot[src])
-        sub = Targets(targets.initial.with_(root_positions=targets.initial.root_positions[bad],
-                                            rotations=targets.initial.rotations[bad]),
-                      targets.com[bad], targets.markers[bad], targets.marker_weight[bad], targets.com_weight[bad])
-        again = _solve_from(sub, start, body, IK_UNFLIP_ITERS if flip[bad].any() else IK_REPAIR_ITERS)
-        again = _replace(again, failed=_missed(again, held[bad], DEFAULT_MAX_ERROR))
-        prev = rot[np.maximum(bad - 1, 0)]
-        old_jump = _largest_joint_angle_deg(rot[bad], prev)
-        new_jump = _largest_joint_angle_deg(again.motion.rotations, prev)
-        better = np.where(flip[bad], new_jump < old_jump,
-                          _worst_held(again, held[bad]) < _worst_held(res, held)[bad])
-        better &= again.com_error <= np.maximum(res.com_error[bad], RETRY_COM_ERROR)
-        root = res.motion.root_positions.copy()
-        rot = rot.copy()
-        root[bad[better]] = again.motion.root_positions[better]
-        rot[bad[better]] = again.motion.rotations[better]
-        com_err = res.com_error.copy()
-        com_err[bad[better]] = again.com_error[better]
-        com = res.com.copy()
-        com[bad[better]] = again.com[better]
-        failed = res.failed.copy()
-        failed[bad[better]] = again.failed[better]
-        res = _replace(res, motion=res.motion.with_(root_positions=root, rotations=rot), com_error=com_err,
-                       failed=failed, com=com)
+    res, _ = _repair(res, targets, body, held, init_jump)
+    for _ in range(repair_rounds - 1):
+        res, n_bad = _repair(res, targets, body, held, init_jump, flips=False)
+        if not n_bad:
+            break
     # Make the COM exact: the remaining sub-millimetre error is removed by a root translation (the COM
     # moves one to one with it), which moves the feet by as little, so the flight parabola is exact.
     shift = targets.com - res.com  # the solver's COM of the solved poses (no second FK)
@@ -103,6 +77,56 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
         assert res.com_error is not None  # the ComTask is always given
         raise IkError(f"IK cannot reach its targets at frame {f} (COM error {1000 * res.com_error[f]:.1f} mm)")
     return res
+
+
+def _repair(res, targets: Targets, body: BodyModel, held: np.ndarray, init_jump: np.ndarray, flips: bool = True):
+    """One repair pass of ``correct``: the frames whose COM or held foot markers (held (F, 6)) stayed above
+    RETRY_COM_ERROR / RETRY_MARKER_ERROR, or that jumped to another branch (a joint changing more than
+    BRANCH_JUMP_DEG more than the reference pose's init_jump (F-1,) [deg]), solved again with a fresh
+    Jacobian at every step, warm-started from their own solution (from the previous frame's where they
+    jumped); a frame keeps the new pose only where it is better. Returns (result, frames tried)."""
+    rot = res.motion.rotations
+    jump = _largest_joint_angle_deg(rot[1:], rot[:-1])
+    flip = np.zeros(len(rot), bool)
+    flip[1:] = jump > init_jump + BRANCH_JUMP_DEG
+    if not flips:
+        flip[:] = False
+    bad = np.flatnonzero(flip | (res.com_error > RETRY_COM_ERROR) | _missed(res, held, RETRY_MARKER_ERROR))
+    if not bad.size:
+        return res, 0
+    src = np.where(flip[bad], bad - 1, bad)  # a jumped frame starts from its neighbour's solution
+    start = res.motion.with_(root_positions=res.motion.root_positions[src], rotations=rot[src])
+    sub = Targets(targets.initial.with_(root_positions=targets.initial.root_positions[bad],
+                                        rotations=targets.initial.rotations[bad]),
+                  targets.com[bad], targets.markers[bad], targets.marker_weight[bad], targets.com_weight[bad])
+    again = _solve_from(sub, start, body, IK_UNFLIP_ITERS if flip[bad].any() else IK_REPAIR_ITERS)
+    again = _replace(again, failed=_missed(again, held[bad], DEFAULT_MAX_ERROR))
+    prev = rot[np.maximum(bad - 1, 0)]
+    old_jump = _largest_joint_angle_deg(rot[bad], prev)
+    new_jump = _largest_joint_angle_deg(again.motion.rotations, prev)
+    better = np.where(flip[bad], new_jump < old_jump,
+                      _worst_held(again, held[bad]) < _worst_held(res, held)[bad])
+    better &= again.com_error <= np.maximum(res.com_error[bad], RETRY_COM_ERROR)
+    if not flips:  # a later pass mends missed targets only: never at the cost of a larger jump either side
+        nxt = rot[np.minimum(bad + 1, len(rot) - 1)]
+        new_next = _largest_joint_angle_deg(again.motion.rotations, nxt)
+        old_next = _largest_joint_angle_deg(rot[bad], nxt)
+        ref = np.concatenate([[0.0], init_jump, [0.0]])  # the reference pose's jumps into and out of each frame
+        allowed = np.maximum(np.maximum(ref[bad], ref[bad + 1]) + BRANCH_JUMP_DEG, np.maximum(old_jump, old_next))
+        better &= np.maximum(new_jump, new_next) <= allowed
+    root = res.motion.root_positions.copy()
+    rot = rot.copy()
+    root[bad[better]] = again.motion.root_positions[better]
+    rot[bad[better]] = again.motion.rotations[better]
+    com_err = res.com_error.copy()
+    com_err[bad[better]] = again.com_error[better]
+    com = res.com.copy()
+    com[bad[better]] = again.com[better]
+    failed = res.failed.copy()
+    failed[bad[better]] = again.failed[better]
+    res = _replace(res, motion=res.motion.with_(root_positions=root, rotations=rot), com_error=com_err,
+                   failed=failed, com=com)
+    return res, int(bad.size)
 
 
 def _held_markers(targets: Targets) -> np.ndarray:

@@ -49,8 +49,10 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag", repair_
     again, with a fresh Jacobian every iteration, the few frames whose COM or held foot markers stayed
     above RETRY_COM_ERROR / RETRY_MARKER_ERROR or that jumped to another branch (a knee flipping near full
     extension), warm-started from the neighbouring frame's solution where they jumped; frames are
-    independent problems, so this is the same problem solved harder where needed. Finally the COM is made
-    exact by a root translation.
+    independent problems, so this is the same problem solved harder where needed. repair_rounds - 1 further
+    passes (a walk's, ``pipeline.IK_REPAIR_ROUNDS_WALK``) mend the frames still missing their targets, each
+    keeping a new pose only where it makes no larger joint jump either side (``_repair``). Finally the COM is
+    made exact by a root translation.
     """
     tasks = [ComTask(body, targets.com, targets.com_weight),
              MarkerTask.feet(body, targets.markers, targets.marker_weight), PostureTask(weight=posture_weights(body))]

@@ -238,10 +238,6 @@ def accelerate(
 #: sampled PERIODIC_OVERSAMPLE times finer and tiling it (see finish).
 PERIODIC_MIN_STRIDES = 6
 PERIODIC_OVERSAMPLE = 4
-#: IK repair passes of a walk (``ik.correct``'s repair_rounds; a run's: 1). On single frames of the Bandai walk
-#: at 30 Hz the fast pass stopped 5-100 mm from held foot targets and one pass left 4-25 mm (a held toe
-#: 3.4 mm under the floor, then 4 mm up); the further passes bring them within the bars (docs/walking.md).
-IK_REPAIR_ROUNDS_WALK = 4
 
 
 def targets_of(prep: Prepared, path: MachinePath, retarget: Retarget):
@@ -257,7 +253,7 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
     the IK of one stride only, sampled PERIODIC_OVERSAMPLE times finer, and tile it (the result is
     periodic too; ``ik.correct.tile_stride``).
     """
-    from .ik.correct import correct, tile_stride
+    from .ik.correct import WALK_REPAIR_ROUNDS, correct, tile_stride
 
     targets = targets_of(prep, path, retarget)
     n_strides = len(path.foot_of_step) / 2
@@ -271,7 +267,7 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
         motion = tile_stride(one, 2.0 * m.step_time * m.time_unit, dense_fps, targets, path.times, stride,
                              retarget.body)
     else:
-        ik = correct(targets, retarget.body, repair_rounds=IK_REPAIR_ROUNDS_WALK if is_walking(prep.machine) else 1)
+        ik = correct(targets, retarget.body, repair_rounds=WALK_REPAIR_ROUNDS if is_walking(prep.machine) else 1)
         if not ik.ok:
             bad = np.flatnonzero(ik.failed)
             notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]

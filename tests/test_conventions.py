@@ -152,6 +152,22 @@ def test_fit_is_the_same_in_every_convention(name, variant, tmp_root):
 # 11 at 8 Hz; a bias towards low K), a ballistic-flight reconstruction of the COM (16-33 of 36: the 120 Hz COM's own
 # flights are 0.19-0.21 body weights off ballistic, so the prior is wrong by more than the noise it would
 # remove), spring fits weighted to mid-stance (16-23 of 36).
+# Where the content comes from (``fit_rates.py --jitter``): the root's translation, which carries 88-96 % of the
+# COM's content above 15 Hz (on 09_02 and 09_06 each segment's share follows its mass: the whole body shifts),
+# a 0.46-0.75 mm RMS vibration through each stance (0.31-0.47 mm in flight) peaking at 18-35 Hz (mostly 21-26 Hz),
+# which the planted foot shares (its ankle height moves with it, correlation 0.5-0.9 on 8 of 9 runs): at 30 Hz
+# it folds to 4-12 Hz, the band of the stance force itself. The errors are in every stance, not a few
+# (``fit_rates.py --stances``: over 76 stances RMS 2.2 ms at touchdown, 2.6 ms at liftoff, 3.7 ms in duration,
+# 3.6 % in a stance's spring; |K| > 5 % on 14), and each clip has two full stances, so no robust aggregation
+# over stances is possible. In the four failing takes the cycle's K follows the stance time (the 120 Hz stance
+# time alone brings 09_02 to +0.5 %/−0.13°) and the priors K, a, b, c (09_06: the 120 Hz a, b, c alone give
+# +3.3 %). Also measured, not adopted: the 0.5 BW events read on a 6 Hz force at both rates (RMS ΔK 3.10 →
+# 2.36 %, Δθ0 0.29 → 0.15°; 5 of 36 miss, 09_03 and 09_07 still) moves the 120 Hz fits (09_02 K 13.65 → 14.72) and
+# breaks their bars (09_01 COM RMS 19 mm > 16, 09_03 flight residual 0.275 BW > 0.25); the events of a pulse (a
+# sum of 1-4 half-sine harmonics over the stance, filtered like the COM) fitted to the force at both rates (6 of
+# 36 miss, RMS 2.2-2.4 %/0.14-0.15°) shorten the 120 Hz stances by 3-18 ms (K up to +26 %, COM RMS up to 25 mm);
+# a sharper cut of the 30 Hz COM above 12 Hz (9 of 36, RMS 2.9 %/0.32°); the feet's marker events (RMS 8 ms at
+# touchdown, 16 ms at liftoff at 30 Hz against 120 Hz).
 _RATE_SHORT = {
     ("09_02", "30Hz"): "K +4.4 %, θ0 −0.74° (COM content above 15 Hz aliased by the thinning; events 5 ms apart)",
     ("09_03", "30Hz"): "K −3.1 % (COM content above 15 Hz aliased by the thinning; spring fits 4 % apart)",

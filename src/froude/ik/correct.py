@@ -9,7 +9,7 @@ from dataclasses import replace as _replace
 import numpy as np
 
 from ..body.model import BodyModel
-from ..constants import UP_AXIS
+from ..constants import HORIZONTAL_AXES, UP_AXIS
 from ..core.motion import Motion
 from ..synthesis.targets import COM_WEIGHT, Targets
 from .solver import DEFAULT_MAX_ERROR, solve_ik
@@ -52,10 +52,8 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
     independent problems, so this is the same problem solved harder where needed. Finally the COM is made
     exact by a root translation.
     """
-    tasks = [ComTask(body, targets.com, targets.com_weight),
-             MarkerTask.feet(body, targets.markers, targets.marker_weight), PostureTask(weight=posture_weights(body))]
-    res = solve_ik(targets.initial, tasks, body=body, freeze=IK_FREEZE, on_failure="flag", tol=IK_TOL,
-                   max_iters=IK_ITERS)
+    res = _fast_pass(targets, body)
+    targets, res = _hold_on_floor(targets, body, res)
     held = _held_markers(targets)
     res = _replace(res, failed=_missed(res, held, DEFAULT_MAX_ERROR))
     assert res.com_error is not None and res.com is not None  # the ComTask is always given
@@ -103,6 +101,101 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag"):
         assert res.com_error is not None  # the ComTask is always given
         raise IkError(f"IK cannot reach its targets at frame {f} (COM error {1000 * res.com_error[f]:.1f} mm)")
     return res
+
+
+#: A released foot marker (lighter than HELD_MARKER_WEIGHT) that the IK leaves in the floor band
+#: (Targets.floor_top) more than RETRY_MARKER_ERROR off its target is held there after all, at this fraction of
+#: the stance marker weight, ramped over WEIGHT_RAMP_S either side (see _hold_on_floor); at most
+#: FLOOR_HOLD_ROUNDS times (a frame next to a held one may sink in turn).
+FLOOR_HOLD_WEIGHT = 0.1
+FLOOR_HOLD_ROUNDS = 3
+#: A target moving slower than this [m/s] is at rest (a held point turning, not a foot travelling).
+FLOOR_TARGET_SPEED = 0.05
+
+
+def _hold_on_floor(targets: Targets, body: BodyModel, res):
+    """(targets, res) with the released foot markers that the IK left sliding on the floor held to their targets.
+
+    A marker's weight falls with its target's height (synthesis.targets._marker_weights), so the loaded
+    point is held and the rest of the foot may pivot. But a body whose posture carries its feet lower than the
+    reference's (a troll: its heavy trunk sets its COM, and so its hips, lower over the same COM path) drops a
+    released toe, its target 0.05 L up after lift-off, back to 0.015 L, where it slides with the swing path
+    2-3 mm a frame (run_tired as a troll, 10.8 mm); a folded rig's ball, released 0.05 L up within the floor
+    band over its 0.039 L rest height, swings 8 mm about the tip. Such markers are held to their targets
+    (which rise out of the band or stay put) where the achieved pose, not the target, is in the band.
+    """
+    if targets.floor_top is None:
+        return targets, res
+    from ..synthesis.targets import STANCE_MARKER_WEIGHT, WEIGHT_RAMP_S, min_jerk
+
+    per_size = (targets.com_weight / COM_WEIGHT)[:, None, None]  # (F, 1, 1)
+    hold = FLOOR_HOLD_WEIGHT * STANCE_MARKER_WEIGHT * per_size
+    dt = targets.initial.frame_time
+    offsets = np.arange(-int(np.ceil(WEIGHT_RAMP_S / dt)), int(np.ceil(WEIGHT_RAMP_S / dt)) + 1)
+    ramp = min_jerk(1.0 - np.abs(offsets) * dt / WEIGHT_RAMP_S)
+    F = len(per_size)
+    for _ in range(FLOOR_HOLD_ROUNDS):
+        achieved = body.foot_markers(res.motion)  # (F, 2, 3, 3) [m]
+        released = targets.marker_weight < HELD_MARKER_WEIGHT * per_size
+        # only toward a target above the band, or one at rest in it: a target that itself slides near the floor
+        # is the targets' to fix, and holding the foot to it would make it slide the more
+        target_h = targets.markers[..., UP_AXIS]
+        above = target_h >= targets.floor_top
+        still = _horizontal_speed(targets.markers, dt) <= FLOOR_TARGET_SPEED
+        sunk = target_h - achieved[..., UP_AXIS] > RETRY_MARKER_ERROR  # the posture holds it below its target
+        err = np.linalg.norm(achieved - targets.markers, axis=-1)
+        slides = (_horizontal_speed(achieved, dt) > FLOOR_TARGET_SPEED) & (err > RETRY_MARKER_ERROR)
+        sunk = released & (achieved[..., UP_AXIS] < targets.floor_top) & ((sunk & (above | still)) | (slides & still))
+        if not sunk.any():
+            break
+        want = np.zeros(sunk.shape)
+        for f, i, k in zip(*np.nonzero(sunk)):
+            rows = f + offsets
+            ok = (rows >= 0) & (rows < F)
+            want[rows[ok], i, k] = np.maximum(want[rows[ok], i, k], ramp[ok])
+        weight = np.maximum(targets.marker_weight, hold * want)
+        rows = np.flatnonzero(np.any(weight > targets.marker_weight, axis=(1, 2)))
+        targets = _replace(targets, marker_weight=weight)
+        res = _merge_rows(res, rows, _fast_pass(_rows_of(targets, rows), body))
+    return targets, res
+
+
+def _fast_pass(targets: Targets, body: BodyModel):
+    """The IK of every frame of ``targets`` from its reference pose, with the solver's fast chord iterations."""
+    tasks = [ComTask(body, targets.com, targets.com_weight),
+             MarkerTask.feet(body, targets.markers, targets.marker_weight), PostureTask(weight=posture_weights(body))]
+    return solve_ik(targets.initial, tasks, body=body, freeze=IK_FREEZE, on_failure="flag", tol=IK_TOL,
+                    max_iters=IK_ITERS)
+
+
+def _horizontal_speed(markers: np.ndarray, dt: float) -> np.ndarray:
+    """(F, 2, 3) [m/s] the larger of each marker's horizontal speeds into and out of each frame; markers
+    (F, 2, 3, 3) [m], dt [s]."""
+    step = np.linalg.norm(np.diff(markers[..., HORIZONTAL_AXES], axis=0), axis=-1) / dt
+    out = np.zeros(markers.shape[:3])
+    out[1:] = step
+    out[:-1] = np.maximum(out[:-1], step)
+    return out
+
+
+def _rows_of(targets: Targets, rows: np.ndarray) -> Targets:
+    """The targets of some frames (rows: frame indices)."""
+    return Targets(targets.initial.with_(root_positions=targets.initial.root_positions[rows],
+                                         rotations=targets.initial.rotations[rows]),
+                   targets.com[rows], targets.markers[rows], targets.marker_weight[rows], targets.com_weight[rows],
+                   None if targets.floor_top is None else targets.floor_top[rows])
+
+
+def _merge_rows(res, rows: np.ndarray, again):
+    """res with the frames ``rows`` taken from ``again`` (an IkResult of those frames only)."""
+    root = res.motion.root_positions.copy()
+    rot = res.motion.rotations.copy()
+    root[rows], rot[rows] = again.motion.root_positions, again.motion.rotations
+    out = {"com_error": res.com_error.copy(), "com": res.com.copy(), "failed": res.failed.copy(),
+           "marker_error": res.marker_error.copy()}
+    for name, v in out.items():
+        v[rows] = getattr(again, name)
+    return _replace(res, motion=res.motion.with_(root_positions=root, rotations=rot), **out)
 
 
 def _held_markers(targets: Targets) -> np.ndarray:

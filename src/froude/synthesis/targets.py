@@ -26,6 +26,9 @@ WEIGHT_RAMP_S = 0.04
 LANDING_WEIGHT = 0.1
 #: Fraction of SWING_MARKER_WEIGHT a foot marker target out of the leg's reach keeps (see build_targets).
 OUT_OF_REACH_SWING = 0.1
+#: Half-width [s] of the window over which a marker's lowest target sets its floor band (_floor_top): about
+#: a stance and the skate measure's margins on one side.
+FLOOR_WINDOW_S = 0.3
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,6 +40,10 @@ class Targets:
     markers: np.ndarray  # (T, 2, 3, 3) [m]
     marker_weight: np.ndarray  # (T, 2, 3)
     com_weight: np.ndarray  # (T,)
+    #: (T, 2, 3) [m] height below which a foot marker is on or just above the floor, where it must not slide
+    #: (the report's stricter skate band about the marker's nearby lowest target); -inf for the markers the
+    #: report does not watch there. None: no such band (the IK's repair then leaves released markers alone).
+    floor_top: np.ndarray | None = None
 
 
 def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, reference_leg_length: float,
@@ -101,7 +108,27 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     # Weights are per (leg length)^2, so the trade-off between a position error and a joint angle is the
     # same for a child and a giant (errors in metres grow with size, joint angles do not).
     per_size = (reference_leg_length / retarget.body.leg_length) ** 2
-    return Targets(initial, path.com, markers, weight * per_size, np.full(T, COM_WEIGHT * per_size))
+    return Targets(initial, path.com, markers, weight * per_size, np.full(T, COM_WEIGHT * per_size),
+                   _floor_top(markers, retarget.body.leg_length, float(path.frame_time)))
+
+
+def _floor_top(markers: np.ndarray, leg_length: float, frame_time: float) -> np.ndarray:
+    """(T, 2, 3) [m]: Targets.floor_top. markers (T, 2, 3, 3) targets [m] (ground at 0); leg_length [m].
+
+    As the physics report's stricter skate measure (metrics.foot_skate_floor_mm) sees it: the ball and the tip
+    (SKATE_MARKERS), within SKATE_BAND_L × L of their lowest height about a contact (here the lowest target
+    within a stance and its margins, FLOOR_WINDOW_S either side), when that lowest height is within
+    SKATE_REACH_L × L of the floor.
+    """
+    from ..metrics import SKATE_BAND_L, SKATE_MARKERS, SKATE_REACH_L
+
+    out = np.full(markers.shape[:3], -np.inf)
+    half = max(1, int(round(FLOOR_WINDOW_S / frame_time)))
+    for k in SKATE_MARKERS:
+        h = np.pad(markers[:, :, k, UP_AXIS], ((half, half), (0, 0)), mode="edge")
+        low = np.lib.stride_tricks.sliding_window_view(h, 2 * half + 1, axis=0).min(axis=-1)  # (T, 2)
+        out[:, :, k] = np.where(low <= SKATE_REACH_L * leg_length, low + SKATE_BAND_L * leg_length, -np.inf)
+    return out
 
 
 def _leg_reach(body: BodyModel, side: str) -> np.ndarray:

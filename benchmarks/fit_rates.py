@@ -5,6 +5,7 @@
     python benchmarks/fit_rates.py 09_02 09_06
     python benchmarks/fit_rates.py --stances  # each full stance's events and spring, thinned take against 120 Hz
     python benchmarks/fit_rates.py --jitter   # where the COM's content above 15 Hz comes from (120 Hz clips)
+    python benchmarks/trajectory_events.py    # events from the whole COM trajectory instead (a measurement)
 
 Two ways of writing the take at 30 Hz (``tests/rig_variants.py``, independent of froude):
 - ``thinned``: every 4th frame, as a converter that samples keys writes it (``rig_variants.every``); the

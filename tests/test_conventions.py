@@ -168,6 +168,15 @@ def test_fit_is_the_same_in_every_convention(name, variant, tmp_root):
 # 36 miss, RMS 2.2-2.4 %/0.14-0.15°) shorten the 120 Hz stances by 3-18 ms (K up to +26 %, COM RMS up to 25 mm);
 # a sharper cut of the 30 Hz COM above 12 Hz (9 of 36, RMS 2.9 %/0.32°); the feet's marker events (RMS 8 ms at
 # touchdown, 16 ms at liftoff at 30 Hz against 120 Hz).
+# Events from the whole COM trajectory (``benchmarks/trajectory_events.py``: ballistic flights, g known, joined to a
+# half-sine stance force by least squares on the raw COM at the clip's samples, ~20 per stance at 30 Hz): over 71
+# stances RMS 1.5 ms at touchdown, 1.7 at liftoff, 3.1 ms in duration (2.3 ms where the pulse crosses 0.5 BW),
+# against the force crossings' 3.7 ms; put in the fit, 5-7 of 36 takes still miss (09_01 K −7.6 %, 09_04 −4.3 %/
+# +0.93°, 09_03 −3.2 %, 09_02 θ0 +0.58°, one run's stance dropped at the clip's edge at one rate only: 09_08 +8.3 %
+# or, with a looser edge, 02_03 +9.5 %; 09_06 +13.5 % where a 60 ms contact sliver at the take's start pulls the
+# contacts' median under SHORT_STANCE_S), and the 120 Hz fits move (θ0 +2.2 to +4.1°, K −9.5 to +8.2 %: the fitted
+# pulse begins 18 ms (11-27) before the force's 0.5 BW crossing and ends 7 ms (−2 to 14) after); its own 0.5 BW
+# crossings move θ0 −1.3 to −0.45° and K +2 to +20 % (120 Hz COM RMS up to 25 mm against the 16 mm bar; 7 of 36 miss).
 _RATE_SHORT = {
     ("09_02", "30Hz"): "K +4.4 %, θ0 −0.74° (COM content above 15 Hz aliased by the thinning; events 5 ms apart)",
     ("09_03", "30Hz"): "K −3.1 % (COM content above 15 Hz aliased by the thinning; spring fits 4 % apart)",
@@ -477,7 +486,7 @@ BANDAI_STRIDING = tuple(n for n in BANDAI_RUNS if n != "dataset-1_dash_normal_00
 _CHANGES = [("child", 1.0), ("troll", 1.0), ("giant", 1.0), (None, 0.7), (None, 1.2), ("accelerate", 0.5),
             ("accelerate", 1.3)]
 _BANDAI_MISSES = {
-    ("run_tired", 1, None): "foot skate (ball and tip near the floor) 9.16 mm (<= 5)",
+    ("run_tired", 1, None): "foot skate (ball and tip near the floor) 5.11 mm (<= 5)",
 }
 
 

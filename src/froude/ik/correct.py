@@ -121,8 +121,9 @@ def _hold_on_floor(targets: Targets, body: BodyModel, res):
     reference's (a troll: its heavy trunk sets its COM, and so its hips, lower over the same COM path) drops a
     released toe, its target 0.05 L up after lift-off, back to 0.015 L, where it slides with the swing path
     2-3 mm a frame (run_tired as a troll, 10.8 mm); a folded rig's ball, released 0.05 L up within the floor
-    band over its 0.039 L rest height, swings 8 mm about the tip. Such markers are held to their targets
-    (which rise out of the band or stay put) where the achieved pose, not the target, is in the band.
+    band over its 0.039 L rest height, swings 8-9 mm about the tip in one frame (the same, 120 and 30 Hz).
+    Such markers are held to their targets (which rise out of the band or stay put) where the achieved pose,
+    not the target, is in the band.
     """
     if targets.floor_top is None:
         return targets, res
@@ -169,12 +170,10 @@ def _fast_pass(targets: Targets, body: BodyModel):
 
 
 def _horizontal_speed(markers: np.ndarray, dt: float) -> np.ndarray:
-    """(F, 2, 3) [m/s] the larger of each marker's horizontal speeds into and out of each frame; markers
+    """(F, 2, 3) [m/s] each marker's horizontal speed from the frame before (0 at the first); markers
     (F, 2, 3, 3) [m], dt [s]."""
-    step = np.linalg.norm(np.diff(markers[..., HORIZONTAL_AXES], axis=0), axis=-1) / dt
     out = np.zeros(markers.shape[:3])
-    out[1:] = step
-    out[:-1] = np.maximum(out[:-1], step)
+    out[1:] = np.linalg.norm(np.diff(markers[..., HORIZONTAL_AXES], axis=0), axis=-1) / dt
     return out
 
 

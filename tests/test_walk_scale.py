@@ -19,15 +19,11 @@ CHARACTERS = ("child", "troll", "giant")
 
 #: Outputs that miss a bar or the double-support share today, measured after the rolling foot of the walking
 #: cycle (synthesis.cycle._remove_sliding_rolling: one pivot held at a time, the toe raised to the top of the
-#: floor band by the end of the stance), the edge contacts (synthesis.targets._contacts_extended) and the IK's
-#: floor hold (ik.correct._hold_on_floor): `python docs/make_walk_table.py`.
+#: floor band by the end of the stance), the edge contacts (synthesis.targets._contacts_extended), the IK's
+#: floor hold (ik.correct._hold_on_floor) and a walk's further IK repair passes (ik.correct.WALK_REPAIR_ROUNDS):
+#: `python docs/make_walk_table.py`.
 KNOWN_MISSES = {
     ("02_01", "troll"): "double support +2.8 points (26.9 vs 24.1 %); every bar met",
-    ("dataset-1_walk_normal_001", "child"): "ball-and-tip skate 5.7 mm (IK misses the held toe by ~3 mm at 30 Hz), "
-                                             "joint jump 45.0 deg (limit 41.5)",
-    ("dataset-1_walk_normal_001", "troll"): "joint jump 48.1 deg (limit 41.5), a knee at frame 90 of 30 Hz "
-                                             "(46.1 deg before the IK's floor hold lifted the swinging toe that "
-                                             "penetrated 5.2 mm: now 4.8)",
 }
 
 

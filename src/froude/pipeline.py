@@ -253,7 +253,7 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
     the IK of one stride only, sampled PERIODIC_OVERSAMPLE times finer, and tile it (the result is
     periodic too; ``ik.correct.tile_stride``).
     """
-    from .ik.correct import correct, tile_stride
+    from .ik.correct import WALK_REPAIR_ROUNDS, correct, tile_stride
 
     targets = targets_of(prep, path, retarget)
     n_strides = len(path.foot_of_step) / 2
@@ -267,7 +267,7 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
         motion = tile_stride(one, 2.0 * m.step_time * m.time_unit, dense_fps, targets, path.times, stride,
                              retarget.body)
     else:
-        ik = correct(targets, retarget.body)
+        ik = correct(targets, retarget.body, repair_rounds=WALK_REPAIR_ROUNDS if is_walking(prep.machine) else 1)
         if not ik.ok:
             bad = np.flatnonzero(ik.failed)
             notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]

@@ -58,7 +58,7 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     phi = np.mod(path.psi, 1.0)
     rot, data = sample_cycle(cyc, phi)
     T = len(path.times)
-    anchors, w_ground = _foot_anchors(path)
+    anchors, w_ground, swings = _foot_anchors(path)
     rel_world = np.einsum("fpki,ij->fpkj", L * data["marker_rel"], Rh)  # heading frame -> world
     on_ground = anchors[:, :, None, :] + rel_world
     # In mid-swing the foot moves with the body (its offset from the COM, scaled), not along a stretched
@@ -67,6 +67,12 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     com_rel = L * data["marker_from_com"]
     com_rel[..., 1] = L * data["marker_rel"][..., 1]  # heights above the ground as in the anchored path
     with_body = path.com[:, None, None, :] + np.einsum("fpki,ij->fpkj", com_rel, Rh)
+    # ... and meets the ground path where the foot is near the floor (_body_path_correction; not in a walk,
+    # whose feet roll from contact to contact: it moved the Bandai walk giant's double support 0.024 from the
+    # clip's, over the 0.02 it keeps)
+    if cyc.order != "walking":
+        with_body += _body_path_correction(cyc, path, L, swings, on_ground[..., UP_AXIS].min(axis=2),
+                                           retarget.body.leg_length)
     # In mid-swing the foot keeps at least its reference height below the COM: a machine whose COM flies
     # higher than the reference's at that phase (a faster cycle: shorter stance, longer flight) would
     # otherwise leave the swinging foot at the reference's height above the ground, out of the leg's reach,
@@ -234,14 +240,30 @@ SWING_RELEASE = 0.05
 SWING_LANDING = 0.35
 
 
-def _foot_anchors(path: MachinePath) -> tuple[np.ndarray, np.ndarray]:
+@dataclass(frozen=True, eq=False)
+class Swings:
+    """The swing each frame of each foot is in (_foot_anchors): its lift-off and touchdown times t_off, t_on
+    (T, 2) [s], the contact points left and reached c_off, c_on (T, 2, 3) [m] and the progress u (T, 2) in
+    stride phase from 0 at lift-off to 1 at touchdown; NaN where the foot is on the ground."""
+
+    t_off: np.ndarray
+    t_on: np.ndarray
+    c_off: np.ndarray
+    c_on: np.ndarray
+    u: np.ndarray
+
+
+def _foot_anchors(path: MachinePath) -> tuple[np.ndarray, np.ndarray, Swings]:
     """Each foot's anchor (T, 2, 3): its contact point on the ground, a min-jerk blend between contacts in
-    swing; and the weight (T, 2) of the ground-anchored foot path (1 on the ground and at the ends of a
-    swing, 0 in mid-swing, min-jerk in between)."""
+    swing; the weight (T, 2) of the ground-anchored foot path (1 on the ground and at the ends of a swing,
+    0 in mid-swing, min-jerk in between); and the swing of each frame (Swings)."""
     T = len(path.times)
     t = path.times
     out = np.zeros((T, 2, 3))
     w_ground = np.ones((T, 2))
+    sw_t = np.full((2, T, 2), np.nan)  # (off, on) times
+    sw_c = np.full((2, T, 2, 3), np.nan)  # (off, on) contact points
+    sw_u = np.full((T, 2), np.nan)
     n = len(path.foot_of_step)
     for foot in range(2):
         idx = np.flatnonzero(path.foot_of_step == foot)
@@ -279,7 +301,71 @@ def _foot_anchors(path: MachinePath) -> tuple[np.ndarray, np.ndarray]:
         p1 = _psi_at(path, t1)
         out[sw, foot], u = swing_anchor(p, p0, p1, c_ext[k_sw], c_ext[k_sw + 1])
         w_ground[sw, foot] = 1.0 - min_jerk(u / SWING_RELEASE) * min_jerk((1.0 - u) / SWING_LANDING)
-    return out, w_ground
+        sw_t[0, sw, foot], sw_t[1, sw, foot] = t0, t1
+        sw_c[0, sw, foot], sw_c[1, sw, foot] = c_ext[k_sw], c_ext[k_sw + 1]
+        sw_u[sw, foot] = u
+    return out, w_ground, Swings(sw_t[0], sw_t[1], sw_c[0], sw_c[1], sw_u)
+
+
+#: A foot's body-relative path is moved onto its ground-anchored one (_body_path_correction) while the foot's
+#: lowest target is below the first of these heights [× L], not at all above the second: above the floor band
+#: the physics report watches from wherever the foot rests (0.02 L over a low point up to 0.04 L up).
+GAP_HOLD_L = (0.06, 0.10)
+#: ... for a gap between the two paths up to the first of these sizes [× L], none from the second: a larger
+#: gap comes from a changed speed (x0.5: 0.2 L), where the body path's own pace carries the foot (and a foot
+#: held to the ground path's place and moved at the body's pace dragged along the floor, run_tired x0.5).
+GAP_SIZE_L = (0.10, 0.15)
+
+
+def _body_path_correction(cyc: ReferenceCycle, path: MachinePath, L: float, swings: Swings, lowest: np.ndarray,
+                          leg_length: float) -> np.ndarray:
+    """(T, 2, 3, 3) [m] horizontal correction of the body-relative foot path in swing that makes it meet the
+    ground-anchored path at lift-off and touchdown while the foot is near the floor: the gap between the two
+    at each end (_ground_minus_body; blended min-jerk over the swing's progress), whole while the foot's
+    lowest target (lowest (T, 2) [m] above the ground) is under GAP_HOLD_L[0] × leg_length and gone above
+    GAP_HOLD_L[1]; gaps beyond GAP_SIZE_L fade out. L: the length scale [m]; leg_length: the target's [m].
+
+    The two paths agree at a contact only as far as the machine carries its COM over the contact as the
+    reference did. A lopsided clip (run_tired: its right stance longer than its left, the machine's steps
+    alike) leaves one foot's body path 20-50 mm from the ground path at lift-off; the release to the body
+    path (SWING_RELEASE of the swing: one 30 Hz frame) moved a tip still 0.03 L up by that much in a frame,
+    a scuff the report sees (the child 39 mm, dash_active's troll 33 mm). Corrected, the foot leaves the
+    floor from where it stands and takes up the body's path only once clear of it.
+    """
+    out = np.zeros((len(path.times), 2, 3, 3))
+    sw = ~np.isnan(swings.u)  # (T, 2)
+    if not sw.any():
+        return out
+    feet = np.nonzero(sw)[1]
+    gap = []
+    for when, at in ((swings.t_off, swings.c_off), (swings.t_on, swings.c_on)):
+        g = _ground_minus_body(cyc, path, L, when[sw], at[sw], feet)  # (n, 3, 3)
+        size = np.linalg.norm(g, axis=-1).max(axis=-1) / leg_length
+        gap.append(g * min_jerk((GAP_SIZE_L[1] - size) / (GAP_SIZE_L[1] - GAP_SIZE_L[0]))[:, None, None])
+    s = min_jerk(swings.u[sw])[:, None, None]
+    h0, h1 = GAP_HOLD_L[0] * leg_length, GAP_HOLD_L[1] * leg_length
+    near_floor = min_jerk((h1 - lowest[sw]) / (h1 - h0))[:, None, None]
+    out[sw] = near_floor * (gap[0] * (1.0 - s) + gap[1] * s)
+    return out
+
+
+def _ground_minus_body(cyc: ReferenceCycle, path: MachinePath, L: float, t: np.ndarray, contact: np.ndarray,
+                       foot: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) [m] horizontal offset of the ground-anchored foot path (anchored at ``contact`` (n, 3) [m])
+    from the body-relative one, for the markers of feet ``foot`` (n,) at times t (n,) [s] (anywhere: the
+    phase and the COM are extrapolated linearly beyond the path, as for its virtual contacts)."""
+    _, data = sample_cycle(cyc, _psi_at(path, t), rotations=False)
+    n = np.arange(len(t))
+    rel = (L * (data["marker_rel"][n, foot] - data["marker_from_com"][n, foot])) @ path.frame  # (n, 3, 3)
+    ts = path.times
+    com = np.stack([np.interp(t, ts, path.com[:, i]) for i in range(3)], axis=-1)  # (n, 3)
+    if len(ts) > 1:  # linear beyond the ends
+        v0 = (path.com[1] - path.com[0]) / (ts[1] - ts[0])
+        v1 = (path.com[-1] - path.com[-2]) / (ts[-1] - ts[-2])
+        com += np.minimum(t - ts[0], 0.0)[:, None] * v0 + np.maximum(t - ts[-1], 0.0)[:, None] * v1
+    out = contact[:, None, :] + rel - com[:, None, :]
+    out[..., UP_AXIS] = 0.0
+    return out
 
 
 def _contacts_extended(path: MachinePath, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

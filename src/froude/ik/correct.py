@@ -98,9 +98,7 @@ def _repair(res, targets: Targets, body: BodyModel, held: np.ndarray, init_jump:
         return res, 0
     src = np.where(flip[bad], bad - 1, bad)  # a jumped frame starts from its neighbour's solution
     start = res.motion.with_(root_positions=res.motion.root_positions[src], rotations=rot[src])
-    sub = Targets(targets.initial.with_(root_positions=targets.initial.root_positions[bad],
-                                        rotations=targets.initial.rotations[bad]),
-                  targets.com[bad], targets.markers[bad], targets.marker_weight[bad], targets.com_weight[bad])
+    sub = _rows_of(targets, bad)
     again = _solve_from(sub, start, body, IK_UNFLIP_ITERS if flip[bad].any() else IK_REPAIR_ITERS)
     again = _replace(again, failed=_missed(again, held[bad], DEFAULT_MAX_ERROR))
     prev = rot[np.maximum(bad - 1, 0)]
@@ -141,9 +139,7 @@ def _repair_later(res, targets: Targets, body: BodyModel, held: np.ndarray, init
     bad = np.flatnonzero(flip | (res.com_error > RETRY_COM_ERROR) | _missed(res, held, RETRY_MARKER_ERROR))
     if not bad.size:
         return res, 0
-    sub = Targets(targets.initial.with_(root_positions=targets.initial.root_positions[bad],
-                                        rotations=targets.initial.rotations[bad]),
-                  targets.com[bad], targets.markers[bad], targets.marker_weight[bad], targets.com_weight[bad])
+    sub = _rows_of(targets, bad)
     prev, nxt = rot[np.maximum(bad - 1, 0)], rot[np.minimum(bad + 1, F - 1)]
     ref = np.concatenate([[0.0], init_jump, [0.0]])  # the reference pose's jumps into and out of each frame
     limit = np.maximum(ref[bad], ref[bad + 1]) + BRANCH_JUMP_DEG

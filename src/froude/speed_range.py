@@ -36,7 +36,8 @@ class SpeedRange:
 
     def sentence(self) -> str:
         """The range as refusals and bar misses say it (scale and accelerate alike)."""
-        return f"with every physics bar met this character runs {self.describe()}"
+        # "steady": the range is probed with ``scale`` outputs; walks and runs alike
+        return f"with every physics bar met this character's steady speeds are {self.describe()}"
 
 
 #: The factors reachable_speed_range searches between, and how finely [-].

@@ -129,7 +129,8 @@ def run(args) -> int:
     fails = res.report.check_bars()
     if fails and not args.keep:
         say(f"froude accelerate: output not written: it misses physics bars ({'; '.join(fails)}); "
-            f"{_steady_range(prep, args)}; --keep writes it anyway")
+            f"{_steady_range(prep, args)} (the change of speed on the way can miss a bar even inside them); "
+            "--keep writes it anyway")
         return 1
     with atomic_group():
         bvh, rep, *data_written = pipeline.write_result(res, out, data, in_place=args.in_place,

@@ -67,7 +67,7 @@ def test_an_unreachable_speed_is_refused_in_one_line_with_the_range(run_cli, tmp
     code, _, err = run_cli("scale", clip("dataset-1_dash_feminine_001"), "--speed", "2.0", "-o", out)
     assert code in (1, 2) and not out.exists()
     lines = [ln for ln in err.strip().splitlines() if "x0." in ln or "x1." in ln]
-    assert len(lines) == 1 and "m/s" in lines[0] and "runs x" in lines[0]
+    assert len(lines) == 1 and "m/s" in lines[0] and "steady speeds are x" in lines[0]
 
 
 def test_the_measuring_script_runs(tmp_path):

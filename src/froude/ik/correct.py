@@ -201,26 +201,23 @@ def _hold_on_floor(targets: Targets, body: BodyModel, res):
     dt = targets.initial.frame_time
     offsets = np.arange(-int(np.ceil(WEIGHT_RAMP_S / dt)), int(np.ceil(WEIGHT_RAMP_S / dt)) + 1)
     ramp = min_jerk(1.0 - np.abs(offsets) * dt / WEIGHT_RAMP_S)
-    F = len(per_size)
+    # only toward a target above the band, or one at rest in it: a target that itself slides near the floor
+    # is the targets' to fix, and holding the foot to it would make it slide the more
+    target_h = targets.markers[..., UP_AXIS]
+    above = target_h >= targets.floor_top
+    still = _horizontal_speed(targets.markers, dt) <= FLOOR_TARGET_SPEED
     for _ in range(FLOOR_HOLD_ROUNDS):
         achieved = body.foot_markers(res.motion)  # (F, 2, 3, 3) [m]
         released = targets.marker_weight < HELD_MARKER_WEIGHT * per_size
-        # only toward a target above the band, or one at rest in it: a target that itself slides near the floor
-        # is the targets' to fix, and holding the foot to it would make it slide the more
-        target_h = targets.markers[..., UP_AXIS]
-        above = target_h >= targets.floor_top
-        still = _horizontal_speed(targets.markers, dt) <= FLOOR_TARGET_SPEED
         sunk = target_h - achieved[..., UP_AXIS] > RETRY_MARKER_ERROR  # the posture holds it below its target
         err = np.linalg.norm(achieved - targets.markers, axis=-1)
         slides = (_horizontal_speed(achieved, dt) > FLOOR_TARGET_SPEED) & (err > RETRY_MARKER_ERROR)
         sunk = released & (achieved[..., UP_AXIS] < targets.floor_top) & ((sunk & (above | still)) | (slides & still))
         if not sunk.any():
             break
-        want = np.zeros(sunk.shape)
-        for f, i, k in zip(*np.nonzero(sunk)):
-            rows = f + offsets
-            ok = (rows >= 0) & (rows < F)
-            want[rows[ok], i, k] = np.maximum(want[rows[ok], i, k], ramp[ok])
+        # each sunk sample spreads the ramp over its neighbours (a max-filter of sunk with the ramp)
+        pad = np.pad(sunk.astype(float), ((len(offsets) // 2,) * 2, (0, 0), (0, 0)))
+        want = (np.lib.stride_tricks.sliding_window_view(pad, len(offsets), axis=0) * ramp[::-1]).max(axis=-1)
         weight = np.maximum(targets.marker_weight, hold * want)
         rows = np.flatnonzero(np.any(weight > targets.marker_weight, axis=(1, 2)))
         targets = _replace(targets, marker_weight=weight)

@@ -138,7 +138,7 @@ def _step_speeds(res) -> np.ndarray:
     return np.diff(x) / np.diff(td)
 
 
-@pytest.mark.parametrize("name,factor", [("02_01", 1.3), ("02_01", 0.6)])
+@pytest.mark.parametrize("name,factor", [("02_01", 1.3), ("02_01", 0.6), ("07_01", 1.3), ("07_01", 0.6)])
 def test_walk_accelerates_monotonically(name, factor, walks):
     if MOCAP is None:
         pytest.skip("real clips not found")
@@ -155,6 +155,8 @@ def test_walk_accelerates_monotonically(name, factor, walks):
 @pytest.mark.parametrize("name,factor", [
     pytest.param("02_01", 1.3),
     pytest.param("02_01", 0.6),
+    pytest.param("07_01", 1.3),
+    pytest.param("07_01", 0.6),
 ])
 def test_walk_acceleration_meets_every_bar(name, factor, walks):
     if MOCAP is None:

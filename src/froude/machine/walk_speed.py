@@ -37,6 +37,11 @@ __all__ = ["WALK_RUN_U", "STEP_TIME_EXPONENT", "step_frequency_factor", "walking
 WALK_RUN_U = 0.7
 #: Step time ∝ speed^STEP_TIME_EXPONENT at a speed change (step length ∝ speed^(1 + exponent)).
 STEP_TIME_EXPONENT = -0.5
+#: The step time law used where STEP_TIME_EXPONENT finds no cycle: cadence rising faster, the step length
+#: slower (× s^0.3), as in people near their fastest walks, whose step length levels off while cadence keeps
+#: rising. Measured on CMU 07_01 (1.39 m/s): with s^-0.5 the cycle exists up to x1.275 and its stance leg
+#: unloads at x1.2875 (a flight phase); with s^-0.7 the search finds the cycle at x1.30 (U = 0.60).
+FAST_STEP_TIME_EXPONENT = -0.7
 
 
 def step_frequency_factor(s: float) -> float:
@@ -84,12 +89,14 @@ def walking_machine_at_speed(machine: WalkingMachine, s: float) -> WalkingMachin
     return walking_machines_at_speeds(machine, [s])[float(s)]
 
 
-def _resolve(base: WalkingMachine, start: WalkingMachine, s: float) -> WalkingMachine:
-    """The cycle at s × base's speed (targets from ``base``), searched from ``start``'s cycle."""
+def _resolve(base: WalkingMachine, start: WalkingMachine, s: float,
+             exponent: float = STEP_TIME_EXPONENT) -> WalkingMachine:
+    """The cycle at s × base's speed (targets from ``base``, step time × s^exponent), searched from
+    ``start``'s cycle."""
     from .walk_fit import _cycle_search
     from .walking import N_PER_STANCE
 
-    k = s ** STEP_TIME_EXPONENT
+    k = s ** exponent
     t_step, t_double = base.t_step * k, base.t_double * k
     T_c = base.T_c * k
     targets = (t_step, t_double, s * base.mean_speed)
@@ -117,6 +124,7 @@ def walking_machines_at_speeds(machine: WalkingMachine, speeds, cache: dict | No
     cache = {} if cache is None else cache
     out = {}
     cur, f_cur = machine, 1.0
+    exponent = STEP_TIME_EXPONENT
     for s in sorted({float(v) for v in speeds}):
         check_walking_speed(machine, s)
         if s in cache:
@@ -125,7 +133,15 @@ def walking_machines_at_speeds(machine: WalkingMachine, speeds, cache: dict | No
             continue
         n = max(1, int(math.ceil((s - f_cur) / CONTINUATION_STEP - 1e-9)))
         for f in np.linspace(f_cur, s, n + 1)[1:]:
-            cur = _resolve(machine, cur, float(f))
+            try:
+                cur = _resolve(machine, cur, float(f), exponent)
+            except FitError:
+                if exponent == FAST_STEP_TIME_EXPONENT:
+                    raise
+                # no cycle with the first law here: the faster-cadence law from here on (the profile's
+                # cadence keeps rising with speed)
+                exponent = FAST_STEP_TIME_EXPONENT
+                cur = _resolve(machine, cur, float(f), exponent)
         cur = replace(cur, source=machine.source + f" (re-solved at x{s:g} speed)")
         out[s] = cache[s] = cur
         f_cur = s

@@ -177,6 +177,17 @@ def test_fit_is_the_same_in_every_convention(name, variant, tmp_root):
 # contacts' median under SHORT_STANCE_S), and the 120 Hz fits move (θ0 +2.2 to +4.1°, K −9.5 to +8.2 %: the fitted
 # pulse begins 18 ms (11-27) before the force's 0.5 BW crossing and ends 7 ms (−2 to 14) after); its own 0.5 BW
 # crossings move θ0 −1.3 to −0.45° and K +2 to +20 % (120 Hz COM RMS up to 25 mm against the 16 mm bar; 7 of 36 miss).
+# The error sits in both kinds of input of the cycle search (``benchmarks/fit_inputs.py``): the 30 Hz take's stance
+# time, flight time and speed swapped for the 120 Hz ones leave 7 of 36 misses (RMS 2.25 %/0.12°), its priors K, a, b,
+# c swapped leave 5 (1.82 %/0.29°), U, H, θ0 swapped none fewer (11); so no reweighting of the search closes it: K's
+# scale 0.3-3 (11 of 36, RMS ΔK 3.17-3.19 %), a stance time held only within σ = 0.3-5 % (10-15 of 36, 3.08-3.17 %;
+# the 120 Hz K moves up to −7 %), a, b, c priors fixed at the runs' mean (8 of 36; the 120 Hz K moves −7 to +6 %).
+# The COM's displacement instead of its force fixes the spring worse: each stance's eq. 2 spring fitted to the raw
+# COM at the clip's frames (its basis integrated twice, ``--displacement``) differs from the 120 Hz one by 6.3 % RMS
+# (force: 3.6 %; with the flights' W_S 0.1 s instead of 0.05: 4.7 %, none: 28 %); the whole machine fitted to the COM's
+# displacement through the simulator (``--machine``: 120 Hz K −38 to +4 %, θ0 +0.1 to +1.4°) misses 23-24 of 36
+# (RMS ΔK 7.4-7.9 %): the machine misses the 120 Hz COM by 3.3-12.5 mm RMS, far above the 0.5 mm vibration, and the
+# spring trades against a, b, c along that misfit.
 _RATE_SHORT = {
     ("09_02", "30Hz"): "K +4.4 %, θ0 −0.74° (COM content above 15 Hz aliased by the thinning; events 5 ms apart)",
     ("09_03", "30Hz"): "K −3.1 % (COM content above 15 Hz aliased by the thinning; spring fits 4 % apart)",

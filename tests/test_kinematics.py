@@ -219,3 +219,21 @@ def test_apply_dof_increment_rotates_about_local_axes():
     np.testing.assert_allclose(root, motion.root_positions + [0.5, 0, 0])
     expect = quat.mul(motion.rotations[:, 1], quat.from_axis_angle(np.array([1.0, 0, 0]), np.pi / 2))
     np.testing.assert_allclose(np.abs(np.sum(rot[:, 1] * expect, axis=-1)), 1.0, atol=1e-12)
+
+
+def test_quat_from_matrix_matches_scipy_including_half_turns():
+    """quat.from_matrix (NumPy Shepperd, no SciPy import at run time) agrees with SciPy's on random rotations and
+    on the 180° turns and axis swaps that unit and up-axis conversions produce; w ≥ 0; shapes broadcast."""
+    from scipy.spatial.transform import Rotation
+
+    half_turns = [np.diag([1.0, -1.0, -1.0]), np.diag([-1.0, 1.0, -1.0]), np.diag([-1.0, -1.0, 1.0]),
+                  np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]), np.array([[0.0, 1, 0], [1, 0, 0], [0, 0, -1]])]
+    m = np.concatenate([Rotation.random(2000, random_state=3).as_matrix(), np.eye(3)[None], np.array(half_turns)])
+    q = quat.from_matrix(m)
+    xyzw = Rotation.from_matrix(m).as_quat()
+    ref = np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1)
+    same_up_to_sign = np.minimum(np.abs(q - ref).max(axis=1), np.abs(q + ref).max(axis=1))
+    assert same_up_to_sign.max() < 1e-12
+    assert np.all(q[:, 0] >= 0.0)
+    assert np.allclose(quat.to_matrix(q), m, atol=1e-12)
+    assert quat.from_matrix(m[:6].reshape(2, 3, 3, 3)).shape == (2, 3, 4)

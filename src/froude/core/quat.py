@@ -98,12 +98,29 @@ def to_matrix(q: np.ndarray) -> np.ndarray:
 
 
 def from_matrix(m: np.ndarray) -> np.ndarray:
-    """Unit quaternions (..., 4) with w ≥ 0 from rotation matrices (..., 3, 3) (Shepperd's method)."""
-    from scipy.spatial.transform import Rotation
+    """Unit quaternions (..., 4) with w ≥ 0 from rotation matrices (..., 3, 3) (Shepperd's method).
 
-    shape = m.shape[:-2]
-    xyzw = Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat()
-    q = np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=-1).reshape(shape + (4,))
+    Each matrix takes the branch of its largest of (trace, m00, m11, m22), so the square root is of a
+    number ≥ 1 and the divisions are well conditioned for every rotation, 180° turns included.
+    """
+    m = np.asarray(m, dtype=float)
+    m00, m11, m22 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
+    trace = m00 + m11 + m22
+    # 4·w², 4·x², 4·y², 4·z² (minus 1) for the four branches; the largest picks the branch.
+    diag = np.stack([trace, m00, m11, m22], axis=-1)
+    branch = np.argmax(diag, axis=-1)
+    s = np.sqrt(np.maximum(1.0 + 2.0 * np.take_along_axis(diag, branch[..., None], -1)[..., 0] - trace,
+                           1e-300))  # = 2·|component of the branch|
+    d21, d02, d10 = m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]
+    s21, s02, s10 = m[..., 2, 1] + m[..., 1, 2], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 0] + m[..., 0, 1]
+    candidates = np.stack([
+        np.stack([s * s, d21, d02, d10], axis=-1),     # w largest
+        np.stack([d21, s * s, s10, s02], axis=-1),     # x largest
+        np.stack([d02, s10, s * s, s21], axis=-1),     # y largest
+        np.stack([d10, s02, s21, s * s], axis=-1),     # z largest
+    ], axis=-2)
+    q = np.take_along_axis(candidates, branch[..., None, None], -2)[..., 0, :] / (2.0 * s[..., None])
+    q = normalize(q)
     return np.where(q[..., :1] < 0.0, -q, q)
 
 

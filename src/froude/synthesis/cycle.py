@@ -585,7 +585,8 @@ def _remove_sliding_rolling(rel: np.ndarray, stance: np.ndarray, contact_tol: fl
         # the landing foot is held from when it is low; the lifting one until the stance ends (it is raised
         # clear by then)
         idx = _with_approach(rel[:, foot], idx, stance[:, foot], contact_tol, band, with_after=False)
-        yaw, shift, lift = _rolling_correction(rel[idx, foot], contact_tol, band, max(1, int(LIFT_OFF_SHARE * K)))
+        yaw, shift, lift, level = _rolling_correction(rel[idx, foot], contact_tol, band,
+                                                      max(1, int(LIFT_OFF_SHARE * K)))
         out[idx, foot] = _moved(rel[idx, foot], yaw, shift, lift)
         covered = np.zeros(K, bool)
         covered[idx] = True
@@ -594,7 +595,8 @@ def _remove_sliding_rolling(rel: np.ndarray, stance: np.ndarray, contact_tol: fl
             start = (idx[-1] + 1) % K
             sw = swing[(np.arange(swing.size) + np.searchsorted(swing, start)) % swing.size]
             fade = 1.0 - min_jerk(np.linspace(0, 1, sw.size))
-            out[sw, foot] = _moved(rel[sw, foot], yaw[-1] * fade, shift[-1] * fade[:, None], lift[-1] * fade)
+            out[sw, foot] = _moved(rel[sw, foot], yaw[-1] * fade, shift[-1] * fade[:, None],
+                                   lift[-1] * fade + level * (1.0 - fade))
     out[..., 1] = np.maximum(out[..., 1], 0.0)
     return out
 
@@ -651,10 +653,12 @@ def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float, n_rise
     comes down to its lowest height so far and stays there; a later pivot keeps its height (the CMU toe end
     site sinks 1-2 cm while the toes pitch up over it, a mocap end site, not a contact: following it down
     would slide the rising ball forward within the band). Over the last n_rise samples of the stance the
-    pivot is raised (min-jerk) to ``band`` above its height then, so the foot leaves the floor band when the
-    reference's foot lifts (held until it was clear, the foot stayed down 40-50 ms longer than the clip's,
-    whose toe scuffs forward at lift-off, and the double support grew by up to 9 points).
-    Returns yaw (n,) [rad], shift (n, 2) [m] (forward, lateral), lift (n,) [m] for ``_moved``.
+    pivot is raised (min-jerk) to ``band`` above its height then, or onto the reference's own path where
+    that is higher, so the foot leaves the floor band when the reference's foot lifts (held until it was
+    clear, the foot stayed down 40-50 ms longer than the clip's, whose toe scuffs forward at lift-off, and
+    the double support grew by up to 9 points).
+    The foot lands and leaves at its held stance's level (``_contact_level``, returned as level [m]).
+    Returns yaw (n,) [rad], shift (n, 2) [m] (forward, lateral), lift (n,) [m] for ``_moved``, and level.
     """
     n = seg.shape[0]
     height = seg[:, :, 1]
@@ -694,12 +698,43 @@ def _rolling_correction(seg: np.ndarray, contact_tol: float, band: float, n_rise
             lift[i] = lowest - y
         else:  # a later pivot stays at its height until the foot lifts
             lift[i] = lift[i - 1] - (y - seg[i - 1, pivot, 1])
-    if pivot >= 0:  # raised to the top of its floor band by the end of the stance (min-jerk)
+    level = 0.0
+    if pivot >= 0:
+        level = _contact_level(seg, lift, rise, band, n_rise)
+        # raised to the top of its floor band by the end of the stance (min-jerk) ...
         a = max(1, n - n_rise)
-        short = (seg[a - 1, pivot, 1] + lift[a - 1]) + band - (seg[n - 1, pivot, 1] + lift[n - 1])
-        if short > 0.0:
-            lift[a:] += short * min_jerk((np.arange(a, n) - a + 1) / (n - a))
-    return yaw, shift, lift
+        u = min_jerk((np.arange(a, n) - a + 1) / (n - a))
+        raw = seg[a:, pivot, 1]
+        held = raw + lift[a:]
+        # ... or onto the reference's own path (at the contact's level) where that is higher, which it then
+        # leaves with the reference's height and speed (a step onto a plateau at the band's top held the
+        # foot's lowest marker still just under the gait's 0.05 L contact test: a millimetre decided its
+        # liftoff)
+        top = np.maximum(seg[a - 1, pivot, 1] + lift[a - 1] + band, raw + level)
+        lift[a:] = np.maximum(held, (1.0 - u) * held + u * top) - raw
+    return yaw, shift, lift, level
+
+
+def _contact_level(seg: np.ndarray, lift: np.ndarray, rise: np.ndarray, band: float, n_settle: int) -> float:
+    """How much higher [m] the held foot's lowest point over the stance is than the reference's, and ``lift``
+    (n,) [m] raised by it (in place) until the landing pivot is down, settling (min-jerk) over n_settle samples.
+
+    seg: (n, 3, 3) the foot's markers over the stance (heading frame), lift: their held heights' change,
+    rise: (n, 3) each marker's rise over its lowest point (inf if it never reaches the floor). The gait's
+    contact test (and the double support the report measures with it) takes a foot as down while its
+    lowest marker is within 0.05 L of the foot's lowest height over the stance. A later pivot keeps its
+    height where the reference's sinks (the toe end site: 5.5 mm on one foot of CMU 02_01, 14.5 mm on one
+    of 07_01), so the held foot's lowest height is that much above the reference's, and a foot coming down
+    as the reference's crossed the test early (02_01 as a child: its targets' right foot 1.9 frames early
+    at 120 Hz, the double support 3.3 points long). Landing and leaving at that level too (the foot raised
+    by it outside the stance), it crosses the test when the reference's did.
+    """
+    raw_low = float(seg[:, :, 1].min())
+    level = float((seg[:, :, 1] + lift[:, None]).min()) - raw_low
+    landed = int(np.flatnonzero((rise <= band).any(axis=1))[0])
+    i = np.arange(seg.shape[0])
+    lift += level * (1.0 - min_jerk((i - landed) / max(n_settle, 1)))
+    return level
 
 
 def _hold_stance(pose: np.ndarray, step: np.ndarray, hold: np.ndarray, rate: np.ndarray, delta: np.ndarray,

@@ -92,7 +92,11 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     initial = initial.with_(root_positions=root + (path.com - retarget.body.com(initial)))
     body = retarget.body
     hips = body.joint_positions(initial, [body.roles["left_hip"], body.roles["right_hip"]])  # (T, 2, 3) [m]
-    markers = _lift_out_of_reach(hips, body, markers)
+    # A walk's landing foot is raised only beyond the time-warped reference pose's own foot: a walking leg
+    # lands almost straight, within the run's margins of its reach, and raised there (the Bandai walk scaled
+    # to itself: its toe 15-23 mm up at every touchdown) the feet landed 0.5-0.9 frames late at 30 Hz
+    own = body.foot_markers(initial) if cyc.order == "walking" else None
+    markers = _lift_out_of_reach(hips, body, markers, own, path.frame[0])
     reach = _reach_factor(hips, body, markers)
     weight = _marker_weights(path, markers, body.leg_length, fade=cyc.order != "walking") * reach
     # A swinging foot's target beyond the leg's reach keeps only OUT_OF_REACH_SWING of the swing weight: the
@@ -156,10 +160,15 @@ TOE_SWEEP_L = 0.002
 SWING_SOFT_L = 0.01
 
 
-def _lift_out_of_reach(hips: np.ndarray, body: BodyModel, markers: np.ndarray) -> np.ndarray:
+def _lift_out_of_reach(hips: np.ndarray, body: BodyModel, markers: np.ndarray,
+                       own: np.ndarray | None = None, forward: np.ndarray | None = None) -> np.ndarray:
     """markers (T, 2, 3, 3) [m] with every target beyond the leg's reach raised straight up until it is
     within it (hips (T, 2, 3) [m] of the initial pose; reach from _leg_reach less LIFT_AT_MARGINS margins;
-    soft cap LIFT_MAX_L × L).
+    soft cap LIFT_MAX_L × L). own (T, 2, 3, 3) [m], forward (3,): the initial pose's own foot markers and
+    the heading, if given (a walk): a target ahead of the hip no farther from it than the pose's own marker
+    is within reach, the pose reaching it. Not behind the hip: there a walking foot pushes off, and raising
+    it as the leg straightens lifts its ball clear of the floor (CMU 07_01's giant: a ball 63 mm up, rising
+    about the tip, slid 10 mm in the report's floor band in its first frames without it).
 
     When the body has travelled farther over a planted foot than the leg allows (an acceleration's longer
     stance, a faster run), holding the foot's points where they are ends with the knee locked and the IK
@@ -177,8 +186,12 @@ def _lift_out_of_reach(hips: np.ndarray, body: BodyModel, markers: np.ndarray) -
         reach = _leg_reach(body, side) - LIFT_AT_MARGINS * margin  # (3,)
         rel = markers[:, i] - hips[:, i, None, :]  # (T, 3, 3)
         flat = np.linalg.norm(rel[..., horizontal], axis=-1)  # (T, 3)
-        lowest = -np.sqrt(np.maximum(reach[None, :] ** 2 - flat**2, 0.0))  # lowest reachable height below the hip
-        need = np.where(flat < reach[None, :], lowest - rel[..., UP_AXIS], np.inf)  # (T, 3) rise needed [m]
+        lift_reach = np.broadcast_to(reach[None, :], flat.shape)  # (T, 3)
+        if own is not None and forward is not None:
+            own_d = np.linalg.norm(own[:, i] - hips[:, i, None, :], axis=-1)  # (T, 3)
+            lift_reach = np.where(rel @ forward > 0.0, np.maximum(lift_reach, own_d), lift_reach)
+        lowest = -np.sqrt(np.maximum(lift_reach**2 - flat**2, 0.0))  # lowest reachable height below the hip
+        need = np.where(flat < lift_reach, lowest - rel[..., UP_AXIS], np.inf)  # (T, 3) rise needed [m]
         rise = cap * np.tanh(np.maximum(need, 0.0) / cap)  # (T, 3)
         # The tip rises with the ball beyond what the ball can rise by turning about it: a raised ball whose
         # weight fades leaves the IK to turn the foot about the held tip, and a folded rig's ball joint, 30 deg

@@ -250,33 +250,63 @@ def foot_skate_floor_mm(markers: np.ndarray, gait: Gait, leg_length: float) -> f
     heel to toe does not slide the ball or the tip; a toe that scuffs sideways at lift-off does. A stance cut
     by the clip's edge whose marker is lowest outside the stance (a landing foot's ball still in its swing
     at the last frame, heel first) never has that marker on the floor within the clip: it is not counted.
+    Nor is the part of a cut stance above where the marker rests on the floor (_floor_rest_heights).
     """
     worst = 0.0
-    F = markers.shape[0]
     band = SKATE_BAND_L * leg_length
+    rest = _floor_rest_heights(markers, gait)
+    for foot, s, a, b in _skate_windows(gait, markers.shape[0]):
+        for k in SKATE_MARKERS:
+            seg = markers[a:b, foot, k]  # (n, 3)
+            h = seg[:, UP_AXIS]
+            if h.min() > s.ground + SKATE_REACH_L * leg_length:
+                continue  # this point never comes down to the floor around this contact
+            base = h.min()
+            if s.partial:
+                if not s.start <= a + int(np.argmin(h)) < s.stop:
+                    # cut by the clip's edge before the point came down (or after it rose): its lowest
+                    # point is in the swing, whose forward travel is not a slide (02_01 x0.8: a ball
+                    # 32 mm up, 166 mm of swing, in the last 20 frames)
+                    continue
+                # cut where the point is still coming down or already rising, its contact's lowest height
+                # lies outside the clip: the floor is where the marker rests in the foot's whole stances
+                # (run_tired's troll: its first frame 6 ms after the right foot's contact ends, the tip 0.03 L
+                # up and swinging forward 13-18 mm a frame, as at every lift-off inside the clip; its rest
+                # in the whole stances is 0.0004 L)
+                base = min(base, rest[foot, k])
+            low = h <= base + band
+            for r0, r1 in _true_runs(low):
+                p = seg[r0:r1][:, HORIZONTAL_AXES]
+                p_rest = p[int(np.argmin(h[r0:r1]))]
+                worst = max(worst, float(np.max(np.linalg.norm(p - p_rest, axis=1))))
+    return 1000.0 * worst
+
+
+def _skate_windows(gait: Gait, n_frames: int):
+    """(foot, stance, a, b) for every stance: the frames [a, b) foot_skate_floor_mm watches about it (the
+    stance widened by SKATE_MARGIN_S on each side, not past the middle of the swings around it)."""
     margin = int(round(SKATE_MARGIN_S / gait.frame_time))
     for foot in (0, 1):
         st = sorted((s for s in gait.stances if s.foot == foot), key=lambda s: s.start)
         for i, s in enumerate(st):
             lo_lim = (st[i - 1].stop + s.start) // 2 if i > 0 else 0
-            hi_lim = (s.stop + st[i + 1].start + 1) // 2 if i + 1 < len(st) else F
-            a, b = max(lo_lim, s.start - margin), min(hi_lim, s.stop + margin)
-            for k in SKATE_MARKERS:
-                seg = markers[a:b, foot, k]  # (n, 3)
-                h = seg[:, UP_AXIS]
-                if h.min() > s.ground + SKATE_REACH_L * leg_length:
-                    continue  # this point never comes down to the floor around this contact
-                if s.partial and not s.start <= a + int(np.argmin(h)) < s.stop:
-                    # cut by the clip's edge before the point came down (or after it rose): its lowest
-                    # point is in the swing, whose forward travel is not a slide (02_01 x0.8: a ball
-                    # 32 mm up, 166 mm of swing, in the last 20 frames)
-                    continue
-                low = h <= h.min() + band
-                for r0, r1 in _true_runs(low):
-                    p = seg[r0:r1][:, HORIZONTAL_AXES]
-                    p_rest = p[int(np.argmin(h[r0:r1]))]
-                    worst = max(worst, float(np.max(np.linalg.norm(p - p_rest, axis=1))))
-    return 1000.0 * worst
+            hi_lim = (s.stop + st[i + 1].start + 1) // 2 if i + 1 < len(st) else n_frames
+            yield foot, s, max(lo_lim, s.start - margin), min(hi_lim, s.stop + margin)
+
+
+def _floor_rest_heights(markers: np.ndarray, gait: Gait) -> np.ndarray:
+    """(2, 3) [m] the height at which each foot marker rests on the floor: the highest of its lowest heights
+    over the foot's whole (uncut) stance windows (the highest: a cut stance's band then reaches as high as
+    any whole stance's), the other foot's where a foot has none; +inf where no stance is whole."""
+    lows = np.full((2, 3), np.inf)
+    for foot, s, a, b in _skate_windows(gait, markers.shape[0]):
+        if not s.partial:
+            low = markers[a:b, foot, :, UP_AXIS].min(axis=0)  # (3,)
+            lows[foot] = np.where(np.isinf(lows[foot]), low, np.maximum(lows[foot], low))
+    for foot in (0, 1):
+        if np.isinf(lows[foot]).all():
+            lows[foot] = lows[1 - foot]
+    return lows
 
 
 def _true_runs(mask: np.ndarray) -> list[tuple[int, int]]:

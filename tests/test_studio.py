@@ -198,6 +198,61 @@ def test_speed_control_bounded_to_what_is_reachable(session):
         studio.stop()
 
 
+def test_a_change_is_not_held_up_by_the_speed_range_search(session, monkeypatch):
+    """The speed range search (about 24 outputs in the tab's worker: 108 s for the walk 02_01's own body and
+    170 s for its giant at load 11 on 2 cores) gives way to a change: a pick that comes in meanwhile is
+    computed after the output being checked, not after the whole search (the browser test's pick that
+    "never reached the app" had waited behind the giant's search). The search resumes later from the
+    outputs it had checked: none is produced twice."""
+    pytest.importorskip("viser")
+    import threading
+    import time
+
+    from froude import speed_range
+    from froude.apps.studio.app import Studio
+
+    monkeypatch.setattr(session.prep.memo, "speed_ranges", {})  # this test's searches, not ones remembered
+    monkeypatch.setattr(session.prep.memo, "speed_probes", {})
+    checked: list = []  # (character, speed factor) of every output the searches check, in order
+    tabs: list = []
+    ready = threading.Event()
+
+    def speed_ok(prep, character, s, numbers):  # a stand-in for a 4-stride output and its bars
+        ready.wait(30)
+        checked.append((character, s))
+        if character is None and len(checked) == 3:
+            tabs[0].request(Params(character="giant"))  # the user's pick arrives while the search runs
+        return 0.5 <= s <= 1.5, "" if 0.5 <= s <= 1.5 else "a bar missed"
+
+    monkeypatch.setattr(speed_range, "_speed_ok", speed_ok)
+
+    def wait_for_range(tab, character):
+        t_end = time.monotonic() + 180
+        while character not in tab.session.speed_ranges and time.monotonic() < t_end:
+            time.sleep(0.05)
+        return tab.session.speed_ranges[character]
+
+    studio = Studio(session.prep, port=_free_port())
+    try:
+        tabs.append(studio.open_tab())  # its worker starts the search for the reference's own body
+        tab = tabs[0]
+        ready.set()
+        wait_for_range(tab, "giant")  # the giant's result, then its own search
+        assert tab.good.params.character == "giant"
+        first = [c for c, _ in checked].index("giant")
+        assert checked[:first] == [(None, 1.0), (None, 0.3), (None, 0.65)]  # stopped after the pick's output
+        assert "same" not in tab.session.speed_ranges
+        tab.request(Params())  # back to the reference's body: its search resumes
+        rng = wait_for_range(tab, "same")
+        mine = [s for c, s in checked if c is None]
+        assert len(mine) == len(set(mine)) == len(rng.probes)  # every output checked once, none again
+        assert rng.lo == pytest.approx(0.5, abs=speed_range.SPEED_SEARCH_TOL)
+        assert rng.hi == pytest.approx(1.5, abs=speed_range.SPEED_SEARCH_TOL)
+        assert tab.gui_speed.min == round(rng.lo, 2) and tab.gui_speed.max == round(rng.hi, 2)
+    finally:
+        studio.stop()
+
+
 class _Catch:
     """A stand-in for a page's client that keeps what the studio sends as downloads."""
 

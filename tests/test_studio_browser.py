@@ -77,8 +77,14 @@ def _type(page, label: str, value: str) -> None:
 
 
 def _pick(page, label: str, option: str) -> None:
-    page.get_by_label(label, exact=True).click()
-    page.get_by_role("option", name=option, exact=True).click()
+    """Pick ``option`` in a dropdown; returns once the dropdown reads it (the pick reached the page's control;
+    the server then computes it in its own time)."""
+    from playwright.sync_api import expect
+
+    box = page.get_by_label(label, exact=True)
+    box.click()
+    page.get_by_role("option", name=option, exact=True).click()  # waits for the option list to be open
+    expect(box).to_have_value(option, timeout=15000)
 
 
 def _check(page, label: str, on: bool) -> None:
@@ -87,19 +93,20 @@ def _check(page, label: str, on: bool) -> None:
         box.click()
 
 
-def _close_toasts(page) -> None:
-    """Close the notifications (viser's software-WebGL note, our messages): they cover the scene."""
-    for _ in range(5):
-        buttons = page.locator(".mantine-Notification-root button").all()
-        if not buttons:
-            return
-        for b in buttons:
-            try:
-                b.click(timeout=1000, force=True)
-            except Exception:
-                pass
-        page.wait_for_timeout(600)
-    raise AssertionError("notifications would not close")
+def _close_toasts(page, timeout_s: float = 30.0) -> None:
+    """Close the notifications (viser's software-WebGL note, our messages): they cover the scene. Each close
+    button is clicked, then the page is watched until no notification is left (on a loaded machine the
+    browser takes seconds to run a click and the closing animation); one that arrives meanwhile is closed too."""
+    toasts = page.locator(".mantine-Notification-root")
+    t_end = time.monotonic() + timeout_s
+    while toasts.count():
+        if time.monotonic() > t_end:
+            raise AssertionError(f"notifications would not close: {toasts.all_inner_texts()}")
+        for b in page.locator(".mantine-Notification-root button").all():
+            with contextlib.suppress(Exception):  # it may have closed by itself (auto-close) meanwhile
+                b.click(timeout=5000, force=True)
+        with contextlib.suppress(Exception):  # not gone within 5 s: click what is still there again
+            page.wait_for_function("() => !document.querySelector('.mantine-Notification-root')", timeout=5000)
 
 
 def _download(page, button: str, folder: Path, timeout=120000) -> Path:

@@ -8,6 +8,7 @@ session keeps its last good result.
 from __future__ import annotations
 
 import socket
+import sys
 import time
 
 import msgspec
@@ -145,6 +146,28 @@ def test_foreign_origins_are_refused_own_page_accepted(studio):
             assert any(b"state:" in m for m in c.received)
         finally:
             c.close()
+
+
+def test_a_socket_closed_before_its_request_prints_no_traceback(studio):
+    """A browser's spare socket (or a port probe) closed before it sent a request is not an error; other
+    handshake failures are still logged."""
+    import logging
+
+    from froude.apps.studio.guard import QuietSpareSockets
+
+    log = logging.getLogger("websockets.server")
+    assert any(isinstance(f, QuietSpareSockets) for f in log.filters)  # the studio put it there
+
+    def record(exc):
+        try:
+            raise exc
+        except Exception:
+            return log.makeRecord(log.name, logging.ERROR, __file__, 0, "opening handshake failed", (),
+                                  sys.exc_info())
+
+    quiet = QuietSpareSockets()
+    assert not quiet.filter(record(EOFError("connection closed while reading HTTP request line")))
+    assert quiet.filter(record(ValueError("invalid HTTP request line: x")))
 
 
 def _wait(cond, timeout=10.0) -> bool:

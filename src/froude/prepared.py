@@ -26,12 +26,15 @@ class Memo:
 
     retargets: (preset name or None, character numbers) -> Retarget (built-in presets and the reference's
     own body only; files and Character objects are built each time); faster_machines: speed factor ->
-    the machine re-solved for it; speed_ranges: character key -> speed_range.SpeedRange.
+    the machine re-solved for it; speed_ranges: character key -> speed_range.SpeedRange; speed_probes:
+    character key -> {speed factor: (meets the bars, why not)}, the outputs a range search checked (kept
+    when the search is stopped, so that its next run repeats none).
     """
 
     retargets: dict = field(default_factory=dict)
     faster_machines: dict = field(default_factory=dict)
     speed_ranges: dict = field(default_factory=dict)
+    speed_probes: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True, eq=False)

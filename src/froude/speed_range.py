@@ -40,6 +40,11 @@ class SpeedRange:
         return f"with every physics bar met this character's steady speeds are {self.describe()}"
 
 
+class SearchStopped(Exception):
+    """reachable_speed_range was asked to stop (its ``stop()`` said so) before it was done; the outputs it
+    had checked are kept on ``prep.memo`` and its next run for the same character starts from them."""
+
+
 #: The factors reachable_speed_range searches between, and how finely [-].
 SPEED_SEARCH_RANGE = (0.3, 3.0)
 SPEED_SEARCH_TOL = 0.03
@@ -89,15 +94,20 @@ def _bisect(ok, good: float, bad: float) -> float:
     return good
 
 
-def reachable_speed_range(prep: Prepared, character=None, **character_numbers) -> SpeedRange:
+def reachable_speed_range(prep: Prepared, character=None, *, stop=None, **character_numbers) -> SpeedRange:
     """The range of ``scale`` speed factors whose outputs meet every physics bar, for one character.
 
     Bisection on real outputs (4 strides each, the same synthesis and IK as ``scale``) between 1 and the
     ends of SPEED_SEARCH_RANGE, to SPEED_SEARCH_TOL; the ends returned were themselves produced and
     checked; then every SPEED_GRID step between x1 and each end is checked too (_walk_in), so that the
     range is one interval of factors that were all seen to meet the bars (at that spacing). About thirty
-    short outputs (a few seconds); remembered per character on ``prep``.
-    For the studio's speed slider and for ``scale``'s refusals.
+    short outputs (a few seconds on a quiet machine, minutes on a loaded one); remembered per character
+    on ``prep``. For the studio's speed slider and for ``scale``'s refusals.
+
+    stop: () -> bool, asked before each output (None: never stop); when it says True the search raises
+    SearchStopped, so that a caller with something more urgent (the studio's next change) waits for one
+    output at most, not the whole search. Each checked output is remembered on ``prep``, so the next run
+    resumes where this one stopped (the probes are the same: the search is deterministic).
     """
     key = ("speed_range", character if isinstance(character, (str, type(None))) else id(character),
            tuple(sorted((k, v) for k, v in character_numbers.items() if v is not None)))
@@ -108,10 +118,16 @@ def reachable_speed_range(prep: Prepared, character=None, **character_numbers) -
     m = prep.machine.scaled(rt.L, rt.M)
     base = m.mean_speed * m.speed_unit
     probes = []
+    seen = prep.memo.speed_probes.setdefault(key, {})
 
     def ok(s):
-        good, why = _speed_ok(prep, character, s, character_numbers)
-        probes.append((float(s), good, why))
+        s = float(s)
+        if s not in seen:
+            if stop is not None and stop():
+                raise SearchStopped(f"speed range search for {character!r} stopped after {len(seen)} outputs")
+            seen[s] = _speed_ok(prep, character, s, character_numbers)
+        good, why = seen[s]
+        probes.append((s, good, why))
         return good
 
     if not ok(1.0):
@@ -124,6 +140,7 @@ def reachable_speed_range(prep: Prepared, character=None, **character_numbers) -
     out = SpeedRange(lo=lo, hi=hi, lo_m_s=lo * base, hi_m_s=hi * base, base_m_s=base, probes=tuple(probes),
                      empty=not probes[0][1])
     prep.memo.speed_ranges[key] = out
+    prep.memo.speed_probes.pop(key, None)  # the range itself is remembered now
     return out
 
 

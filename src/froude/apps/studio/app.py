@@ -574,13 +574,22 @@ class Tab:
         return self.session.speed_ranges.get(character)
 
     def _bound_speed(self, character: str) -> None:
-        """Work out (once per preset; a few seconds: about 24 short outputs) the speed factors whose outputs
-        meet every physics bar and bound the speed slider to them (within its own limits)."""
-        from ...speed_range import reachable_speed_range
+        """Work out (once per preset; about 24 short outputs: a few seconds, minutes on a loaded machine) the
+        speed factors whose outputs meet every physics bar and bound the speed slider to them (within its
+        own limits).
+
+        The search gives way to the user: a change (or the tab closing) that comes in meanwhile stops it
+        after the output being checked, and the change is computed next; the outputs already checked are
+        kept, and the search resumes from them when this preset's result is next on screen (apply)."""
+        from ...speed_range import SearchStopped, reachable_speed_range
 
         rng = self.session.speed_ranges.get(character)
         if rng is None:
-            rng = reachable_speed_range(self.session.prep, None if character == "same" else character)
+            try:
+                rng = reachable_speed_range(self.session.prep, None if character == "same" else character,
+                                            stop=lambda: self._stop.is_set() or self._newer_pending())
+            except SearchStopped:
+                return  # the slider keeps its bounds until the search is done
             self.session.speed_ranges[character] = rng
         lim = LIMITS["speed"]
         if rng.empty:

@@ -10,6 +10,7 @@ Origin, when a browser sent one, is that same host and port. Clients without an 
 from __future__ import annotations
 
 import ipaddress
+import logging
 import socket
 from urllib.parse import urlsplit
 
@@ -91,6 +92,17 @@ def handshake_refusal(host_header: str | None, origin: str | None, hosts: frozen
     return None
 
 
+class QuietSpareSockets(logging.Filter):
+    """Drops websockets' "opening handshake failed" record (logged with a traceback) when the connection
+    closed before it sent its HTTP request line: a browser's spare preconnected socket, or a port probe.
+    Nothing went wrong, and a traceback on a running studio's terminal says otherwise (viser filters the
+    message too, but only from the first request it serves on). Other handshake failures are kept."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        return not (record.getMessage() == "opening handshake failed" and isinstance(exc, EOFError))
+
+
 def install(server, port_of, bound: str, on_refused=None) -> set:
     """Refuse foreign handshakes on a viser server before it hears or sends anything.
 
@@ -99,6 +111,9 @@ def install(server, port_of, bound: str, on_refused=None) -> set:
     (and calls the studio's connect handler) only after its first camera message, so a refused one never
     gets a session. port_of: () -> the bound port. Returns the set of refused client ids.
     """
+    log = logging.getLogger("websockets.server")
+    if not any(isinstance(f, QuietSpareSockets) for f in log.filters):
+        log.addFilter(QuietSpareSockets())
     ws = server._websock_server  # viser has no public hook for the handshake; this is its connection list
     hosts = allowed_hosts(bound)
     refused: set = set()

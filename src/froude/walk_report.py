@@ -79,7 +79,8 @@ def walking_extras(prep, res, report) -> dict:
     of the clip, and the cadence the naive retarget would have next to the physical one.
 
     "cadence": clip [Hz] (measured over its complete steps), output [Hz] (measured), expected = clip × L^-1/2
-    × the speed law's factor (dynamic similarity and ``machine.walk_speed.step_frequency_factor``),
+    × the speed law's factor (dynamic similarity, and above the clip's speed the re-solved cycle's step time:
+    ``machine.walk_speed``),
     naive = clip × s (engines keep the clip's timing, played s times faster) and its error against the
     expected one.
     """
@@ -97,7 +98,10 @@ def walking_extras(prep, res, report) -> dict:
     # take's first and last touchdowns too, 2 % slower on CMU 07_01, which starts and stops)
     f_clip = 1.0 / float(prep.machine.reference["step_time_s"])
     f_out = float(report.step_frequency_hz)
-    expected = f_clip * L ** -0.5 * step_frequency_factor(s)
+    # above the clip's speed, the step time of the cycle actually walked (the faster-cadence law where the
+    # first finds no cycle: CMU 07_01 past x1.275); the same solve as the output's, remembered on prep
+    law = prep.machine.t_step / prep.faster_machine(s).t_step if s > 1.0 else step_frequency_factor(s)
+    expected = f_clip * L ** -0.5 * law
     naive = f_clip * s
     return {"machine": "walking", "walking": {**out, "clip": clip},
             "cadence": {"clip_step_frequency_hz": f_clip, "step_frequency_hz": f_out,

@@ -137,7 +137,7 @@ def _step_speeds(res) -> np.ndarray:
     return np.diff(x) / np.diff(td)
 
 
-@pytest.mark.parametrize("name,factor", [("02_01", 1.3), ("02_01", 0.6), ("07_01", 1.3), ("07_01", 0.6)])
+@pytest.mark.parametrize("name,factor", [(n, f) for n in ("02_01", "07_01", BANDAI_WALKS[0]) for f in (1.3, 0.6)])
 def test_walk_accelerates_monotonically(name, factor, walks):
     if MOCAP is None:
         pytest.skip("real clips not found")
@@ -156,6 +156,8 @@ def test_walk_accelerates_monotonically(name, factor, walks):
     pytest.param("02_01", 0.6),
     pytest.param("07_01", 1.3),
     pytest.param("07_01", 0.6),
+    pytest.param(BANDAI_WALKS[0], 1.3),
+    pytest.param(BANDAI_WALKS[0], 0.6),
 ])
 def test_walk_acceleration_meets_every_bar(name, factor, walks):
     if MOCAP is None:

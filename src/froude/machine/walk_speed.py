@@ -11,6 +11,8 @@ people walk faster with longer *and* quicker steps. Here the fitted walking mach
 * the step time × s^(−1/2), so the step length grows × s^(1/2) (the usual empirical shape of human
   walking, step length rising about with the square root of speed, cadence the other half: Grieve &
   Gear 1966, an approximation over 0.8-1.6 m/s);
+  where that law finds no cycle, the continuation goes on with × s^(−0.7) (FAST_STEP_TIME_EXPONENT;
+  CMU 07_01 past ×1.275, whose stance leg otherwise unloads);
 * the share of the step spent in double support kept (the reference's own; it shrinks a little with
   speed in people, which the machine may then show through its own dynamics);
 * the leg control's stance time T_c scaled like the step time, the touchdown geometry, control and roll

@@ -90,10 +90,7 @@ def _repair(res, targets: Targets, body: BodyModel, held: np.ndarray, init_jump:
     Jacobian at every step, warm-started from their own solution (from the previous frame's where they
     jumped); a frame keeps the new pose only where it is better. Returns (result, frames tried)."""
     rot = res.motion.rotations
-    jump = _largest_joint_angle_deg(rot[1:], rot[:-1])
-    flip = np.zeros(len(rot), bool)
-    flip[1:] = jump > init_jump + BRANCH_JUMP_DEG
-    bad = np.flatnonzero(flip | (res.com_error > RETRY_COM_ERROR) | _missed(res, held, RETRY_MARKER_ERROR))
+    bad, flip = _frames_to_retry(res, held, init_jump)
     if not bad.size:
         return res, 0
     src = np.where(flip[bad], bad - 1, bad)  # a jumped frame starts from its neighbour's solution
@@ -107,19 +104,7 @@ def _repair(res, targets: Targets, body: BodyModel, held: np.ndarray, init_jump:
     better = np.where(flip[bad], new_jump < old_jump,
                       _worst_held(again, held[bad]) < _worst_held(res, held)[bad])
     better &= again.com_error <= np.maximum(res.com_error[bad], RETRY_COM_ERROR)
-    root = res.motion.root_positions.copy()
-    rot = rot.copy()
-    root[bad[better]] = again.motion.root_positions[better]
-    rot[bad[better]] = again.motion.rotations[better]
-    com_err = res.com_error.copy()
-    com_err[bad[better]] = again.com_error[better]
-    com = res.com.copy()
-    com[bad[better]] = again.com[better]
-    failed = res.failed.copy()
-    failed[bad[better]] = again.failed[better]
-    res = _replace(res, motion=res.motion.with_(root_positions=root, rotations=rot), com_error=com_err,
-                   failed=failed, com=com)
-    return res, int(bad.size)
+    return _merge_rows(res, bad, again, better), int(bad.size)
 
 
 def _repair_later(res, targets: Targets, body: BodyModel, held: np.ndarray, init_jump: np.ndarray):
@@ -133,10 +118,7 @@ def _repair_later(res, targets: Targets, body: BodyModel, held: np.ndarray, init
     frames tried)."""
     rot = res.motion.rotations
     F = len(rot)
-    jump = _largest_joint_angle_deg(rot[1:], rot[:-1])
-    flip = np.zeros(F, bool)
-    flip[1:] = jump > init_jump + BRANCH_JUMP_DEG
-    bad = np.flatnonzero(flip | (res.com_error > RETRY_COM_ERROR) | _missed(res, held, RETRY_MARKER_ERROR))
+    bad, _ = _frames_to_retry(res, held, init_jump)
     if not bad.size:
         return res, 0
     sub = _rows_of(targets, bad)
@@ -277,16 +259,30 @@ def _rows_of(targets: Targets, rows: np.ndarray) -> Targets:
                    None if targets.floor_top is None else targets.floor_top[rows])
 
 
-def _merge_rows(res, rows: np.ndarray, again):
-    """res with the frames ``rows`` taken from ``again`` (an IkResult of those frames only)."""
+def _merge_rows(res, rows: np.ndarray, again, take=slice(None)):
+    """res with the frames ``rows`` taken from ``again`` (an IkResult of those frames only); with ``take``
+    (a mask or index into rows), only the frames rows[take]."""
+    rows = rows[take]
     root = res.motion.root_positions.copy()
     rot = res.motion.rotations.copy()
-    root[rows], rot[rows] = again.motion.root_positions, again.motion.rotations
+    root[rows], rot[rows] = again.motion.root_positions[take], again.motion.rotations[take]
     out = {"com_error": res.com_error.copy(), "com": res.com.copy(), "failed": res.failed.copy(),
            "marker_error": res.marker_error.copy()}
     for name, v in out.items():
-        v[rows] = getattr(again, name)
+        v[rows] = getattr(again, name)[take]
     return _replace(res, motion=res.motion.with_(root_positions=root, rotations=rot), **out)
+
+
+def _frames_to_retry(res, held: np.ndarray, init_jump: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(frame indices, flip (F,) bool) of the frames a repair pass solves again: those whose COM or held
+    foot markers (held (F, 6)) are above RETRY_COM_ERROR / RETRY_MARKER_ERROR, or that jumped to another
+    branch (flip: a joint turning more than BRANCH_JUMP_DEG beyond the reference pose's init_jump (F-1,)
+    [deg] from the frame before)."""
+    rot = res.motion.rotations
+    flip = np.zeros(len(rot), bool)
+    flip[1:] = _largest_joint_angle_deg(rot[1:], rot[:-1]) > init_jump + BRANCH_JUMP_DEG
+    bad = np.flatnonzero(flip | (res.com_error > RETRY_COM_ERROR) | _missed(res, held, RETRY_MARKER_ERROR))
+    return bad, flip
 
 
 def _held_markers(targets: Targets) -> np.ndarray:

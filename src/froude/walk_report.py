@@ -85,7 +85,6 @@ def walking_extras(prep, res, report) -> dict:
     expected one.
     """
     from .body.gait import detect_gait
-    from .machine.walk_speed import step_frequency_factor
     from .metrics import _with_ground
 
     body = res.retarget.body
@@ -100,7 +99,8 @@ def walking_extras(prep, res, report) -> dict:
     f_out = float(report.step_frequency_hz)
     # above the clip's speed, the step time of the cycle actually walked (the faster-cadence law where the
     # first finds no cycle: CMU 07_01 past x1.275); the same solve as the output's, remembered on prep
-    law = prep.machine.t_step / prep.faster_machine(s).t_step if s > 1.0 else step_frequency_factor(s)
+    # (below it, §5.2's horizontal stretch keeps the clip's timing)
+    law = prep.machine.t_step / prep.faster_machine(s).t_step if s > 1.0 else 1.0
     expected = f_clip * L ** -0.5 * law
     naive = f_clip * s
     return {"machine": "walking", "walking": {**out, "clip": clip},

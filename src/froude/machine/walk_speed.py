@@ -31,7 +31,7 @@ import numpy as np
 from ..errors import FitError
 from .walk_model import WalkingMachine
 
-__all__ = ["WALK_RUN_U", "STEP_TIME_EXPONENT", "step_frequency_factor", "walking_machine_at_speed",
+__all__ = ["WALK_RUN_U", "STEP_TIME_EXPONENT", "walking_machine_at_speed",
            "walking_machines_at_speeds",
            "check_walking_speed"]
 
@@ -44,12 +44,6 @@ STEP_TIME_EXPONENT = -0.5
 #: rising. Measured on CMU 07_01 (1.39 m/s): with s^-0.5 the cycle exists up to x1.275 and its stance leg
 #: unloads at x1.2875 (a flight phase); with s^-0.7 the search finds the cycle at x1.30 (U = 0.60).
 FAST_STEP_TIME_EXPONENT = -0.7
-
-
-def step_frequency_factor(s: float) -> float:
-    """Step frequency of a walk at speed factor s / the clip's: s^(1/2) faster (the re-solved cycle, step
-    time × s^STEP_TIME_EXPONENT), 1 slower (§5.2's horizontal stretch keeps the timing)."""
-    return s ** -STEP_TIME_EXPONENT if s > 1.0 else 1.0
 
 
 def check_walking_speed(machine: WalkingMachine, s: float, what: str = "walk") -> None:

@@ -266,13 +266,15 @@ def test_bandai_walk_decelerated_at_120_hz_meets_every_bar(name, walks):
     assert res.report.foot_skate_mm <= 5.0 and res.report.check_bars() == []
 
 
-def test_walk_report_expects_the_cadence_of_the_cycle_walked_past_the_first_law(walks):
-    """Above x1.275 CMU 07_01's walking cycle is re-solved with the faster-cadence step time law
-    (machine.walk_speed.FAST_STEP_TIME_EXPONENT): the report's expected cadence is that cycle's, not s^0.5's."""
+@pytest.mark.parametrize("name", clip_params(BANDAI_WALKS))
+def test_walk_report_expects_the_cadence_of_the_cycle_walked_past_the_first_law(name, walks):
+    """Past x1.4 the Bandai walk's cycle is re-solved with the faster-cadence step time law
+    (machine.walk_speed.FAST_STEP_TIME_EXPONENT): the report's expected cadence is that cycle's, not s^0.5's.
+    (CMU 07_01 walked it from x1.2875 before the control's pulses; with them it has s^-1/2 cycles to x1.30.)"""
     from froude.machine.walk_speed import STEP_TIME_EXPONENT
 
-    prep = walks("07_01")
-    r = pipeline.scale(prep, None, speed=1.3).report
+    prep = walks(name)
+    r = pipeline.scale(prep, None, speed=1.5).report
     c = r.extras["cadence"]
-    assert c["expected_step_frequency_hz"] > 1.05 * c["clip_step_frequency_hz"] * 1.3 ** -STEP_TIME_EXPONENT
+    assert c["expected_step_frequency_hz"] > 1.05 * c["clip_step_frequency_hz"] * 1.5 ** -STEP_TIME_EXPONENT
     assert r.step_frequency_hz == pytest.approx(c["expected_step_frequency_hz"], rel=0.02)

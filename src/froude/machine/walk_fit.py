@@ -23,15 +23,19 @@ complete stances gives a control without splitting the double-support force betw
 real clips it explains little of the force (r² ≈ 0: the leg-length change of walking is mostly
 geometry, not compression), so it is only a start; a plain spring leg (Geyer et al.'s) is the other.
 
-Cycle search: z = (u, v, d, s, θ0, K, a, b, c, l_td, e) (T_c held at the measured mean stance time) must
-make the step map periodic (4 equations) and reproduce the measured step time, double-support time and
-mean speed (3): seven equations in eleven unknowns, solved by minimum-norm Newton from the priors in
-coordinates scaled by ``CYCLE_SCALES`` (the periodic machine nearest them). Then the *shape fit*: least
+Cycle search: z = (u, v, d, s, θ0, K, a, b, c, l_td, e) (T_c held at the measured mean stance time; the
+control's two pulses, six more entries of z, held) must make the step map periodic (4 equations) and
+reproduce the measured step time, double-support time and mean speed (3): seven equations in eleven
+unknowns, solved by minimum-norm Newton from the priors in coordinates scaled by ``CYCLE_SCALES`` (the
+periodic machine nearest them). Then the *shape fit*: least
 squares of the machine's total vertical force over a stance (measured through the clip's filter) and its
 COM height over a step against the clip's, with periodicity and the three targets as heavily weighted
 residuals, the force weighted up around the clip's two peaks and trough (``LANDMARK_WEIGHT``: the
 acceptance is on those landmarks, and a plain least-squares fit of the CMU clips' W-shaped single
-support flattens them); the exact cycle is then found again from its result. Of the two starts the better shape wins.
+support flattens them); the exact cycle is then found again from its result. Each of the two starts is
+fitted without the control's pulses and with them (``PULSE_START``: a push-off pulse just past the other
+foot's touchdown, a weight-acceptance pulse at the clip's first peak, their amplitudes fitted by the
+shape fit); of the four the best shape wins.
 """
 from __future__ import annotations
 
@@ -48,14 +52,41 @@ from ..errors import FitError, NotAWalkingMotion
 from .forces import CUTOFF_HZ, ground_force, smooth_com
 from .orbit import rowwise, solve_orbit
 from .walk_model import WalkingMachine
-from .walking import N_PER_STANCE, REASONS, WalkControl, WalkState, record_step, simulate_walk, walk_step
+from .walking import (
+    N_PER_STANCE,
+    REASONS,
+    WalkControl,
+    WalkState,
+    desired_leg_length,
+    record_step,
+    simulate_walk,
+    walk_step,
+)
 
 __all__ = ["WalkFitResult", "fit_walking_detailed", "CYCLE_SCALES", "force_landmarks", "PROFILE_SAMPLES"]
 
-_VARS = ("u", "v", "d", "s", "theta0", "K", "a", "b", "c", "l_td", "e")
-#: Scales of the cycle variables for the minimum-norm search (K relative to its prior).
+_VARS = ("u", "v", "d", "s", "theta0", "K", "a", "b", "c", "l_td", "e", "p", "tau_p", "w_p", "q", "tau_q", "w_q")
+#: The two control pulses' variables (``WalkControl``): held in the cycle search; the shape fit fits
+#: their amplitudes p and q.
+PULSE_VARS = ("p", "tau_p", "w_p", "q", "tau_q", "w_q")
+#: Scales of the cycle variables for the minimum-norm search (K relative to its prior); a pulse variable
+#: is free only where a search frees it (:func:`_scales`).
 CYCLE_SCALES = {"u": 0.05, "v": 0.02, "d": 0.02, "s": 0.05, "theta0": 0.03, "K": 0.1, "a": 0.01, "b": 0.02,
-                "c": 0.02, "l_td": 0.01, "e": 0.02}
+                "c": 0.02, "l_td": 0.01, "e": 0.02, "p": 0.01, "tau_p": 0.02, "w_p": 0.01, "q": 0.01, "tau_q": 0.02,
+                "w_q": 0.01}
+#: The pulses off (amplitudes 0; centres and widths then do nothing): (p, tau_p, w_p, q, tau_q, w_q).
+PULSES_OFF = (0.0, 0.85, 0.04, 0.0, 0.15, 0.075)
+#: The start of the fit with pulses: amplitudes p, q [l0], the push-off pulse's centre past the other
+#: foot's touchdown (dtau_p, stance phase) and both widths (half the support, stance phase).
+PULSE_START = {"p": 0.03, "dtau_p": 0.007, "w_p": 0.04, "q": 0.02, "w_q": 0.075}
+
+
+def _scales(z0, free=()):
+    """(17,) scales of the cycle variables z0 (``_VARS``): CYCLE_SCALES, K's relative to its value, the
+    pulse variables 0 (held) unless named in ``free``."""
+    s = np.array([CYCLE_SCALES[v] if (v not in PULSE_VARS or v in free) else 0.0 for v in _VARS])
+    s[5] *= abs(z0[5])
+    return s
 #: The second start of the cycle search: a plain spring leg, Geyer et al.'s K ≈ 20 (k = 20 kN/m, m = 80 kg,
 #: l0 = 1 m gives 25), l_d = l0; (K, a, b, c).
 GEYER_CONTROL = (20.0, 0.0, 0.0, 0.0)
@@ -218,8 +249,7 @@ def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40 *
     up to 30 halvings).
     Returns (z, WalkStep, simulator evaluations, residual max-norm).
     """
-    s = np.array([CYCLE_SCALES[v] for v in _VARS])
-    s[5] *= abs(z0[5])
+    s = _scales(z0)
     h = 1e-7 * np.maximum(np.abs(z0), 1.0)
     tgt = np.asarray(targets, float)
 
@@ -299,7 +329,7 @@ def stance_leg_length(m, tau, n_per_stance=N_PER_STANCE):
     tr = simulate_walk(m.state, m.theta0, m.control, tq, roll=m.roll, l_td=m.l_td, n_per_stance=n_per_stance)
     xc = np.where(first, tr.contact_x[1], tr.contact_x[0]) + m.roll * tau
     l = np.hypot(tr.pos[:, 0] - xc, tr.pos[:, 1])
-    return l, 1.0 + m.a + tau * (m.b + tau * (m.c + m.e * tau))
+    return l, desired_leg_length(m.control, tau)
 
 
 def step_phase_times(t_double, t_step):
@@ -310,10 +340,12 @@ def step_phase_times(t_double, t_step):
 
 def _control(z, T_c) -> WalkControl:
     """The leg control of the cycle variables z (``_VARS``) with T_c [√(l0/g)]."""
-    return WalkControl(K=float(z[5]), a=float(z[6]), b=float(z[7]), c=float(z[8]), T_c=T_c, e=float(z[10]))
+    return WalkControl(K=float(z[5]), a=float(z[6]), b=float(z[7]), c=float(z[8]), T_c=T_c, e=float(z[10]),
+                       p=float(z[11]), tau_p=float(z[12]), w_p=float(z[13]), q=float(z[14]), tau_q=float(z[15]),
+                       w_q=float(z[16]))
 
 
-def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_unit, tau_landmarks,
+def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_unit, tau_landmarks, free=(),
                n_per_stance=SHAPE_N_PER_STANCE):
     """Least squares of the machine's stance force profile against the clip's, near-periodic.
 
@@ -325,15 +357,18 @@ def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_un
     """
     from scipy.optimize import least_squares
 
-    s = np.array([CYCLE_SCALES[v] for v in _VARS])
-    s[5] *= abs(z1[5])
+    s_all = _scales(z1, free)
+    fr = s_all > 0
+    s = s_all[fr]
     tgt = np.asarray(targets, float)
     wp, wt, wr = SHAPE_WEIGHTS["periodic"], SHAPE_WEIGHTS["targets"], SHAPE_WEIGHTS["prior"]
-    n_res = tau.size + h_ref.size + 7 + z1.size
+    n_res = tau.size + h_ref.size + 7 + int(fr.sum())
     wc = SHAPE_WEIGHTS["com"]
     wf = 1.0 + LANDMARK_WEIGHT * sum(np.exp(-0.5 * ((tau - tk) / LANDMARK_WIDTH) ** 2) for tk in tau_landmarks)
 
-    def resid(z):
+    def resid(x):
+        z = z1.copy()
+        z[fr] = x
         rec = record_step(WalkState(*z[:4]), z[4], _control(z, T_c), roll=roll, l_td=z[9], n_per_stance=n_per_stance)
         w = rec.step
         if not w.valid:
@@ -344,10 +379,12 @@ def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_un
         per = np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3]]) * wp
         tg = np.array([(w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
                        (w.step_length / w.t_step - tgt[2]) / tgt[2]]) * wt
-        return np.concatenate([wf * (prof - prof_ref), wc * (h - h_ref), per, tg, wr * (z - z1) / s])
+        return np.concatenate([wf * (prof - prof_ref), wc * (h - h_ref), per, tg, wr * (x - z1[fr]) / s])
 
-    sol = least_squares(resid, z1, x_scale=s, diff_step=1e-6, max_nfev=SHAPE_MAX_EVALUATIONS, method="trf")
-    return sol.x, float(sol.cost)
+    sol = least_squares(resid, z1[fr], x_scale=s, diff_step=1e-6, max_nfev=SHAPE_MAX_EVALUATIONS, method="trf")
+    z = z1.copy()
+    z[fr] = sol.x
+    return z, float(sol.cost)
 
 
 # Long because, like fit.fit_machine_detailed, the walking fit is one sequential pass whose intermediates
@@ -454,14 +491,19 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
                           for a, b, c in zip(t_td, t_lo, t_nx)], axis=0) / l0
 
     # Two starts: the least-squares control, and a plain spring leg (Geyer's K ≈ 20, l_d = l0) in case
-    # the force of the clip does not determine the control well; the better shape fit wins.
+    # the force of the clip does not determine the control well; each without and with the two control
+    # pulses (push-off just past the other foot's touchdown, weight acceptance at the clip's first peak);
+    # the best shape fit wins.
+    pulses_on = (PULSE_START["p"], step_time / stance_time + PULSE_START["dtau_p"], PULSE_START["w_p"],
+                 PULSE_START["q"], lm_ref["tau_peak1"], PULSE_START["w_q"])
     best = None
     errors = []
-    for ctl0 in starts:
-        z0 = np.array([u0, v0, d0, step_time / T, th0, *ctl0, 1.0, 0.0])
+    for ctl0, pulses in [(c, pl) for c in starts for pl in (PULSES_OFF, pulses_on)]:
+        z0 = np.array([u0, v0, d0, step_time / T, th0, *ctl0, 1.0, 0.0, *pulses])
+        free = ("p", "q") if pulses is pulses_on else ()
         try:
             z1, _, it1, _ = _cycle_search(z0, T_c, roll, targets, n_per_stance)
-            z2, cost = _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref_step, dt, T, tau_landmarks)
+            z2, cost = _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref_step, dt, T, tau_landmarks, free)
             z, w, it2, _ = _cycle_search(z2, T_c, roll, targets, n_per_stance)
         except FitError as e:
             errors.append(str(e))
@@ -520,10 +562,12 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         "force_profile_rms_bw": float(np.sqrt(np.mean((prof_model - prof_ref) ** 2))),
     }
     fit = {"K": K0, "a": a0, "b": b0, "c": c0, "r2_vertical": r2, "rms_bw": rms, "note": fit_note,
-           "prior": dict(zip(_VARS, map(float, z0))), "shape_cost": float(cost)}
+           "prior": dict(zip(_VARS, map(float, z0))), "shape_cost": float(cost),
+           "pulses_start": dict(zip(PULSE_VARS, map(float, z0[11:])))}
     machine = WalkingMachine(
         u=state.u, v=state.v, d=state.d, s=state.s, theta0=th, l_td=l_td, roll=roll, K=ctl.K, a=ctl.a, b=ctl.b,
-        c=ctl.c, e=ctl.e, T_c=T_c, t_stance=w.t_stance, t_double=w.t_double, t_step=w.t_step, step_length=w.step_length,
+        c=ctl.c, e=ctl.e, p=ctl.p, tau_p=ctl.tau_p, w_p=ctl.w_p, q=ctl.q, tau_q=ctl.tau_q, w_q=ctl.w_q, T_c=T_c,
+        t_stance=w.t_stance, t_double=w.t_double, t_step=w.t_step, step_length=w.step_length,
         mean_speed=w.step_length / w.t_step, periodicity=periodicity, iterations=iters, mass=mass, l0=l0,
         g=GRAVITY, source=src, heading=heading, lateral=lateral, up=np.eye(3)[UP_AXIS], ground=float(gait.ground),
         reference=reference, quality=quality, fit=fit)

@@ -3,16 +3,19 @@
 The walking counterpart of :class:`froude.machine.model.SimpleMachine`. Canonical content is
 dimensionless (l0 = 1, g = 1, m = 1; see :mod:`froude.machine.walking`): the periodic touchdown state
 (u, v, d, s), the touchdown geometry (θ0, l_td), the centre-of-pressure roll, the eq. 2 control of both
-legs (K, a, b, c, T_c and the cubic term e of ``WalkControl``) and the cycle's times. The SI view
-multiplies by l0 [m], m [kg] and g, so
-:meth:`WalkingMachine.scaled` is dynamic similarity (Table 1): lengths × L, times × √L, speeds × √L,
-forces × M; dimensionless numbers, angles and body-weight forces unchanged.
+legs (K, a, b, c, T_c, the cubic term e and the two pulses of ``WalkControl``) and the cycle's times.
+The SI view multiplies by l0 [m], m [kg] and g, so :meth:`WalkingMachine.scaled` is dynamic similarity
+(Table 1): lengths × L, times × √L, speeds × √L, forces × M; dimensionless numbers, angles and
+body-weight forces unchanged (the pulses are dimensionless too: amplitudes in l0, centres and widths in
+stance phase, so scaling needs no change for them).
 
 JSON (all keys always present)::
 
   schema, kind: "walking", source, mass_kg, l0_m, g_m_s2,
-  cycle: {u, v, d, s, theta0_rad, l_td, roll, K, a, b, c, e, T_c, t_stance, t_double, t_step, step_length,
-          mean_speed, periodicity, iterations}                                  # dimensionless
+  cycle: {u, v, d, s, theta0_rad, l_td, roll, K, a, b, c, e, p, tau_p, w_p, q, tau_q, w_q, T_c, t_stance,
+          t_double, t_step, step_length, mean_speed, periodicity, iterations}  # dimensionless
+  (e and the pulses p, tau_p, w_p, q, tau_q, w_q may be absent in older files: e = p = q = 0, the control
+  they were fitted with)
   cycle_si: {...}                                                               # derived, informative
   frame: {heading, lateral, up, ground_m}
   reference: {...measured on the clip, SI...}, quality: {...}, fit: {...}
@@ -36,8 +39,10 @@ from .walking import WalkControl, WalkState
 __all__ = ["WALK_SCHEMA", "WalkingMachine", "is_walking", "load_walking_machine"]
 
 WALK_SCHEMA = "froude.walking/1"
-_CYCLE = ("u", "v", "d", "s", "l_td", "roll", "K", "a", "b", "c", "e", "T_c", "t_stance", "t_double", "t_step",
-          "step_length", "mean_speed", "periodicity")
+_CYCLE = ("u", "v", "d", "s", "l_td", "roll", "K", "a", "b", "c", "e", "p", "tau_p", "w_p", "q", "tau_q", "w_q", "T_c",
+          "t_stance", "t_double", "t_step", "step_length", "mean_speed", "periodicity")
+#: Cycle keys that files written before them lack, with the value that keeps their machine (off).
+_CYCLE_DEFAULTS = {"e": 0.0, "p": 0.0, "tau_p": 0.85, "w_p": 0.04, "q": 0.0, "tau_q": 0.15, "w_q": 0.075}
 
 
 @dataclass(frozen=True)
@@ -47,7 +52,9 @@ class WalkingMachine:
     Dimensionless (units l0, √(l0/g), √(g l0), m g): touchdown state u, v (COM velocity), d (COM ahead of
     the trailing touchdown point), s (time since the trailing touchdown); theta0 [rad] and l_td (leg
     length at touchdown) place the landing foot; roll: centre-of-pressure travel per unit τ; K, a, b, c,
-    e, T_c: the leg control of both legs (``WalkControl``: eq. 2 with a cubic term e); t_stance, t_double
+    e, T_c: the leg control of both legs (``WalkControl``: eq. 2 with a cubic term e); p, tau_p, w_p and q,
+    tau_q, w_q: its push-off and weight-acceptance pulses (amplitude [l0], centre and half-width [stance
+    phase]; p = q = 0: off, as in files written before them); t_stance, t_double
     (one double support), t_step; step_length;
     mean_speed (the Froude number U of the gait); periodicity: max |next − state| at the cycle; iterations:
     simulator evaluations of the cycle searches (``machine.orbit.solve_orbit``: points and Jacobians).
@@ -86,6 +93,13 @@ class WalkingMachine:
     reference: dict = field(default_factory=dict)
     quality: dict = field(default_factory=dict)
     fit: dict = field(default_factory=dict)
+    # The control's two pulses (``WalkControl``; amplitude 0: off, as in files written before them).
+    p: float = 0.0
+    tau_p: float = 0.85
+    w_p: float = 0.04
+    q: float = 0.0
+    tau_q: float = 0.15
+    w_q: float = 0.075
 
     kind = "walking"
 
@@ -101,7 +115,8 @@ class WalkingMachine:
 
     @property
     def control(self) -> WalkControl:
-        return WalkControl(K=self.K, a=self.a, b=self.b, c=self.c, T_c=self.T_c, e=self.e)
+        return WalkControl(K=self.K, a=self.a, b=self.b, c=self.c, T_c=self.T_c, e=self.e, p=self.p, tau_p=self.tau_p,
+                           w_p=self.w_p, q=self.q, tau_q=self.tau_q, w_q=self.w_q)
 
     @property
     def state(self) -> WalkState:
@@ -191,8 +206,9 @@ class WalkingMachine:
             raise FitError(f"{where}: not a froude walking machine file (schema {got!r}, expected {WALK_SCHEMA!r})")
         try:
             c, fr = d["cycle"], d["frame"]
-            # files written before the cubic term have none: their control is the quadratic one (e = 0)
-            kw = {k: float(c[k] if k != "e" else c.get("e", 0.0)) for k in _CYCLE}
+            # files written before the cubic term or the pulses have none: their control is the one they were
+            # fitted with (e = 0, pulses off)
+            kw = {k: float(c[k] if k not in _CYCLE_DEFAULTS else c.get(k, _CYCLE_DEFAULTS[k])) for k in _CYCLE}
             return cls(**kw, theta0=float(c["theta0_rad"]), iterations=int(c["iterations"]),
                        mass=float(d["mass_kg"]), l0=float(d["l0_m"]), g=float(d["g_m_s2"]), source=str(d["source"]),
                        heading=np.asarray(fr["heading"], float), lateral=np.asarray(fr["lateral"], float),

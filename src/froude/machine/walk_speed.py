@@ -98,7 +98,9 @@ def _resolve(base: WalkingMachine, start: WalkingMachine, s: float,
     targets = (t_step, t_double, s * base.mean_speed)
     r = t_step / start.t_step  # time stretch from the start cycle to the target one
     z0 = np.array([start.u * (s * base.mean_speed / start.mean_speed), start.v, start.d, start.s * r, start.theta0,
-                   start.K, start.a, start.b, start.c, start.l_td, start.e])
+                   start.K, start.a, start.b, start.c, start.l_td, start.e,
+                   # the control's pulses are held (in stance phase, so they keep their share of the stance)
+                   start.p, start.tau_p, start.w_p, start.q, start.tau_q, start.w_q])
     try:
         z, w, it, _ = _cycle_search(z0, T_c, base.roll, targets, N_PER_STANCE)
     except FitError as e:

@@ -5,11 +5,15 @@ Soc. B 273:2861: a point mass on two massless compliant legs, with double suppor
 the M-shaped vertical force and the vaulting COM path of human walking). Each leg is controlled as in
 Pollard's eq. 2, with the same control for both legs (a symmetric gait)::
 
-    f_i = K (l_d(τ_i) − l_i),   l_d(τ) = 1 + a + b τ + c τ² + e τ³,   τ_i = (t − t_touchdown,i) / T_c
+    f_i = K (l_d(τ_i) − l_i),   l_d(τ) = 1 + a + b τ + c τ² + e τ³ + two pulses,
+    τ_i = (t − t_touchdown,i) / T_c
 
 (``WalkControl``: the running machine's ``Control`` and a cubic term e, which lets the weight-acceptance
 half of a stance differ from the push-off half: with e = 0 the fitted l_d came out symmetric about
-mid-stance, b ≈ −c, and so did the force's peaks.)
+mid-stance, b ≈ −c, and so did the force's peaks. The two pulses, short smooth extensions of the leg
+just past the other foot's touchdown (push-off, p) and in weight acceptance (q), give each double
+support two force maxima, the trailing leg's push-off and the leading leg's loading, as a walk's
+COM-derived force has; amplitude 0 is off.)
 
 along the leg from its contact point to the COM, in the sagittal plane: x forward, y up, ground y = 0.
 Units are those of the running machine (touchdown leg length l0 = 1, g = 1, m = 1; see the table in
@@ -44,8 +48,8 @@ import numpy as np
 from ..errors import PlanError
 from .dynamics import Control
 
-__all__ = ["WalkControl", "WalkState", "WalkStep", "WalkTrajectory", "RecordedStep", "walk_step", "record_step",
-           "simulate_walk", "N_PER_STANCE",
+__all__ = ["WalkControl", "WalkState", "desired_leg_length", "WalkStep", "WalkTrajectory", "RecordedStep",
+           "walk_step", "record_step", "simulate_walk", "N_PER_STANCE",
            "REASONS", "OK"]
 
 #: RK4 steps per nominal stance T_c.
@@ -56,7 +60,7 @@ MIN_COM_HEIGHT = 0.2
 MAX_PHASE_FACTOR = 3.0
 
 OK = 0
-BAD_INPUT = 1        #: non-finite input, K ≤ 0, T_c ≤ 0, s < 0, or θ0 outside (0, π/2)
+BAD_INPUT = 1        #: non-finite input, K ≤ 0, T_c ≤ 0, s < 0, θ0 outside (0, π/2) or a pulse of width ≤ 0
 NO_DOUBLE_SUPPORT = 2  #: the trailing leg pushes no more at touchdown (a flight phase came before)
 COLLAPSE = 3         #: COM height ≤ MIN_COM_HEIGHT
 STALL = 4            #: forward velocity ≤ 0
@@ -64,7 +68,8 @@ NO_EVENT = 5         #: a phase longer than MAX_PHASE_FACTOR · T_c
 FLIGHT = 6           #: the stance leg's force fell to zero in single support: running, not walking
 LOW_VAULT = 7        #: the COM fell below the landing height before passing over the stance foot
 REASONS = {
-    OK: "ok", BAD_INPUT: "bad input (non-finite, K <= 0, T_c <= 0, s < 0 or theta0 outside (0, 90) deg)",
+    OK: "ok", BAD_INPUT: "bad input (non-finite, K <= 0, T_c <= 0, s < 0, theta0 outside (0, 90) deg or a pulse "
+                         "of width <= 0)",
     NO_DOUBLE_SUPPORT: "the trailing leg is already unloaded at touchdown (no double support)",
     COLLAPSE: "COM collapsed (height <= 0.2 l0)", STALL: "forward velocity <= 0 (stall)",
     NO_EVENT: "no liftoff or touchdown within the phase time limit",
@@ -75,16 +80,31 @@ REASONS = {
 
 @dataclass(frozen=True)
 class WalkControl(Control):
-    """The walking leg control: eq. 2's (K, a, b, c, T_c) and a cubic coefficient e [l0 per unit τ³],
-    l_d = 1 + a + b τ + c τ² + e τ³ (scalar fields). A plain ``Control`` is a WalkControl with e = 0."""
+    """The walking leg control: eq. 2's (K, a, b, c, T_c), a cubic coefficient e [l0 per unit τ³] and two
+    pulses (scalar fields)::
+
+        l_d = 1 + a + b τ + c τ² + e τ³ + p B((τ − tau_p) / w_p) + q B((τ − tau_q) / w_q),
+        B(x) = cos²(π x / 2) for |x| < 1, else 0                         (a smooth bump, C¹, compact)
+
+    p [l0]: the push-off pulse, centred at tau_p just past the other foot's touchdown (an extension of the
+    trailing leg there: the ankle's push-off); q [l0]: the weight-acceptance pulse of the leading leg,
+    centred at tau_q; w_p, w_q: half-widths in stance phase. A plain ``Control`` is a WalkControl with
+    e = p = q = 0 (``desired_leg_length``)."""
 
     e: float = 0.0
+    p: float = 0.0
+    tau_p: float = 0.85
+    w_p: float = 0.04
+    q: float = 0.0
+    tau_q: float = 0.15
+    w_q: float = 0.075
 
-    NAMES: ClassVar[tuple[str, ...]] = ("K", "a", "b", "c", "T_c", "e")
+    NAMES: ClassVar[tuple[str, ...]] = ("K", "a", "b", "c", "T_c", "e", "p", "tau_p", "w_p", "q", "tau_q", "w_q")
 
     def as_tuple(self):
-        """(K, a, b, c, T_c, e)."""
-        return (self.K, self.a, self.b, self.c, self.T_c, self.e)
+        """(K, a, b, c, T_c, e, p, tau_p, w_p, q, tau_q, w_q)."""
+        return (self.K, self.a, self.b, self.c, self.T_c, self.e, self.p, self.tau_p, self.w_p, self.q, self.tau_q,
+                self.w_q)
 
 
 @dataclass(frozen=True)
@@ -127,6 +147,32 @@ def _ld(tau, a1, b, c, e):
     return a1 + tau * (b + tau * (c + e * tau))
 
 
+def _bump(x):
+    """B(x) = cos²(π x / 2) for |x| < 1, else 0 (scalar; see ``WalkControl``)."""
+    if -1.0 < x < 1.0:
+        cx = math.cos(0.5 * math.pi * x)
+        return cx * cx
+    return 0.0
+
+
+def desired_leg_length(control: Control, tau) -> np.ndarray:
+    """l_d(τ) [l0] of a walking leg control (``WalkControl``; a running ``Control`` has no cubic term and
+    no pulses) at stance phases tau (N,)."""
+    tau = np.asarray(tau, float)
+    ld = _ld(tau, 1.0 + control.a, control.b, control.c, getattr(control, "e", 0.0))
+    for amp, centre, width in _pulses(control):
+        x = (tau - centre) / width
+        ld = ld + amp * np.where(np.abs(x) < 1.0, np.cos(0.5 * np.pi * np.clip(x, -1.0, 1.0)) ** 2, 0.0)
+    return ld
+
+
+def _pulses(control) -> list[tuple[float, float, float]]:
+    """[(amplitude, centre, half-width)] of the control's pulses that are on (amplitude ≠ 0)."""
+    out = [(float(getattr(control, amp, 0.0)), float(getattr(control, "tau_" + amp, 0.0)),
+            float(getattr(control, "w_" + amp, 1.0))) for amp in ("p", "q")]
+    return [pl for pl in out if pl[0] != 0.0]
+
+
 class _Machine:
     """Scalar RK4 of the two-leg machine for one control; legs given as (contact x, touchdown time)."""
 
@@ -137,8 +183,17 @@ class _Machine:
         self.b = float(ctl.b)
         self.c = float(ctl.c)
         self.e = float(getattr(ctl, "e", 0.0))  # a running Control has no cubic term
+        self.pulses = _pulses(ctl)
+        self.ctl = ctl
         self.Tc = float(ctl.T_c)
         self.h = self.Tc / n_per_stance
+
+    def ld(self, tau):
+        """l_d(τ) (scalar, as ``desired_leg_length``)."""
+        v = _ld(tau, self.a1, self.b, self.c, self.e)
+        for amp, centre, width in self.pulses:
+            v += amp * _bump((tau - centre) / width)
+        return v
 
     def leg(self, x, y, t, xc, t0, armed):
         """(force along the leg [m g], unclamped g = l_d − l, ux, uy) of one leg.
@@ -148,7 +203,7 @@ class _Machine:
         tau = (t - t0) / self.Tc
         dx = x - xc - self.roll * tau
         l = math.sqrt(dx * dx + y * y)
-        g = _ld(tau, self.a1, self.b, self.c, self.e) - l
+        g = self.ld(tau) - l
         f = self.K * (g if armed else max(g, 0.0))
         return f, g, dx / l, y / l
 
@@ -239,7 +294,7 @@ class _Machine:
 def _valid_inputs(state: WalkState, theta0: float, ctl: Control) -> bool:
     vals = (*state.as_tuple(), theta0, *map(float, ctl.as_tuple()))
     return (all(math.isfinite(v) for v in vals) and ctl.K > 0 and ctl.T_c > 0 and state.s >= 0
-            and 0.0 < theta0 < 0.5 * math.pi)
+            and 0.0 < theta0 < 0.5 * math.pi and all(w > 0 for _, _, w in _pulses(ctl)))
 
 
 def _one_step(state: WalkState, theta0: float, ctl: Control, n_per_stance: int, record: bool, roll: float = 0.0,
@@ -377,7 +432,7 @@ class RecordedStep:
             tau = (t - t0) / mc.Tc
             rel = pos - np.stack([xc + mc.roll * tau, np.zeros_like(tau)], axis=1)
             l = np.linalg.norm(rel, axis=1)
-            f = mc.K * np.maximum(_ld(tau, mc.a1, mc.b, mc.c, mc.e) - l, 0.0)
+            f = mc.K * np.maximum(desired_leg_length(mc.ctl, tau) - l, 0.0)
             force[:, i] = np.where(on[:, None], (f / l)[:, None] * rel, 0.0)
         return WalkTrajectory(t=t, pos=pos, vel=vel, force=force, contact_x=np.array([legs[0][0], legs[1][0]]),
                               t_touchdown=np.array([legs[0][1], legs[1][1]]), t_liftoff=float(t_lo),

@@ -138,6 +138,8 @@ def walk_table(res) -> str:
         f"        control  K = {m.K:.2f}  a = {m.a:+.4f}  b = {m.b:+.4f}  c = {m.c:+.4f}  e = {m.e:+.4f}  "
         f"T_c = {m.T_c:.4f}"
         f"   (l0 = {m.l0:.3f} m, m = {m.mass:g} kg; periodic to {m.periodicity:.1e})",
+        *([f"         pulses  push-off p = {m.p:+.4f} at τ {m.tau_p:.3f} ± {m.w_p:.3f}   weight acceptance "
+           f"q = {m.q:+.4f} at τ {m.tau_q:.3f} ± {m.w_q:.3f}"] if (m.p or m.q) else []),
         "",
         "                       clip    machine",
         f"stance [s]           {ref['stance_time_s']:6.3f}     {st:6.3f}  {pct(q['stance_time_error'])}",

@@ -167,7 +167,7 @@ def test_naive_comparison_and_clip_facts(session):
         studio.stop()
 
 
-def test_speed_control_bounded_to_what_is_reachable(session):
+def test_speed_control_bounded_to_what_is_reachable(session, monkeypatch):
     """The speed slider spans the factors whose outputs meet every physics bar (pipeline's
     reachable_speed_range), and the server refuses a value beyond them whatever sent it."""
     pytest.importorskip("viser")
@@ -194,6 +194,18 @@ def test_speed_control_bounded_to_what_is_reachable(session):
             tab.params_from_gui()
         tab._on_change(type("E", (), {"client": object()})())  # what a page's edit calls
         assert tab.good is good and tab.gui_speed.value == good.params.speed and "beyond" in tab.message
+        # another character whose search has not finished (stopped by a newer change): the slider is not
+        # left at the previous character's x1.8; it spans its own limits and the status says why
+        from froude import speed_range
+
+        def stopped(*args, **kwargs):
+            raise speed_range.SearchStopped()
+
+        monkeypatch.setattr(speed_range, "reachable_speed_range", stopped)
+        tab._bound_speed("troll")
+        assert "troll" not in tab.session.speed_ranges
+        assert (tab.gui_speed.min, tab.gui_speed.max) == (0.5, 2.0)
+        assert "working out which speeds troll reaches" in tab._range_note  # the status's note (scale mode)
     finally:
         studio.stop()
 

@@ -584,22 +584,31 @@ class Tab:
         from ...speed_range import SearchStopped, reachable_speed_range
 
         rng = self.session.speed_ranges.get(character)
+        lim = LIMITS["speed"]
         if rng is None:
+            # Until this character's search is done the slider spans its own limits (not the previous
+            # character's range), and the status says the range is being worked out.
+            self._set_speed_bounds(lim.lo, lim.hi, f"working out which speeds {character} reaches with every "
+                                                   "physics bar met (the slider is not narrowed meanwhile)")
             try:
                 rng = reachable_speed_range(self.session.prep, None if character == "same" else character,
                                             stop=lambda: self._stop.is_set() or self._newer_pending())
             except SearchStopped:
-                return  # the slider keeps its bounds until the search is done
+                return  # resumed when this character's result is next on screen
             self.session.speed_ranges[character] = rng
-        lim = LIMITS["speed"]
         if rng.empty:
             lo, hi = lim.lo, lim.hi
-            self._range_note = (f"no speed factor meets every physics bar for {character} on this clip "
-                                f"(×1 = {rng.base_m_s:.2f} m/s already misses one): the slider is not narrowed")
+            note = (f"no speed factor meets every physics bar for {character} on this clip "
+                    f"(×1 = {rng.base_m_s:.2f} m/s already misses one): the slider is not narrowed")
         else:
             lo, hi = max(lim.lo, rng.lo), min(lim.hi, rng.hi)
-            self._range_note = (f"speed reachable with every bar met: ×{rng.lo:.2f} to ×{rng.hi:.2f} "
-                                f"({rng.lo_m_s:.2f} to {rng.hi_m_s:.2f} m/s)")
+            note = (f"speed reachable with every bar met: ×{rng.lo:.2f} to ×{rng.hi:.2f} "
+                    f"({rng.lo_m_s:.2f} to {rng.hi_m_s:.2f} m/s)")
+        self._set_speed_bounds(lo, hi, note)
+
+    def _set_speed_bounds(self, lo: float, hi: float, note: str) -> None:
+        """Bound the speed slider to ×lo … ×hi and show why (the status's range note)."""
+        self._range_note = note
         if (self.gui_speed.min, self.gui_speed.max) != (round(lo, 2), round(hi, 2)):
             self.gui_speed.min, self.gui_speed.max = round(lo, 2), round(hi, 2)
         self.gui_status.content = self._status_md()

@@ -210,6 +210,43 @@ def test_speed_control_bounded_to_what_is_reachable(session, monkeypatch):
         studio.stop()
 
 
+def test_a_refused_value_keeps_the_change_being_computed(session):
+    """A value refused while another change is still being computed puts the controls back to that change,
+    not to the last good result's (the controls jumped back to the previous character, and the next edit
+    asked for it again)."""
+    pytest.importorskip("viser")
+    import threading
+
+    from froude.apps.studio.app import Studio
+
+    studio = Studio(session.prep, port=_free_port())
+    try:
+        tab = studio.open_tab()
+        release, started, done = threading.Event(), threading.Event(), threading.Event()
+        apply = tab.apply
+
+        def held(params, **kw):  # the worker's compute, held until the refusal has been made
+            started.set()
+            release.wait(60)
+            try:
+                return apply(params, **kw)
+            finally:
+                done.set()
+
+        tab.apply = held
+        tab.request(Params(character="child"))
+        assert started.wait(30)
+        tab.gui_strides.value = 99  # beyond the control's limits, as a crafted page could send
+        tab._on_change(type("E", (), {"client": object()})())
+        assert "error" in tab.message
+        assert tab.gui_char.value == "child" and tab.gui_strides.value == Params().strides
+        release.set()
+        assert done.wait(120)
+        assert tab.good.params.character == "child" and tab._asked is None
+    finally:
+        studio.stop()
+
+
 def test_a_change_is_not_held_up_by_the_speed_range_search(session, monkeypatch):
     """The speed range search (about 24 outputs in the tab's worker: 108 s for the walk 02_01's own body and
     170 s for its giant at load 11 on 2 cores) gives way to a change: a pick that comes in meanwhile is

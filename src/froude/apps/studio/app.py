@@ -292,6 +292,8 @@ class Tab:
         self._work_what = ""
         self._wake = threading.Condition()
         self._pending: tuple | None = None  # ("params", Params, t) | ("clip", name, bytes, t) | ("naive",)
+        #: The newest change asked for by the controls and not yet finished (None: the controls show self.good)
+        self._asked: Params | None = None
         self._draw_lock = threading.RLock()
         self._t = 0.0
         self._playing = True
@@ -699,10 +701,11 @@ class Tab:
         self.request(params)
 
     def _refuse(self, err) -> None:
-        """A control value outside its options or limits: say so, put the controls back to the last good
-        result's values, and compute nothing."""
+        """A control value outside its options or limits: say so, put the controls back to the change being
+        computed (or, with none, to the last good result's values), and compute nothing."""
         self._show_error(err)
-        self._set_controls(self.good.params)
+        asked = self._asked
+        self._set_controls(asked if asked is not None else self.good.params)
 
     def _set_controls(self, p: Params) -> None:
         """The controls showing ``p`` (the character's own numbers where ``p`` does not override them)."""
@@ -817,6 +820,7 @@ class Tab:
     # ---- recompute
     def request(self, params: Params) -> None:
         """Ask for a recompute (the latest request wins). What every control calls."""
+        self._asked = params
         self._post(("params", params))
 
     def _post(self, job: tuple) -> None:
@@ -912,6 +916,8 @@ class Tab:
         finally:
             self._busy.clear()
             self._work_since = None
+            if self._asked is params and not self._newer_pending():
+                self._asked = None  # done (a result or its refusal): the controls are the good result's again
         self.timing = timing
         return timing
 

@@ -167,7 +167,7 @@ def test_naive_comparison_and_clip_facts(session):
         studio.stop()
 
 
-def test_speed_control_bounded_to_what_is_reachable(session):
+def test_speed_control_bounded_to_what_is_reachable(session, monkeypatch):
     """The speed slider spans the factors whose outputs meet every physics bar (pipeline's
     reachable_speed_range), and the server refuses a value beyond them whatever sent it."""
     pytest.importorskip("viser")
@@ -194,6 +194,55 @@ def test_speed_control_bounded_to_what_is_reachable(session):
             tab.params_from_gui()
         tab._on_change(type("E", (), {"client": object()})())  # what a page's edit calls
         assert tab.good is good and tab.gui_speed.value == good.params.speed and "beyond" in tab.message
+        # another character whose search has not finished (stopped by a newer change): the slider is not
+        # left at the previous character's x1.8; it spans its own limits and the status says why
+        from froude import speed_range
+
+        def stopped(*args, **kwargs):
+            raise speed_range.SearchStopped()
+
+        monkeypatch.setattr(speed_range, "reachable_speed_range", stopped)
+        tab._bound_speed("troll")
+        assert "troll" not in tab.session.speed_ranges
+        assert (tab.gui_speed.min, tab.gui_speed.max) == (0.5, 2.0)
+        assert "working out which speeds troll reaches" in tab._range_note  # the status's note (scale mode)
+    finally:
+        studio.stop()
+
+
+def test_a_refused_value_keeps_the_change_being_computed(session):
+    """A value refused while another change is still being computed puts the controls back to that change,
+    not to the last good result's (the controls jumped back to the previous character, and the next edit
+    asked for it again)."""
+    pytest.importorskip("viser")
+    import threading
+
+    from froude.apps.studio.app import Studio
+
+    studio = Studio(session.prep, port=_free_port())
+    try:
+        tab = studio.open_tab()
+        release, started, done = threading.Event(), threading.Event(), threading.Event()
+        apply = tab.apply
+
+        def held(params, **kw):  # the worker's compute, held until the refusal has been made
+            started.set()
+            release.wait(60)
+            try:
+                return apply(params, **kw)
+            finally:
+                done.set()
+
+        tab.apply = held
+        tab.request(Params(character="child"))
+        assert started.wait(30)
+        tab.gui_strides.value = 99  # beyond the control's limits, as a crafted page could send
+        tab._on_change(type("E", (), {"client": object()})())
+        assert "error" in tab.message
+        assert tab.gui_char.value == "child" and tab.gui_strides.value == Params().strides
+        release.set()
+        assert done.wait(120)
+        assert tab.good.params.character == "child" and tab._asked is None
     finally:
         studio.stop()
 

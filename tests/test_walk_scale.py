@@ -149,6 +149,13 @@ def test_walk_accelerates_monotonically(name, factor, walks):
     assert v[0] == pytest.approx(plan["start_speed_m_s"], rel=0.02)
     assert v[-1] == pytest.approx(factor * plan["start_speed_m_s"], rel=0.02)
     assert res.report.foot_skate_mm <= 5.0 and res.report.penetration_mm <= 5.0
+    # the report's expected cadence is the plan's walking cycles', and the output steps at it; the naive
+    # retarget's is the clip's played at the mean speed factor (07_01 to 1.3x: 2.085 expected, 2.090
+    # measured, naive 2.212 Hz; the expected figure was the clip's 1.886 Hz before)
+    c = res.report.extras["cadence"]
+    assert c["expected_step_frequency_hz"] == pytest.approx(1.0 / np.mean(plan["step_time_s"]), rel=1e-12)
+    assert res.report.step_frequency_hz == pytest.approx(c["expected_step_frequency_hz"], rel=0.02)
+    assert np.sign(factor - 1.0) * (c["naive_step_frequency_hz"] / c["clip_step_frequency_hz"] - 1.0) > 0.05
 
 
 @pytest.mark.parametrize("name,factor", [

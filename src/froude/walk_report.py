@@ -78,11 +78,9 @@ def walking_extras(prep, res, report) -> dict:
     """The walking part of an output's report (``Report.extras``): the walking figures of the output and
     of the clip, and the cadence the naive retarget would have next to the physical one.
 
-    "cadence": clip [Hz] (measured over its complete steps), output [Hz] (measured), expected = clip × L^-1/2
-    × the speed law's factor (dynamic similarity, and above the clip's speed the re-solved cycle's step time:
-    ``machine.walk_speed``),
-    naive = clip × s (engines keep the clip's timing, played s times faster) and its error against the
-    expected one.
+    "cadence": clip [Hz] (measured over its complete steps), output [Hz] (measured), expected (dynamic
+    similarity and the walking speed law, ``_expected_and_naive_cadence``), naive (engines keep the clip's
+    timing, played faster with the speed) and its error against the expected one.
     """
     from .body.gait import detect_gait
     from .metrics import _with_ground
@@ -97,16 +95,30 @@ def walking_extras(prep, res, report) -> dict:
     # take's first and last touchdowns too, 2 % slower on CMU 07_01, which starts and stops)
     f_clip = 1.0 / float(prep.machine.reference["step_time_s"])
     f_out = float(report.step_frequency_hz)
-    # above the clip's speed, the step time of the cycle actually walked (the faster-cadence law where the
-    # first finds no cycle: CMU 07_01 past x1.275); the same solve as the output's, remembered on prep
-    # (below it, §5.2's horizontal stretch keeps the clip's timing)
-    law = prep.machine.t_step / prep.faster_machine(s).t_step if s > 1.0 else 1.0
-    expected = f_clip * L ** -0.5 * law
-    naive = f_clip * s
+    expected, naive = _expected_and_naive_cadence(prep, res, f_clip, L, s)
     return {"machine": "walking", "walking": {**out, "clip": clip},
             "cadence": {"clip_step_frequency_hz": f_clip, "step_frequency_hz": f_out,
                         "expected_step_frequency_hz": expected, "naive_step_frequency_hz": naive,
                         "naive_error": naive / expected - 1.0, "clip_froude_U": float(prep.summary.froude)}}
+
+
+def _expected_and_naive_cadence(prep, res, f_clip: float, L: float, s: float) -> tuple[float, float]:
+    """(expected, naive) step frequency [Hz] of an output walked at speed factor s by a character L × the clip.
+
+    A scaled output: expected = clip × L^-1/2 × the speed law's factor (above the clip's speed the step time
+    of the cycle actually walked, the faster-cadence law where the first finds no cycle: CMU 07_01 past
+    x1.275; the same solve as the output's, remembered on prep; below it §5.2's horizontal stretch keeps the
+    clip's timing); naive = clip × s. An accelerated output (a walking plan in ``res.extras``) walks a cycle
+    per step: expected = steps / their total time (each step's cycle, L included), naive = clip × the
+    time-weighted mean speed factor (an engine plays the clip faster as the speed rises).
+    """
+    plan = res.extras.get("plan") or {}
+    if "step_time_s" in plan:
+        t = np.asarray(plan["step_time_s"], float)
+        factors = np.asarray(plan["apex_speed_m_s"], float) / float(plan["start_speed_m_s"])
+        return 1.0 / float(np.mean(t)), f_clip * float(np.sum(factors * t) / np.sum(t))
+    law = prep.machine.t_step / prep.faster_machine(s).t_step if s > 1.0 else 1.0
+    return f_clip * L ** -0.5 * law, f_clip * s
 
 
 def walking_rows(report) -> list[tuple[str, str]]:

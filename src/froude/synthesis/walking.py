@@ -311,6 +311,7 @@ def plan_walk_speed_change(prep, retarget, *, to_speed=None, to_factor=None, ste
         "start_speed_m_s": start, "target_speed_m_s": target, "apex_speed_m_s": speeds,
         "apex_U": [float(s * mm.mean_speed) for mm, s in zip(machines, stretch)],
         "apex_time_s": path.t_touchdown.tolist(), "theta0_deg": [math.degrees(mm.theta0) for mm in machines],
+        "step_time_s": [float(mm.t_step * mm.time_unit) for mm in machines],
         "phase": ["lead"] * lead_steps + ["change"] * steps + ["hold"] * hold_steps,
         "mode": "walking (a periodic cycle per step)", "policy": "ease"}
     return path, plan

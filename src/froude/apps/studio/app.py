@@ -292,6 +292,8 @@ class Tab:
         self._work_what = ""
         self._wake = threading.Condition()
         self._pending: tuple | None = None  # ("params", Params, t) | ("clip", name, bytes, t) | ("naive",)
+        #: The newest change asked for by the controls and not yet finished (None: the controls show self.good)
+        self._asked: Params | None = None
         self._draw_lock = threading.RLock()
         self._t = 0.0
         self._playing = True
@@ -584,22 +586,31 @@ class Tab:
         from ...speed_range import SearchStopped, reachable_speed_range
 
         rng = self.session.speed_ranges.get(character)
+        lim = LIMITS["speed"]
         if rng is None:
+            # Until this character's search is done the slider spans its own limits (not the previous
+            # character's range), and the status says the range is being worked out.
+            self._set_speed_bounds(lim.lo, lim.hi, f"working out which speeds {character} reaches with every "
+                                                   "physics bar met (the slider is not narrowed meanwhile)")
             try:
                 rng = reachable_speed_range(self.session.prep, None if character == "same" else character,
                                             stop=lambda: self._stop.is_set() or self._newer_pending())
             except SearchStopped:
-                return  # the slider keeps its bounds until the search is done
+                return  # resumed when this character's result is next on screen
             self.session.speed_ranges[character] = rng
-        lim = LIMITS["speed"]
         if rng.empty:
             lo, hi = lim.lo, lim.hi
-            self._range_note = (f"no speed factor meets every physics bar for {character} on this clip "
-                                f"(×1 = {rng.base_m_s:.2f} m/s already misses one): the slider is not narrowed")
+            note = (f"no speed factor meets every physics bar for {character} on this clip "
+                    f"(×1 = {rng.base_m_s:.2f} m/s already misses one): the slider is not narrowed")
         else:
             lo, hi = max(lim.lo, rng.lo), min(lim.hi, rng.hi)
-            self._range_note = (f"speed reachable with every bar met: ×{rng.lo:.2f} to ×{rng.hi:.2f} "
-                                f"({rng.lo_m_s:.2f} to {rng.hi_m_s:.2f} m/s)")
+            note = (f"speed reachable with every bar met: ×{rng.lo:.2f} to ×{rng.hi:.2f} "
+                    f"({rng.lo_m_s:.2f} to {rng.hi_m_s:.2f} m/s)")
+        self._set_speed_bounds(lo, hi, note)
+
+    def _set_speed_bounds(self, lo: float, hi: float, note: str) -> None:
+        """Bound the speed slider to ×lo … ×hi and show why (the status's range note)."""
+        self._range_note = note
         if (self.gui_speed.min, self.gui_speed.max) != (round(lo, 2), round(hi, 2)):
             self.gui_speed.min, self.gui_speed.max = round(lo, 2), round(hi, 2)
         self.gui_status.content = self._status_md()
@@ -690,10 +701,11 @@ class Tab:
         self.request(params)
 
     def _refuse(self, err) -> None:
-        """A control value outside its options or limits: say so, put the controls back to the last good
-        result's values, and compute nothing."""
+        """A control value outside its options or limits: say so, put the controls back to the change being
+        computed (or, with none, to the last good result's values), and compute nothing."""
         self._show_error(err)
-        self._set_controls(self.good.params)
+        asked = self._asked
+        self._set_controls(asked if asked is not None else self.good.params)
 
     def _set_controls(self, p: Params) -> None:
         """The controls showing ``p`` (the character's own numbers where ``p`` does not override them)."""
@@ -808,6 +820,7 @@ class Tab:
     # ---- recompute
     def request(self, params: Params) -> None:
         """Ask for a recompute (the latest request wins). What every control calls."""
+        self._asked = params
         self._post(("params", params))
 
     def _post(self, job: tuple) -> None:
@@ -903,6 +916,8 @@ class Tab:
         finally:
             self._busy.clear()
             self._work_since = None
+            if self._asked is params and not self._newer_pending():
+                self._asked = None  # done (a result or its refusal): the controls are the good result's again
         self.timing = timing
         return timing
 

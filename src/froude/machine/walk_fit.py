@@ -54,6 +54,7 @@ from .orbit import rowwise, solve_orbit
 from .walk_model import WalkingMachine
 from .walking import (
     N_PER_STANCE,
+    PULSES_OFF,
     REASONS,
     WalkControl,
     WalkState,
@@ -74,8 +75,6 @@ PULSE_VARS = ("p", "tau_p", "w_p", "q", "tau_q", "w_q")
 CYCLE_SCALES = {"u": 0.05, "v": 0.02, "d": 0.02, "s": 0.05, "theta0": 0.03, "K": 0.1, "a": 0.01, "b": 0.02,
                 "c": 0.02, "l_td": 0.01, "e": 0.02, "p": 0.01, "tau_p": 0.02, "w_p": 0.01, "q": 0.01, "tau_q": 0.02,
                 "w_q": 0.01}
-#: The pulses off (amplitudes 0; centres and widths then do nothing): (p, tau_p, w_p, q, tau_q, w_q).
-PULSES_OFF = (0.0, 0.85, 0.04, 0.0, 0.15, 0.075)
 #: The start of the fit with pulses: amplitudes p, q [l0], the push-off pulse's centre past the other
 #: foot's touchdown (dtau_p, stance phase) and both widths (half the support, stance phase).
 PULSE_START = {"p": 0.03, "dtau_p": 0.007, "w_p": 0.04, "q": 0.02, "w_q": 0.075}
@@ -498,7 +497,8 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
                  PULSE_START["q"], lm_ref["tau_peak1"], PULSE_START["w_q"])
     best = None
     errors = []
-    for ctl0, pulses in [(c, pl) for c in starts for pl in (PULSES_OFF, pulses_on)]:
+    pulses_off = tuple(PULSES_OFF[k] for k in PULSE_VARS)
+    for ctl0, pulses in [(c, pl) for c in starts for pl in (pulses_off, pulses_on)]:
         z0 = np.array([u0, v0, d0, step_time / T, th0, *ctl0, 1.0, 0.0, *pulses])
         free = ("p", "q") if pulses is pulses_on else ()
         try:

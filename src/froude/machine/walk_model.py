@@ -34,7 +34,7 @@ from ..errors import FitError
 from ..io.atomic import atomic_write_text
 from ..io.jsonable import dumps
 from . import is_walking  # re-exported: its home is the package (no walking code imported)
-from .walking import WalkControl, WalkState
+from .walking import PULSES_OFF, WalkControl, WalkState
 
 __all__ = ["WALK_SCHEMA", "WalkingMachine", "is_walking", "load_walking_machine"]
 
@@ -42,7 +42,7 @@ WALK_SCHEMA = "froude.walking/1"
 _CYCLE = ("u", "v", "d", "s", "l_td", "roll", "K", "a", "b", "c", "e", "p", "tau_p", "w_p", "q", "tau_q", "w_q", "T_c",
           "t_stance", "t_double", "t_step", "step_length", "mean_speed", "periodicity")
 #: Cycle keys that files written before them lack, with the value that keeps their machine (off).
-_CYCLE_DEFAULTS = {"e": 0.0, "p": 0.0, "tau_p": 0.85, "w_p": 0.04, "q": 0.0, "tau_q": 0.15, "w_q": 0.075}
+_CYCLE_DEFAULTS = {"e": 0.0, **PULSES_OFF}
 
 
 @dataclass(frozen=True)
@@ -94,12 +94,12 @@ class WalkingMachine:
     quality: dict = field(default_factory=dict)
     fit: dict = field(default_factory=dict)
     # The control's two pulses (``WalkControl``; amplitude 0: off, as in files written before them).
-    p: float = 0.0
-    tau_p: float = 0.85
-    w_p: float = 0.04
-    q: float = 0.0
-    tau_q: float = 0.15
-    w_q: float = 0.075
+    p: float = PULSES_OFF["p"]
+    tau_p: float = PULSES_OFF["tau_p"]
+    w_p: float = PULSES_OFF["w_p"]
+    q: float = PULSES_OFF["q"]
+    tau_q: float = PULSES_OFF["tau_q"]
+    w_q: float = PULSES_OFF["w_q"]
 
     kind = "walking"
 

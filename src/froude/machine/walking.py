@@ -48,7 +48,7 @@ import numpy as np
 from ..errors import PlanError
 from .dynamics import Control
 
-__all__ = ["WalkControl", "WalkState", "desired_leg_length", "WalkStep", "WalkTrajectory", "RecordedStep",
+__all__ = ["WalkControl", "PULSES_OFF", "WalkState", "desired_leg_length", "WalkStep", "WalkTrajectory", "RecordedStep",
            "walk_step", "record_step", "simulate_walk", "N_PER_STANCE",
            "REASONS", "OK"]
 
@@ -78,6 +78,10 @@ REASONS = {
 }
 
 
+#: The control's pulse fields with their defaults (amplitudes 0: off; centres and widths then do nothing).
+PULSES_OFF: dict[str, float] = {"p": 0.0, "tau_p": 0.85, "w_p": 0.04, "q": 0.0, "tau_q": 0.15, "w_q": 0.075}
+
+
 @dataclass(frozen=True)
 class WalkControl(Control):
     """The walking leg control: eq. 2's (K, a, b, c, T_c), a cubic coefficient e [l0 per unit τ³] and two
@@ -92,12 +96,12 @@ class WalkControl(Control):
     e = p = q = 0 (``desired_leg_length``)."""
 
     e: float = 0.0
-    p: float = 0.0
-    tau_p: float = 0.85
-    w_p: float = 0.04
-    q: float = 0.0
-    tau_q: float = 0.15
-    w_q: float = 0.075
+    p: float = PULSES_OFF["p"]
+    tau_p: float = PULSES_OFF["tau_p"]
+    w_p: float = PULSES_OFF["w_p"]
+    q: float = PULSES_OFF["q"]
+    tau_q: float = PULSES_OFF["tau_q"]
+    w_q: float = PULSES_OFF["w_q"]
 
     NAMES: ClassVar[tuple[str, ...]] = ("K", "a", "b", "c", "T_c", "e", "p", "tau_p", "w_p", "q", "tau_q", "w_q")
 

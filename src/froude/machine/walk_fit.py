@@ -86,6 +86,8 @@ def _scales(z0, free=()):
     s = np.array([CYCLE_SCALES[v] if (v not in PULSE_VARS or v in free) else 0.0 for v in _VARS])
     s[5] *= abs(z0[5])
     return s
+
+
 #: The second start of the cycle search: a plain spring leg, Geyer et al.'s K ≈ 20 (k = 20 kN/m, m = 80 kg,
 #: l0 = 1 m gives 25), l_d = l0; (K, a, b, c).
 GEYER_CONTROL = (20.0, 0.0, 0.0, 0.0)

@@ -91,8 +91,10 @@ class WalkControl(Control):
         B(x) = cos²(π x / 2) for |x| < 1, else 0                         (a smooth bump, C¹, compact)
 
     p [l0]: the push-off pulse, centred at tau_p just past the other foot's touchdown (an extension of the
-    trailing leg there: the ankle's push-off); q [l0]: the weight-acceptance pulse of the leading leg,
-    centred at tau_q; w_p, w_q: half-widths in stance phase. A plain ``Control`` is a WalkControl with
+    trailing leg there, as an ankle's push-off); q [l0]: the weight-acceptance pulse of the leading leg,
+    centred at tau_q; w_p, w_q: half-widths in stance phase. In a machine with massless legs they also
+    stand in for the legs' own inertia, which puts force into a clip's COM at those instants
+    (docs/walking.md, Limitations). A plain ``Control`` is a WalkControl with
     e = p = q = 0 (``desired_leg_length``)."""
 
     e: float = 0.0

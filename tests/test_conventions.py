@@ -211,6 +211,41 @@ def test_fit_is_the_same_at_60_and_30_hz(name, variant, tmp_root):
     _assert_same_fit(name, _variant_file(name, variant, tmp_root))
 
 
+#: Walk variants: another unit, Z-up, a folded rest pose, and (CMU) 60 Hz and 30 Hz through an anti-alias filter.
+WALK_VARIANTS = ("metres", "inches", "z_up", "folded", "60Hz", "30Hz_lowpass")
+#: Measured misses (``froude fit`` on the variant file), kept as strict xfails.
+_WALK_SHORT = {
+    ("07_01", "30Hz_lowpass"): "the push-off peak -17.3 % of a step (weight acceptance -0.3 %, trough -4.0 %): "
+                               "written at 30 Hz through an anti-alias filter, the clip's own force has no push-off "
+                               "maximum inside the stance any more (it rises to 1.24 BW at the liftoff, 632 ms, "
+                               "where the landmark falls), while the machine's is at 539 ms as at 120 Hz (538)",
+}
+
+
+def _walk_variant_cases():
+    if MOCAP is None:
+        return [pytest.param(None, None, marks=pytest.mark.skip(reason="real clips not found"))]
+    names = [n for n in ("02_01", "07_01")] + (list(BANDAI_WALKS) if BANDAI is not None else [])
+    return [pytest.param(n, v, marks=pytest.mark.xfail(reason=_WALK_SHORT[(n, v)], strict=True))
+            if (n, v) in _WALK_SHORT else pytest.param(n, v)
+            for n in names for v in WALK_VARIANTS if v in _variants(n)]
+
+
+@pytest.mark.parametrize("name,variant", _walk_variant_cases())
+def test_walk_fit_meets_issue_17_in_other_conventions(name, variant, tmp_root):
+    """A walk in another unit, axis convention, rest pose or frame rate fits the walking machine within
+    issue 17's acceptance 1 (force landmarks 0.1 BW and 5 % of a step, stance and double support 5 %, COM
+    1.5 cm), as its original does (tests/test_walking.py)."""
+    from froude.machine.walk_fit import fit_walking_detailed
+
+    q = fit_walking_detailed(load_bvh(_variant_file(name, variant, tmp_root))).machine.quality
+    for key in ("peak1", "trough", "peak2"):
+        assert abs(q[key + "_error_bw"]) <= 0.1, (key, q[key + "_error_bw"])
+        assert abs(q[key + "_timing_error_step"]) <= 0.05, (key, q[key + "_timing_error_step"])
+    assert abs(q["stance_time_error"]) <= 0.05 and abs(q["double_support_error"]) <= 0.05
+    assert q["com_rms_m"] <= 0.015
+
+
 @pytest.mark.parametrize("variant", list(_variants("09_01")))
 def test_scaling_to_a_child_meets_the_bars_in_every_convention(variant, tmp_root):
     from froude import pipeline

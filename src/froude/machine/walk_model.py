@@ -34,7 +34,7 @@ from ..errors import FitError
 from ..io.atomic import atomic_write_text
 from ..io.jsonable import dumps
 from . import is_walking  # re-exported: its home is the package (no walking code imported)
-from .walking import PULSES_OFF, WalkControl, WalkState
+from .walking import PULSES_OFF, ControlPulses, WalkControl, WalkState
 
 __all__ = ["WALK_SCHEMA", "WalkingMachine", "is_walking", "load_walking_machine"]
 
@@ -46,7 +46,7 @@ _CYCLE_DEFAULTS = {"e": 0.0, **PULSES_OFF}
 
 
 @dataclass(frozen=True)
-class WalkingMachine:
+class WalkingMachine(ControlPulses):
     """A periodic walking cycle of the two-leg machine fitted to a reference walk.
 
     Dimensionless (units l0, √(l0/g), √(g l0), m g): touchdown state u, v (COM velocity), d (COM ahead of
@@ -93,13 +93,6 @@ class WalkingMachine:
     reference: dict = field(default_factory=dict)
     quality: dict = field(default_factory=dict)
     fit: dict = field(default_factory=dict)
-    # The control's two pulses (``WalkControl``; amplitude 0: off, as in files written before them).
-    p: float = PULSES_OFF["p"]
-    tau_p: float = PULSES_OFF["tau_p"]
-    w_p: float = PULSES_OFF["w_p"]
-    q: float = PULSES_OFF["q"]
-    tau_q: float = PULSES_OFF["tau_q"]
-    w_q: float = PULSES_OFF["w_q"]
 
     kind = "walking"
 

@@ -40,7 +40,7 @@ NumPy (as in the running machine's small-batch path).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import ClassVar
 
 import numpy as np
@@ -48,8 +48,8 @@ import numpy as np
 from ..errors import PlanError
 from .dynamics import Control
 
-__all__ = ["WalkControl", "PULSES_OFF", "WalkState", "desired_leg_length", "WalkStep", "WalkTrajectory", "RecordedStep",
-           "walk_step", "record_step", "simulate_walk", "N_PER_STANCE",
+__all__ = ["WalkControl", "ControlPulses", "PULSES_OFF", "WalkState", "desired_leg_length", "WalkStep",
+           "WalkTrajectory", "RecordedStep", "walk_step", "record_step", "simulate_walk", "N_PER_STANCE",
            "REASONS", "OK"]
 
 #: RK4 steps per nominal stance T_c.
@@ -78,12 +78,27 @@ REASONS = {
 }
 
 
-#: The control's pulse fields with their defaults (amplitudes 0: off; centres and widths then do nothing).
-PULSES_OFF: dict[str, float] = {"p": 0.0, "tau_p": 0.85, "w_p": 0.04, "q": 0.0, "tau_q": 0.15, "w_q": 0.075}
+@dataclass(frozen=True, kw_only=True)
+class ControlPulses:
+    """The walking control's two pulses (``WalkControl``), keyword fields shared by the control and the
+    fitted machine (``walk_model.WalkingMachine``, which stores them in its JSON): amplitudes p, q [l0],
+    centres tau_p, tau_q and half-widths w_p, w_q [stance phase]. The defaults are off (amplitudes 0;
+    centres and widths then do nothing), as in files written before the pulses."""
+
+    p: float = 0.0
+    tau_p: float = 0.85
+    w_p: float = 0.04
+    q: float = 0.0
+    tau_q: float = 0.15
+    w_q: float = 0.075
+
+
+#: The pulse fields with their off values (the defaults of ``ControlPulses``).
+PULSES_OFF: dict[str, float] = {f.name: f.default for f in fields(ControlPulses)}
 
 
 @dataclass(frozen=True)
-class WalkControl(Control):
+class WalkControl(Control, ControlPulses):
     """The walking leg control: eq. 2's (K, a, b, c, T_c), a cubic coefficient e [l0 per unit τ³] and two
     pulses (scalar fields)::
 
@@ -98,12 +113,6 @@ class WalkControl(Control):
     e = p = q = 0 (``desired_leg_length``)."""
 
     e: float = 0.0
-    p: float = PULSES_OFF["p"]
-    tau_p: float = PULSES_OFF["tau_p"]
-    w_p: float = PULSES_OFF["w_p"]
-    q: float = PULSES_OFF["q"]
-    tau_q: float = PULSES_OFF["tau_q"]
-    w_q: float = PULSES_OFF["w_q"]
 
     NAMES: ClassVar[tuple[str, ...]] = ("K", "a", "b", "c", "T_c", "e", "p", "tau_p", "w_p", "q", "tau_q", "w_q")
 

@@ -94,7 +94,7 @@ class ControlPulses:
 
 
 #: The pulse fields with their off values (the defaults of ``ControlPulses``).
-PULSES_OFF: dict[str, float] = {f.name: f.default for f in fields(ControlPulses)}
+PULSES_OFF: dict[str, float] = {f.name: float(getattr(ControlPulses, f.name)) for f in fields(ControlPulses)}
 
 
 @dataclass(frozen=True)

@@ -69,7 +69,7 @@ __all__ = ["WalkFitResult", "fit_walking_detailed", "CYCLE_SCALES", "force_landm
 _VARS = ("u", "v", "d", "s", "theta0", "K", "a", "b", "c", "l_td", "e", "p", "tau_p", "w_p", "q", "tau_q", "w_q")
 #: The two control pulses' variables (``WalkControl``): held in the cycle search; the shape fit fits
 #: their amplitudes p and q.
-PULSE_VARS = ("p", "tau_p", "w_p", "q", "tau_q", "w_q")
+PULSE_VARS = tuple(PULSES_OFF)
 #: Scales of the cycle variables for the minimum-norm search (K relative to its prior); a pulse variable
 #: is free only where a search frees it (:func:`_scales`).
 CYCLE_SCALES = {"u": 0.05, "v": 0.02, "d": 0.02, "s": 0.05, "theta0": 0.03, "K": 0.1, "a": 0.01, "b": 0.02,
@@ -341,9 +341,7 @@ def step_phase_times(t_double, t_step):
 
 def _control(z, T_c) -> WalkControl:
     """The leg control of the cycle variables z (``_VARS``) with T_c [√(l0/g)]."""
-    return WalkControl(K=float(z[5]), a=float(z[6]), b=float(z[7]), c=float(z[8]), T_c=T_c, e=float(z[10]),
-                       p=float(z[11]), tau_p=float(z[12]), w_p=float(z[13]), q=float(z[14]), tau_q=float(z[15]),
-                       w_q=float(z[16]))
+    return WalkControl(T_c=T_c, **{k: float(v) for k, v in zip(_VARS, z) if k in WalkControl.NAMES})
 
 
 def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_unit, tau_landmarks, free=(),
@@ -568,7 +566,7 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
            "pulses_start": dict(zip(PULSE_VARS, map(float, z0[11:])))}
     machine = WalkingMachine(
         u=state.u, v=state.v, d=state.d, s=state.s, theta0=th, l_td=l_td, roll=roll, K=ctl.K, a=ctl.a, b=ctl.b,
-        c=ctl.c, e=ctl.e, p=ctl.p, tau_p=ctl.tau_p, w_p=ctl.w_p, q=ctl.q, tau_q=ctl.tau_q, w_q=ctl.w_q, T_c=T_c,
+        c=ctl.c, e=ctl.e, **{k: getattr(ctl, k) for k in PULSE_VARS}, T_c=T_c,
         t_stance=w.t_stance, t_double=w.t_double, t_step=w.t_step, step_length=w.step_length,
         mean_speed=w.step_length / w.t_step, periodicity=periodicity, iterations=iters, mass=mass, l0=l0,
         g=GRAVITY, source=src, heading=heading, lateral=lateral, up=np.eye(3)[UP_AXIS], ground=float(gait.ground),

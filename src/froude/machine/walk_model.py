@@ -108,8 +108,7 @@ class WalkingMachine(ControlPulses):
 
     @property
     def control(self) -> WalkControl:
-        return WalkControl(K=self.K, a=self.a, b=self.b, c=self.c, T_c=self.T_c, e=self.e, p=self.p, tau_p=self.tau_p,
-                           w_p=self.w_p, q=self.q, tau_q=self.tau_q, w_q=self.w_q)
+        return WalkControl(**{k: getattr(self, k) for k in WalkControl.NAMES})
 
     @property
     def state(self) -> WalkState:

@@ -89,7 +89,7 @@ def _resolve(base: WalkingMachine, start: WalkingMachine, s: float,
              exponent: float = STEP_TIME_EXPONENT) -> WalkingMachine:
     """The cycle at s × base's speed (targets from ``base``, step time × s^exponent), searched from
     ``start``'s cycle."""
-    from .walk_fit import _cycle_search
+    from .walk_fit import _VARS, _cycle_search
     from .walking import N_PER_STANCE
 
     k = s ** exponent
@@ -97,10 +97,11 @@ def _resolve(base: WalkingMachine, start: WalkingMachine, s: float,
     T_c = base.T_c * k
     targets = (t_step, t_double, s * base.mean_speed)
     r = t_step / start.t_step  # time stretch from the start cycle to the target one
-    z0 = np.array([start.u * (s * base.mean_speed / start.mean_speed), start.v, start.d, start.s * r, start.theta0,
-                   start.K, start.a, start.b, start.c, start.l_td, start.e,
-                   # the control's pulses are held (in stance phase, so they keep their share of the stance)
-                   start.p, start.tau_p, start.w_p, start.q, start.tau_q, start.w_q])
+    # the start cycle's variables (the control's pulses held: in stance phase, they keep their share of the
+    # stance), its forward speed and trailing time stretched to the target's
+    z0 = np.array([float(getattr(start, k)) for k in _VARS])
+    z0[_VARS.index("u")] *= s * base.mean_speed / start.mean_speed
+    z0[_VARS.index("s")] *= r
     try:
         z, w, it, _ = _cycle_search(z0, T_c, base.roll, targets, N_PER_STANCE)
     except FitError as e:

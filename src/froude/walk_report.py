@@ -106,9 +106,9 @@ def _expected_and_naive_cadence(prep, res, f_clip: float, L: float, s: float) ->
     """(expected, naive) step frequency [Hz] of an output walked at speed factor s by a character L × the clip.
 
     A scaled output: expected = clip × L^-1/2 × the speed law's factor (above the clip's speed the step time
-    of the cycle actually walked, the faster-cadence law where the first finds no cycle: CMU 07_01 past
-    x1.275; the same solve as the output's, remembered on prep; below it §5.2's horizontal stretch keeps the
-    clip's timing); naive = clip × s. An accelerated output (a walking plan in ``res.extras``) walks a cycle
+    of the cycle actually walked, ``machine.walk_speed``'s faster-cadence law where the first finds no cycle;
+    the same solve as the output's, remembered on prep; below it §5.2's horizontal stretch keeps the clip's
+    timing); naive = clip × s. An accelerated output (a walking plan in ``res.extras``) walks a cycle
     per step: expected = steps / their total time (each step's cycle, L included), naive = clip × the
     time-weighted mean speed factor (an engine plays the clip faster as the speed rises).
     """

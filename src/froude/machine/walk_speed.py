@@ -12,7 +12,7 @@ people walk faster with longer *and* quicker steps. Here the fitted walking mach
   walking, step length rising about with the square root of speed, cadence the other half: Grieve &
   Gear 1966, an approximation over 0.8-1.6 m/s);
   where that law finds no cycle, the continuation goes on with × s^(−0.7) (FAST_STEP_TIME_EXPONENT;
-  CMU 07_01 past ×1.275, whose stance leg otherwise unloads);
+  the Bandai walk by ×1.5, whose stance leg otherwise unloads);
 * the share of the step spent in double support kept (the reference's own; it shrinks a little with
   speed in people, which the machine may then show through its own dynamics);
 * the leg control's stance time T_c scaled like the step time, the touchdown geometry, control and roll
@@ -41,8 +41,10 @@ WALK_RUN_U = 0.7
 STEP_TIME_EXPONENT = -0.5
 #: The step time law used where STEP_TIME_EXPONENT finds no cycle: cadence rising faster, the step length
 #: slower (× s^0.3), as in people near their fastest walks, whose step length levels off while cadence keeps
-#: rising. Measured on CMU 07_01 (1.39 m/s): with s^-0.5 the cycle exists up to x1.275 and its stance leg
-#: unloads at x1.2875 (a flight phase); with s^-0.7 the search finds the cycle at x1.30 (U = 0.60).
+#: rising. Measured on CMU 07_01 (1.39 m/s) before the control's pulses: with s^-0.5 the cycle existed up to
+#: x1.275 and its stance leg unloaded at x1.2875 (a flight phase); with s^-0.7 the search found the cycle at
+#: x1.30 (U = 0.60). With the pulses 07_01 has s^-0.5 cycles to x1.30; the Bandai walk has taken this law by
+#: x1.5 (docs/walking.md).
 FAST_STEP_TIME_EXPONENT = -0.7
 
 

@@ -19,12 +19,13 @@ FIXTURES = Path(__file__).resolve().parent / "fixtures"
 
 
 def _find_data(kind: str, probe: str) -> Path | None:
-    """The folder of real clips of one kind ("mocap": CMU, "bandai": Bandai Namco), or None.
+    """The folder of real clips of one kind ("mocap": CMU, "bandai", "bandai-locomotion", "cmu-turns"), or None.
 
     Looked for in $FROUDE_<KIND>_DIR, then ../shared/data/<kind> beside the repository (a worktree one
     level deeper is covered too), then /work/shared/data/<kind>.
     """
-    candidates = [os.environ.get(f"FROUDE_{kind.upper()}_DIR"), REPO.parent / "shared" / "data" / kind,
+    env = f"FROUDE_{kind.upper().replace('-', '_')}_DIR"
+    candidates = [os.environ.get(env), REPO.parent / "shared" / "data" / kind,
                   REPO.parent.parent / "shared" / "data" / kind, Path("/work/shared/data") / kind]
     for c in candidates:
         if c and Path(c, probe).is_file():
@@ -45,11 +46,37 @@ BANDAI_WALKS = ("dataset-1_walk_normal_001",)
 NO_DATA = "real clips not found: set FROUDE_MOCAP_DIR to the folder holding 09_01.bvh"
 NO_BANDAI = ("Bandai clips not found: set FROUDE_BANDAI_DIR to the folder holding "
              "dataset-1_dash_normal_001.bvh")
+# The locomotion sample of the same Bandai rig (walks of seven styles, 90-degree walk-turns, a backward walk,
+# grounded runs; CC BY-NC 4.0, tests only) and CMU's turning walk and run. Their clips are named by folder:
+# clip("bandai-locomotion/turns/dataset-2_walk-turn-left_normal_001"), clip("cmu-turns/16_51").
+BANDAI_LOCO = _find_data("bandai-locomotion", "walks/dataset-2_walk_normal_002.bvh")
+CMU_TURNS = _find_data("cmu-turns", "16_18.bvh")
+_FOLDERS = {"bandai-locomotion": BANDAI_LOCO, "cmu-turns": CMU_TURNS}
+
+
+def _folder_clips(kind: str, sub: str = "") -> tuple[str, ...]:
+    """Names (``kind/sub/stem``) of the clips in one of the folders above; () when it is absent."""
+    root = _FOLDERS[kind]
+    if root is None:
+        return ()
+    return tuple(sorted(f"{kind}/{p.relative_to(root).with_suffix('').as_posix()}"
+                        for p in (root / sub).glob("*.bvh")))
+
+
+LOCO_WALKS = _folder_clips("bandai-locomotion", "walks")
+LOCO_RUNS = _folder_clips("bandai-locomotion", "runs")
+LOCO_TURNS = _folder_clips("bandai-locomotion", "turns")
+CMU_TURN_CLIPS = _folder_clips("cmu-turns")
 
 
 def clip(name: str) -> Path:
-    """Path of a real clip (CMU "09_01" or Bandai "dataset-1_…"), skipping the test with the reason when
-    its data folder is absent."""
+    """Path of a real clip (CMU "09_01", Bandai "dataset-1_…", or "bandai-locomotion/…", "cmu-turns/…"),
+    skipping the test with the reason when its data folder is absent."""
+    kind, _, rest = name.partition("/")
+    if rest:
+        if _FOLDERS.get(kind) is None:
+            pytest.skip(f"{kind} clips not found: set FROUDE_{kind.upper().replace('-', '_')}_DIR")
+        return _FOLDERS[kind] / f"{rest}.bvh"
     if name.startswith("dataset-"):
         if BANDAI is None:
             pytest.skip(NO_BANDAI)
@@ -78,6 +105,10 @@ def prepared():
 def clip_params(names=None):
     """pytest parameters over real clips; a single skipping parameter when the data is absent."""
     names = list(names or ALL_CLIPS)
+    if not names:
+        return [pytest.param(None, marks=pytest.mark.skip(reason="that folder of real clips is absent"))]
+    if all("/" in n for n in names):  # folder-named clips: clip() skips each one whose folder is absent
+        return names
     bandai = any(n.startswith("dataset-") for n in names)
     if (MOCAP is None and not bandai) or (bandai and BANDAI is None) or not names:
         return [pytest.param(None, marks=pytest.mark.skip(reason=NO_BANDAI if bandai else NO_DATA))]

@@ -441,6 +441,6 @@ def test_unreachable_speed_says_so_in_metres_per_second(monkeypatch):
     def no_cycle(self, speed):
         raise FitError("no running cycle found: the search left the feasible region (liftoff with downward velocity)")
 
-    monkeypatch.setattr(Prepared, "faster_machine", no_cycle)
+    monkeypatch.setattr(Prepared, "machine_at_speed", no_cycle)
     with pytest.raises(FroudeError, match=r"^same cannot run at ×2 \(\d\.\d\d m/s\) on this clip: .* nearer ×1$"):
         s.solve(Params(speed=2.0))

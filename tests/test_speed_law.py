@@ -58,12 +58,11 @@ def test_human_top_is_the_first_limit_reached():
     f = law.F_INFLECTION
     t_step = 1 / f
     top = law.human_top_factor(f, t_step, 0.4 * t_step, 0.6 * t_step, 1.0)
-    m = law.HUMAN_MARGIN
-    by_cadence = (law.F_MAX * (1 - m) / f) ** (1 / law.BETA)
-    by_step = (1.4 * (1 - m)) ** (1 / (1 - law.BETA))
-    by_stance = 0.4 * t_step / (law.T_STANCE_MIN * (1 + m))
+    by_cadence = (law.F_MAX / f) ** (1 / law.BETA)
+    by_step = 1.4 ** (1 / (1 - law.BETA))
+    by_stance = 0.4 * t_step / law.T_STANCE_MIN
     want = min(by_cadence, by_step, by_stance)
-    assert top.factor == pytest.approx(want, abs=2 * law.HUMAN_TOP_TOL)
+    assert top.factor == pytest.approx(want * (1 - law.HUMAN_MARGIN), abs=2 * law.HUMAN_TOP_TOL)
     assert top.limit == {by_cadence: "step frequency", by_step: "step length", by_stance: "stance time"}[want]
     # a clip already past a limit keeps its own value as the limit: x1 is never refused
     assert law.human_top_factor(f, t_step, 0.4 * t_step, 0.6 * t_step, 1.6).factor >= 1.0
@@ -173,10 +172,13 @@ def test_reachable_range_and_refusal_are_the_human_ones(name, tmp_path, prepared
     g_t = math.sqrt(rt.body.stature / 9.81)
     step = law.law_step(top.factor, prep.law_cadence, si["step_time_s"] / g_t, si["stance_time_s"] / g_t,
                         si["flight_time_s"] / g_t, si["mean_speed_m_s"] / math.sqrt(9.81 * rt.body.stature))
-    assert (step.step_length >= 1.4 * (1 - law.HUMAN_MARGIN) - 1e-3
-            or step.cadence_ratio / si["step_time_s"] * g_t >= law.F_MAX * (1 - law.HUMAN_MARGIN) - 1e-3
-            or step.t_stance <= law.T_STANCE_MIN * (1 + law.HUMAN_MARGIN) + 1e-3), top
-    assert step.step_length <= 1.4 and 1.0 < top.factor < 3.0
+    beyond = law.law_step(top.factor / (1 - law.HUMAN_MARGIN) * 1.001, prep.law_cadence, si["step_time_s"] / g_t,
+                          si["stance_time_s"] / g_t, si["flight_time_s"] / g_t,
+                          si["mean_speed_m_s"] / math.sqrt(9.81 * rt.body.stature))
+    assert (beyond.step_length > 1.4 or beyond.cadence_ratio / si["step_time_s"] * g_t > law.F_MAX
+            or beyond.t_stance < law.T_STANCE_MIN), top  # just past the top a limit is crossed
+    assert step.step_length <= 1.4 and step.cadence_ratio / si["step_time_s"] * g_t <= law.F_MAX
+    assert step.t_stance >= law.T_STANCE_MIN and 1.0 < top.factor < 3.0
     rng = reachable_speed_range(prep)
     assert rng.human_top == pytest.approx(top.factor)
     assert 1.0 < rng.hi <= top.factor + law.HUMAN_TOP_TOL, rng.describe()

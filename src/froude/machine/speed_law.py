@@ -143,17 +143,18 @@ class HumanTop:
 
 #: The precision of :func:`human_top_factor` [-]: a factor within this of the top is inside.
 HUMAN_TOP_TOL = 1e-4
-#: The top is found this fraction inside each published limit [-], so that an output there, whose cycle
-#: meets the law's times only to the solver's tolerance and whose steps are measured between frames, is
-#: still inside the limit (measured: a step 0.1 % longer than the law's at the top of a Bandai dash).
-HUMAN_MARGIN = 0.01
+#: The top is this fraction slower than where the law's step reaches the first limit [-], so that an
+#: output there, whose steps are measured between frames, is still inside it (measured at the exact top of
+#: a Bandai dash: a step 0.1 % longer than 1.4 x stature; above the inflection a step grows only as
+#: s^(1 - BETA), so 2 % of speed is 0.2 % of step).
+HUMAN_MARGIN = 0.02
 
 
 def human_top_factor(f_law: float, step_time: float, t_stance: float, t_flight: float, step_length: float,
                      s_max: float = 10.0, tol: float = HUMAN_TOP_TOL) -> HumanTop:
     """The largest speed factor whose law step has a step ≤ STEP_MAX_PER_STATURE, a cadence ≤ F_MAX and
-    a stance ≥ T_STANCE_MIN, each HUMAN_MARGIN inside (and widened to the runner's own value at x1 when
-    that is past it).
+    a stance ≥ T_STANCE_MIN (each widened to the runner's own value at x1 when that is past it), made
+    HUMAN_MARGIN slower (never below 1).
 
     f_law: where the clip sits on the law (its cadence in Froude terms, the machine's ``cadence_ratio``
     argument); step_time, t_stance, t_flight [√(S/g)], step_length [S]: the runner's steady step at x1 in
@@ -162,9 +163,8 @@ def human_top_factor(f_law: float, step_time: float, t_stance: float, t_flight: 
     limit is found by bisection on [1, s_max] to ``tol``."""
     v = step_length / step_time
     f_own = 1.0 / step_time
-    limits = {"step length": max(STEP_MAX_PER_STATURE * (1 - HUMAN_MARGIN), step_length),
-              "step frequency": max(F_MAX * (1 - HUMAN_MARGIN), f_own),
-              "stance time": min(T_STANCE_MIN * (1 + HUMAN_MARGIN), t_stance)}
+    limits = {"step length": max(STEP_MAX_PER_STATURE, step_length), "step frequency": max(F_MAX, f_own),
+              "stance time": min(T_STANCE_MIN, t_stance)}
 
     def values(s: float) -> dict:
         st = law_step(s, f_law, step_time, t_stance, t_flight, v)
@@ -183,6 +183,7 @@ def human_top_factor(f_law: float, step_time: float, t_stance: float, t_flight: 
         while hi - lo > tol:
             mid = 0.5 * (lo + hi)
             lo, hi = (mid, hi) if inside(mid, name) else (lo, mid)
-        if lo < best.factor:
-            best = HumanTop(lo, name, (values(lo)[name], limits[name]))
+        top = max(1.0, lo * (1 - HUMAN_MARGIN)) if lo > 1.0 else 1.0
+        if top < best.factor:
+            best = HumanTop(top, name, (values(top)[name], limits[name]))
     return best

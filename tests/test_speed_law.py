@@ -191,3 +191,19 @@ def test_reachable_range_and_refusal_are_the_human_ones(name, tmp_path, prepared
     assert f"human limit is {top.factor * base:.2f} m/s" in last and "--unlimited" in last, last
     code, _, err = run_cli("scale", clip(name), "--speed", f"{over:.3f}x", "-o", out, "-q", "--unlimited", "--keep")
     assert code == 0 and out.exists(), err
+
+
+def test_an_acceleration_to_inhuman_steps_is_refused(prepared):
+    """Acceptance 2's "no step longer than 1.4 x stature" for ``accelerate``: its planner keeps the clip's
+    stance, so its steps grow with the goal; past 1.4 x stature the change is refused in the user's terms."""
+    from froude import pipeline
+    from froude.errors import BeyondHumanRange
+
+    prep = prepared["09_01"]
+    with pytest.raises(BeyondHumanRange, match=r"takes a step of 2\.\d\d m \(step \d+\), 1\.4\d x stature"):
+        pipeline.accelerate(prep, to_factor=1.5, report=False)
+    res = pipeline.accelerate(prep, to_factor=1.5, report=False, unlimited=True)
+    steps = np.linalg.norm(np.diff(res.path.contacts, axis=0), axis=1)
+    assert steps.max() > 1.4 * prep.body.stature  # what was refused is what --unlimited writes
+    res = pipeline.accelerate(prep, to_factor=1.3, report=False)
+    assert np.linalg.norm(np.diff(res.path.contacts, axis=0), axis=1).max() <= 1.4 * prep.body.stature

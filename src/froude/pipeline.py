@@ -200,6 +200,23 @@ def check_human_speed(prep: Prepared, retarget: Retarget, factor: float, base_m_
             "; --unlimited (unlimited=True) lifts it")
 
 
+def check_step_lengths(path: MachinePath, stature_m: float, start_m_s: float, goal_m_s: float) -> None:
+    """Refuse (BeyondHumanRange) a speed change whose machine path has a step longer than a human's
+    (``machine.speed_law.STEP_MAX_PER_STATURE`` × the character's stature ``stature_m`` [m]): the planner
+    keeps the fitted control's stance, so its steps grow with the speed where a runner's cadence would."""
+    from .errors import BeyondHumanRange
+    from .machine.speed_law import STEP_MAX_PER_STATURE
+
+    steps_m = np.linalg.norm(np.diff(path.contacts, axis=0), axis=1)
+    if steps_m.size and steps_m.max() > STEP_MAX_PER_STATURE * stature_m:
+        k = int(np.argmax(steps_m))
+        raise BeyondHumanRange(
+            f"the change from {start_m_s:.2f} to {goal_m_s:.2f} m/s (x{goal_m_s / start_m_s:.2f}) takes a step of "
+            f"{steps_m[k]:.2f} m (step {k + 1}), {steps_m[k] / stature_m:.2f} x stature: longer than the "
+            f"{STEP_MAX_PER_STATURE:g} x stature a human sprinter takes (the planned steps keep the clip's "
+            "stance); choose a goal nearer x1, or --unlimited (unlimited=True)")
+
+
 def accelerate(
     prep: Prepared,
     character=None,
@@ -252,6 +269,8 @@ def accelerate(
     fps = prep.motion.fps if fps is None else float(fps)
     path = machine_path(prep.cycle, m, retarget.L, prep.origin, n_steps=plan.n_steps, fps=fps,
                         theta0=plan.theta0, controls=plan.controls, start_state=(float(plan.U[0]), float(plan.H[0])))
+    if not unlimited:
+        check_step_lengths(path, retarget.body.stature, start_speed, target)
     notes = list(prep.notes) + list(plan.notes)
     extras = {"plan": plan_report(plan, m, start_speed, target)}
     return finish(prep, path, retarget, 1.0, notes, "physical", plan=plan, report=report, extras=extras)

@@ -207,3 +207,15 @@ def test_an_acceleration_to_inhuman_steps_is_refused(prepared):
     assert steps.max() > 1.4 * prep.body.stature  # what was refused is what --unlimited writes
     res = pipeline.accelerate(prep, to_factor=1.3, report=False)
     assert np.linalg.norm(np.diff(res.path.contacts, axis=0), axis=1).max() <= 1.4 * prep.body.stature
+
+
+def test_a_batch_plan_can_lift_the_human_limits():
+    """The batch's equivalent of --unlimited: a plan key passed to every variation (scale and accelerate)."""
+    from froude.apps.batch import BatchError, parse_plan
+
+    plan = parse_plan({"speeds": [1.5], "accelerations": [{"to_factor": 1.3, "steps": 8}], "unlimited": True})
+    assert [dict(v.args).get("unlimited") for v in plan.variations] == [True, True]
+    plan = parse_plan({"speeds": [1.5]})
+    assert "unlimited" not in dict(plan.variations[0].args)
+    with pytest.raises(BatchError, match="unlimited: true or false"):
+        parse_plan({"speeds": [1.5], "unlimited": "yes"})

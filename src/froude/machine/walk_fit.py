@@ -392,7 +392,7 @@ def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_un
     s = s_all[fr]
     tgt = np.asarray(targets, float)
     wp, wt, wr = SHAPE_WEIGHTS["periodic"], SHAPE_WEIGHTS["targets"], SHAPE_WEIGHTS["prior"]
-    n_res = tau.size + h_ref.size + 8 + int(fr.sum())
+    n_res = tau.size + h_ref.size + 7 + int(fr.sum())
     wc = SHAPE_WEIGHTS["com"]
     wf = 1.0 + LANDMARK_WEIGHT * sum(np.exp(-0.5 * ((tau - tk) / LANDMARK_WIDTH) ** 2) for tk in tau_landmarks)
 
@@ -409,8 +409,13 @@ def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_un
         per = np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3]]) * wp
         tg = np.array([(w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
                        (w.step_length / w.t_step - tgt[2]) / tgt[2]]) * wt
+        # The clearance shortfall shares the step-time residual r: copysign(√(r² + g²), r) adds g² to the
+        # cost as a residual of its own would, and is r to the last bit where the clearance is kept (g = 0),
+        # so a fit the margin does not touch runs the same arithmetic as without it (a residual more, even
+        # a zero one, changes the solver's rounding, and the walks' shape fits follow rounding: issue 26).
         graze = CLEARANCE_WEIGHT * _clearance_shortfall(rec, z[4], z[9])
-        return np.concatenate([wf * (prof - prof_ref), wc * (h - h_ref), per, tg, [graze], wr * (x - z1[fr]) / s])
+        tg[0] = math.copysign(math.sqrt(tg[0] * tg[0] + graze * graze), tg[0])
+        return np.concatenate([wf * (prof - prof_ref), wc * (h - h_ref), per, tg, wr * (x - z1[fr]) / s])
 
     sol = least_squares(resid, z1[fr], x_scale=s, diff_step=1e-6, max_nfev=SHAPE_MAX_EVALUATIONS, method="trf")
     z = z1.copy()

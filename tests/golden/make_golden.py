@@ -10,7 +10,8 @@ of the positions, which depend on the BLAS kernel and the SIMD path chosen at ru
 planner's Newton iterations (accelerate) carry up to a few 1e-7 m. Measured with
 ``python tests/golden/make_golden.py --spread`` (every output recomputed under each setting of
 ``kernels.settings()`` in a fresh process, compared with the default one) on this machine, an AMD EPYC with
-AVX-512 (NumPy 2.4.6, SciPy 1.17.1, scipy-openblas 0.3.31), on the goldens of 26ec188 (before the speed law):
+AVX-512 (NumPy 2.4.6, SciPy 1.17.1, scipy-openblas 0.3.31), at 26ec188 and again at 049af6e (the speed law's
+goldens), with the same figures both times:
 
     setting (kernels that ran)                          largest |position - default| [m]
     OPENBLAS_CORETYPE=Haswell  (Haswell)                1.5e-07   accelerate/09_06/0.5

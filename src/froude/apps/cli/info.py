@@ -92,6 +92,39 @@ def info_dict(motion, body, summary, gait) -> dict:
     }
 
 
+def path_dict(motion, body, com, gait) -> dict | None:
+    """The take's path (``body.path``): total heading change, speed along the path, facing vs travel, and
+    per step heading change, radius, speed and lean; None for a take too short to have one (< 3 frames)."""
+    from ...body.path import take_path
+
+    if motion.n_frames < 3:
+        return None
+    return take_path(motion, body, com, gait).to_dict()
+
+
+def _path_rows(p: dict | None) -> list[tuple[str, str]]:
+    """The table rows of the path: heading change, speed along it, facing, per-step turn and radius."""
+    if p is None:
+        return []
+    h = p["heading_change_deg"]
+    side = "" if h is None else " (left)" if h > 0 else " (right)" if h < 0 else ""
+    f = p["facing_vs_travel_deg"]
+    facing = ("n/a" if f is None else f"{f:+.0f} deg (" + ("forwards" if abs(f) < 30 else "backwards" if abs(f) > 150
+                                                           else "sideways") + ")")
+    steps = p["steps"]
+    return [
+        ("heading change", f"{_n(h, '+.1f')} deg{side}: COM travel over the last {p['heading_window_s']:.2f} s "
+                           "against the first"),
+        ("speed along the path", f"{_n(p['path_speed_m_s'])} m/s over {_n(p['path_length_m'], '.2f')} m"),
+        ("facing vs travel", facing),
+        ("turn per step", " ".join(_n(s["heading_change_deg"], "+.0f") for s in steps) + " deg" if steps else "n/a"),
+        ("radius per step", " ".join("straight" if s["radius_m"] is None else f"{s['radius_m']:.1f}"
+                                     for s in steps) + " m" if steps else "n/a"),
+        ("lean per step", " ".join(_n(s["lean_deg"], "+.0f") for s in steps) + " deg (COM over the stance foot, "
+                                                                               "+ = left)" if steps else "n/a"),
+    ]
+
+
 def _finite(v, digits: int = 4):
     """A rounded float, or None (JSON null) for NaN and infinities: JSON has no such numbers."""
     v = float(v)
@@ -124,6 +157,7 @@ def run(args) -> int:
 
     d = jsonable(info_dict(motion, body, summary, gait))
     d["take"] = jsonable(_take(motion, body))
+    d["path"] = path_dict(motion, body, com, gait)
     if data is not None:
         from ...io.framedata import frame_table, write_frame_data
 
@@ -155,6 +189,7 @@ def run(args) -> int:
         ("double support",
          f"{_n(d['double_support_fraction'] and 100 * d['double_support_fraction'], '.0f')}% of frames"),
     ]
+    rows += _path_rows(d["path"])
     if d["take"] is not None:  # a loop or an in-place take: what fit/scale model
         t = d["take"]
         rows.append(("as analysed", f"{'; '.join(t['notes'])}: {_n(t['mean_speed_m_s'])} m/s, "

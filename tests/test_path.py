@@ -12,10 +12,11 @@ import re
 import numpy as np
 import pytest
 
+from froude import pipeline
 from froude.body.path import direction_of, heading_change, smooth_path, wrap_angle, yaw_of
 from froude.constants import UP
 
-from conftest import BANDAI_LOCO, CMU_TURN_CLIPS, CMU_TURNS, LOCO_TURNS, clip
+from conftest import BANDAI_LOCO, CMU_TURN_CLIPS, CMU_TURNS, LOCO_TURNS, clip, oracle_fk, read_bvh_oracle
 
 #: SOURCES.md figures a clip's measured heading change may differ from [deg] (acceptance 28.4).
 HEADING_TOL_DEG = 5.0
@@ -131,3 +132,48 @@ def test_heading_change_of_an_arc_with_sway(turn_deg):
     p = smooth_path(swayed, int(round(stride / dt)))
     length = np.linalg.norm(np.diff(p[:, [0, 2]], axis=0), axis=1).sum()
     assert length == pytest.approx(speed * t[-1], rel=0.01)
+
+
+# ---- never silently straight (issue 28 point 4) ---------------------------------------------------------
+TURN = "bandai-locomotion/turns/dataset-2_walk-turn-right_normal_001"
+
+
+def _oracle_heading_deg(bvh_path, window_s: float) -> float:
+    """Heading change [deg] of a BVH file's pelvis track measured with the tests' own reader: its travel
+    direction (a chord) over the last window_s minus over the first, + = left with Y up."""
+    b = read_bvh_oracle(bvh_path)
+    p, _ = oracle_fk(b, 1.0)  # file units: a direction does not depend on them
+    hips = p[:, b.names.index("Hips")]
+    n = int(round(window_s / b.frame_time))
+    first, last = hips[n] - hips[0], hips[-1] - hips[-1 - n]
+    yaw = [math.atan2(-d[2], d[0]) for d in (first, last)]
+    return math.degrees(math.remainder(yaw[1] - yaw[0], 2 * math.pi))
+
+
+def test_a_lost_turn_is_a_missed_bar_said_in_degrees(run_cli, tmp_path):
+    """The machines run straight today: scaling a 93-degree right turn loses it, and the report says so
+    as a missed bar (it said "all met"); kept with --keep, the written file walks straight by the tests'
+    own BVH reader while the clip turns (-93 deg by the same reader), and facing vs travel is kept."""
+    out = tmp_path / "child.bvh"
+    code, stdout, _ = run_cli("scale", clip(TURN), "--character", "child", "-o", out, "--keep", "-q")
+    assert code == 0 and out.exists()
+    bars = next(line for line in stdout.splitlines() if line.startswith("physics bars:"))
+    assert "NOT met (kept): the output turns +0 deg where the clip turns -93 deg (within 3 deg)" in bars
+    written = json.loads(out.with_name("child.report.json").read_text())
+    cmp = written["extras"]["path_vs_clip"]
+    assert cmp["heading_change_deg"]["clip"] == pytest.approx(-93.3, abs=1.0)
+    got = cmp["heading_change_deg"]["output"]
+    assert abs(got) < 3.0
+    # the tests' own reader on the written file and on the clip (the same 1.1 s window, a stride of each)
+    assert abs(_oracle_heading_deg(out, 1.1) - got) < 3.0
+    assert _oracle_heading_deg(clip(TURN), 1.1) == pytest.approx(-93.3, abs=4.0)
+    f = cmp["facing_vs_travel_deg"]
+    assert abs(f["output"] - f["clip"]) < 5.0
+
+
+def test_a_straight_take_that_veers_is_met_and_said(prepared):
+    """A straight run (09_05 veers +1.8 deg) is modelled straight: the path bar is met, the note says so."""
+    rep = pipeline.scale(prepared["09_05"], "giant").report
+    cmp = rep.extras["path_vs_clip"]
+    assert cmp["heading_change_deg"]["intended"] == 0.0 and abs(cmp["heading_change_deg"]["output"]) < 1.0
+    assert cmp["misses"] == [] and "veers +1.8 deg" in cmp["notes"][0]

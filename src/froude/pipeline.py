@@ -286,6 +286,7 @@ def add_report(prep: Prepared, res: Result) -> Result:
         res.motion, res.retarget.body, ground_height=0.0, machine_com=res.path.com,
         marker_targets=stance_only(res.targets), reference_pose=res.targets.initial,
         reference_max_joint_jump_deg=prep.cycle.max_joint_jump_deg,
+        reference_path=prep.path, reference_leg_length=prep.body.leg_length,
     )
     report.extras.update({"character": res.retarget.character.name, "L": res.retarget.L, "M": res.retarget.M,
                           "speed_factor": res.speed_factor, "method": res.method, "notes": list(res.notes),

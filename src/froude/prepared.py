@@ -11,6 +11,7 @@ import numpy as np
 from .body.characters import Retarget, apply_character, resolve_character
 from .body.gait import Gait, GaitSummary
 from .body.model import BodyModel
+from .body.path import TakePath
 from .core.motion import Motion
 from .synthesis.cycle import ReferenceCycle
 
@@ -57,6 +58,13 @@ class Prepared:
     notes: tuple = ()
     #: What is built on demand for this clip and remembered (see Memo).
     memo: Memo = field(default_factory=lambda: Memo(), repr=False)
+
+    @functools.cached_property
+    def path(self) -> TakePath:
+        """The clip's path (``body.path.take_path``): what an output's path is compared with."""
+        from .body.path import take_path
+
+        return take_path(self.motion, self.body, self.com, self.gait)
 
     @property
     def origin(self) -> np.ndarray:

@@ -95,6 +95,11 @@ class TakePath:
         return self.length_m / ((n - 1) * self.frame_time) if n > 1 else float("nan")
 
     @property
+    def n_steps(self) -> float:
+        """How many steps the take spans: its duration over the step time (half the stride) [-]."""
+        return (self.arc_length_m.size - 1) * self.frame_time / (0.5 * self.stride_s)
+
+    @property
     def mean_facing_vs_travel_rad(self) -> float:
         """Circular mean of the facing-vs-travel angle [rad] (NaN without a facing)."""
         a = self.facing_vs_travel_rad[np.isfinite(self.facing_vs_travel_rad)]

@@ -177,3 +177,15 @@ def test_a_straight_take_that_veers_is_met_and_said(prepared):
     cmp = rep.extras["path_vs_clip"]
     assert cmp["heading_change_deg"]["intended"] == 0.0 and abs(cmp["heading_change_deg"]["output"]) < 1.0
     assert cmp["misses"] == [] and "veers +1.8 deg" in cmp["notes"][0]
+
+
+def test_the_turning_run_is_a_run_and_its_lost_turn_a_missed_bar(run_cli, prepared):
+    """CMU 16_51 (a run turning 82 deg) read "unknown: no flight phase": its turn's flights last 3 frames at
+    120 Hz, 0.0249999 s with the file's 7-digit frame time, under the 0.025 s a flight must last. It runs;
+    scaled, the report says the turn is lost."""
+    code, out, _ = run_cli("info", clip("cmu-turns/16_51"), "--json")
+    d = json.loads(out)
+    assert code == 0 and d["kind"] == "running", d["verdict"]
+    assert sum(abs(t - 0.025) < 1e-4 for t in d["flight_times_s"]) >= 3
+    rep = pipeline.scale(prepared["cmu-turns/16_51"], "child").report
+    assert any(f.startswith("the output turns +0 deg where the clip turns +82 deg") for f in rep.check_bars())

@@ -12,7 +12,7 @@ import numpy as np
 
 from .body.gait import Gait, detect_gait, summarize
 from .body.model import BodyModel
-from .body.path import TakePath, take_path
+from .body.path import TakePath, is_straight, take_path
 from .constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
 from .core import quat
 from .core.motion import Motion
@@ -398,7 +398,12 @@ def physics_report(
         leg_stiffness_n_m=k_leg, leg_stiffness_K=K, max_joint_jump_deg=max_joint_jump_deg(motion),
     )
     if motion.n_frames >= 3:
-        path = take_path(motion, body, com, gait)
+        # compared with a turning clip, the output's heading is measured over the clip's share of a stride
+        # (take_path); against a straight one over its own window (at least a stride: its sway cancels)
+        window_strides = None
+        if reference_path is not None and not is_straight(reference_path):
+            window_strides = reference_path.window_s / reference_path.stride_s
+        path = take_path(motion, body, com, gait, window_strides=window_strides)
         rep.extras["path"] = path.to_dict()
         if reference_path is not None:
             from .path_report import path_comparison

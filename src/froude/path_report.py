@@ -8,10 +8,9 @@ import math
 
 import numpy as np
 
-from .body.path import TakePath, wrap_angle
+from .body.path import STRAIGHT_TAKE_RAD, TakePath, is_straight, wrap_angle
 
-__all__ = ["FACING_TOL_RAD", "HEADING_TOL_RAD", "STRAIGHT_TAKE_RAD", "intended_heading_change", "is_straight",
-           "path_comparison", "path_rows"]
+__all__ = ["FACING_TOL_RAD", "HEADING_TOL_RAD", "intended_heading_change", "path_comparison", "path_rows"]
 
 #: The quality bar (docs/architecture.md): the output's total heading change within 3 degrees of the intended.
 HEADING_TOL_RAD = math.radians(3.0)
@@ -19,18 +18,6 @@ HEADING_TOL_RAD = math.radians(3.0)
 FACING_TOL_RAD = math.radians(5.0)
 #: A step turning more than this [rad] is a turning step: its radius and lean are compared (2 degrees).
 TURNING_STEP_RAD = math.radians(2.0)
-
-
-#: A clip whose total heading change is smaller than this [rad] is a straight take that veers: its outputs
-#: are meant to run straight (the machines model it so), and the report says how much the clip veers. The
-#: straight takes of the shared data veer by up to 6.4 degrees (Bandai dataset-2_walk_exhausted_001, whose
-#: SOURCES.md also says +6; CMU 02_01 +6.4); its turning takes turn by 84-97 degrees.
-STRAIGHT_TAKE_RAD = math.radians(10.0)
-
-
-def is_straight(clip: TakePath) -> bool:
-    """A take that veers by less than STRAIGHT_TAKE_RAD (or whose heading change is not measurable)."""
-    return not abs(clip.heading_change_rad) >= STRAIGHT_TAKE_RAD
 
 
 def intended_heading_change(clip: TakePath, n_steps_out: float) -> float:
@@ -62,7 +49,7 @@ def _stride_lean(path: TakePath) -> float:
 
     A straight walk's lean alternates with the stance foot; over a turn's steps the mean is the lean into
     the curve (tan phi = v^2/(g r) for a body in a steady turn)."""
-    leans = [math.copysign(s.lean_rad, s.heading_change_rad) for s in _turning(path)]
+    leans = [s.lean_rad * math.copysign(1.0, s.heading_change_rad) for s in _turning(path)]
     return float(np.mean(leans)) if leans else float("nan")
 
 

@@ -20,6 +20,7 @@ import numpy as np
 from .body.characters import Retarget
 from .body.gait import detect_gait, require_running, summarize
 from .body.model import BodyModel
+from .body.path import is_straight, straighten, take_path
 from .body.take import modelled_part, running_take, select_range
 from .core.motion import Motion
 from .errors import FroudeError, PlanError
@@ -61,6 +62,17 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     motion, take_notes = running_take(motion, body)
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers)
+    clip_path = take_path(motion, body, com, gait)
+    turn = None
+    if not is_straight(clip_path):  # the machines run along the path: the take is straightened for them
+        turn = clip_path
+        motion = straighten(motion, clip_path)
+        com, markers = body.com_and_markers(motion)
+        gait = detect_gait(motion, body, markers)
+        take_notes = list(take_notes) + [
+            f"a turning take ({math.degrees(clip_path.heading_change_rad):+.0f} deg over "
+            f"{clip_path.length_m:.2f} m): the machine runs along its path, {clip_path.path_speed_m_s:.2f} m/s, "
+            "and the output follows the path (scaled with the character)"]
     summary = summarize(motion, body, com, gait)
     if summary.kind == "walking" and not running_only:  # a motion's kind chooses its machine
         from .synthesis.walking import fit_walk
@@ -73,7 +85,8 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     machine = fit.machine
     modelled, note = modelled_part(motion, summary, com, gait)
     return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source, fit,
-                    modelled=modelled, notes=tuple(take_notes) + ((note,) if note else ()))
+                    modelled=modelled, notes=tuple(take_notes) + ((note,) if note else ()), clip_path=clip_path,
+                    turn=turn)
 
 
 @dataclass(frozen=True, eq=False)
@@ -256,8 +269,12 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
     from .ik.correct import WALK_REPAIR_ROUNDS, correct, tile_stride
 
     targets = targets_of(prep, path, retarget)
+    if prep.turn is not None:  # the straight output rolled back onto the clip's path, scaled
+        from .synthesis.bend import bend
+
+        targets, path = bend(targets, path, prep.turn, retarget.L, prep.origin)
     n_strides = len(path.foot_of_step) / 2
-    if periodic is not None and n_strides > PERIODIC_MIN_STRIDES:
+    if periodic is not None and n_strides > PERIODIC_MIN_STRIDES and prep.turn is None:
         machine, stretch, fps = periodic
         m = machine.scaled(retarget.L, retarget.M)
         dense_fps = PERIODIC_OVERSAMPLE * fps

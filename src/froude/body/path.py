@@ -32,6 +32,11 @@ HEADING_WINDOW_S = 0.6
 FALLBACK_STRIDE_S = 1.0
 #: A step whose heading changes less than this [rad] has no finite radius worth reporting (0.5 degree).
 STRAIGHT_STEP_RAD = math.radians(0.5)
+#: A clip whose total heading change is smaller than this [rad] is a straight take that veers: its outputs
+#: are meant to run straight (the machines model it as it is, not straightened), and the report says how
+#: much the clip veers. The straight takes of the shared data veer by up to 6.4 degrees (Bandai
+#: dataset-2_walk_exhausted_001, whose SOURCES.md also says +6; CMU 02_01 +6.4); its turns turn 84-97 degrees.
+STRAIGHT_TAKE_RAD = math.radians(10.0)
 #: The reference horizontal direction from which headings are measured (the first horizontal axis, +X).
 _E_REF = np.eye(3)[HORIZONTAL_AXES[0]]
 
@@ -154,7 +159,8 @@ def heading_window_s(duration_s: float, stride_s: float) -> float:
     return min(max(HEADING_WINDOW_S, stride_s), 0.25 * duration_s)
 
 
-def heading_change(com: np.ndarray, frame_time: float, stride_s: float) -> tuple[float, float]:
+def heading_change(com: np.ndarray, frame_time: float, stride_s: float,
+                   window_s: float | None = None) -> tuple[float, float]:
     """Total heading change of a take [rad] and the window W [s] it was measured over.
 
     com: (F, 3) [m]; stride_s: the take's stride time [s]. The direction of the horizontal COM travel over
@@ -162,10 +168,11 @@ def heading_change(com: np.ndarray, frame_time: float, stride_s: float) -> tuple
     wrapped to (-pi, pi]; + = left. W (``heading_window_s``) is 0.6 s as in the shared data's SOURCES.md,
     but at least one stride: over a whole stride the COM's side-to-side sway from one foot to the other
     cancels, while over half a stride it tilts a walk's chord by up to 7 degrees either way (Bandai
-    straight walks, measured). NaN when the take has fewer than 3 frames or does not travel in a window.
+    straight walks, measured). window_s: that window given instead. NaN when the take has fewer than 3
+    frames or does not travel in a window.
     """
     F = com.shape[0]
-    w = heading_window_s((F - 1) * frame_time, stride_s)
+    w = heading_window_s((F - 1) * frame_time, stride_s) if window_s is None else float(window_s)
     n = max(1, int(round(w / frame_time)))
     if F < 3 or n >= F:
         return float("nan"), w
@@ -179,8 +186,10 @@ def heading_change(com: np.ndarray, frame_time: float, stride_s: float) -> tuple
 def smooth_path(com: np.ndarray, n_box: int) -> np.ndarray:
     """(F, 3) the COM's horizontal track averaged over n_box frames (its height: the mean) [m].
 
-    A centred box average; at the ends the track is continued by point reflection about the end frame
-    (2 p_0 − p_k), which continues a straight or steadily curving track without bending it back.
+    A centred box average one stride (n_box frames) long. Beyond the ends the track is continued by its
+    first (last) stride repeated, moved on by that stride's travel: the sway then cancels at the ends
+    too, and the path's heading there is the travel direction over the first (last) stride. A take of
+    one stride or less is continued by point reflection about its end frames (2 p_0 − p_k).
     """
     F = com.shape[0]
     out = np.empty_like(com, dtype=float)
@@ -190,7 +199,13 @@ def smooth_path(com: np.ndarray, n_box: int) -> np.ndarray:
         out[:, HORIZONTAL_AXES] = com[:, HORIZONTAL_AXES]
         return out
     x = com[:, HORIZONTAL_AXES]
-    padded = np.concatenate([2 * x[0] - x[h:0:-1], x, 2 * x[-1] - x[-2 : -2 - h : -1]])
+    n = 2 * h + 1
+    if F > n:
+        head = x[n - h : n] - (x[n] - x[0])  # x[-j] = x[n - j] - (x[n] - x[0]), j = h..1
+        tail = x[F - 1 - n + 1 : F - n + h] + (x[-1] - x[F - 1 - n])
+    else:
+        head, tail = 2 * x[0] - x[h:0:-1], 2 * x[-1] - x[-2 : -2 - h : -1]
+    padded = np.concatenate([head, x, tail])
     c = np.cumsum(np.concatenate([np.zeros((1, x.shape[1])), padded]), axis=0)
     out[:, HORIZONTAL_AXES] = (c[2 * h + 1 :] - c[: -2 * h - 1]) / (2 * h + 1)
     return out
@@ -206,8 +221,15 @@ def facing_yaw(motion: Motion, body: BodyModel) -> np.ndarray:
     return np.unwrap(yaw_of(fwd))
 
 
-def take_path(motion: Motion, body: BodyModel, com: np.ndarray, gait: Gait) -> TakePath:
-    """The path of a take (``TakePath``) from its COM (F, 3) [m] and gait (for the stride and the steps)."""
+def take_path(motion: Motion, body: BodyModel, com: np.ndarray, gait: Gait,
+              window_strides: float | None = None) -> TakePath:
+    """The path of a take (``TakePath``) from its COM (F, 3) [m] and gait (for the stride and the steps).
+
+    window_strides: measure the total heading change over this many of the take's strides at each end
+    instead of ``heading_window_s``'s window: an output is measured over the same share of its stride as
+    the clip it is compared with (the COM's sway then tilts both chords alike; a short clip's window is a
+    quarter of it, less than a stride).
+    """
     F, dt = motion.n_frames, motion.frame_time
     period = step_period(gait, F, com)
     stride_s = 2.0 * period if np.isfinite(period) and period > 0 else FALLBACK_STRIDE_S
@@ -225,7 +247,7 @@ def take_path(motion: Motion, body: BodyModel, com: np.ndarray, gait: Gait) -> T
     curvature = np.where(speed > 0, curvature, np.nan)
     facing = facing_yaw(motion, body)
     fvt = wrap_angle(facing - heading)
-    total, w = heading_change(com, dt, stride_s)
+    total, w = heading_change(com, dt, stride_s, None if window_strides is None else window_strides * stride_s)
     steps = _steps(gait, com, s, heading, fvt, F, dt)
     return TakePath(dt, p, s, heading, curvature, speed, facing, fvt, total, w, stride_s, steps)
 
@@ -256,3 +278,46 @@ def _steps(gait: Gait, com: np.ndarray, s: np.ndarray, heading: np.ndarray, fvt:
         f_t = float(np.angle(np.mean(np.exp(1j * seg)))) if seg.size else float("nan")
         out.append(PathStep(a.foot, t0 * dt, t1 * dt, arc, dpsi, radius, arc / ((t1 - t0) * dt), lean, f_t))
     return tuple(out)
+
+
+def is_straight(path: TakePath) -> bool:
+    """A take that veers by less than STRAIGHT_TAKE_RAD (or whose heading change is not measurable)."""
+    return not abs(path.heading_change_rad) >= STRAIGHT_TAKE_RAD
+
+
+def yaw_quat(angle_rad: np.ndarray) -> np.ndarray:
+    """(..., 4) rotations (w, x, y, z) by angle_rad (...,) about the up axis (+ = to the left)."""
+    from ..core import quat
+
+    a = np.asarray(angle_rad, float)
+    return quat.from_axis_angle(np.broadcast_to(UP, a.shape + (3,)), a)
+
+
+def straighten(motion: Motion, path: TakePath) -> Motion:
+    """The take unrolled onto a straight line: each frame moved rigidly so that its point of the path
+    lands at its arc length along the path's first direction, turned by the heading it has gained.
+
+    Frame i is turned about the up axis by −(heading_i − heading_0) about the path point P_i and carried to
+    P_0 + s_i · direction(heading_0): the COM keeps its offset from the path (its sway and lean) in the
+    path's own frame, the travel becomes straight at the speed along the path. A foot planted while the
+    path turns moves a little in the straightened take (rigid per frame: about a δ²/2 sideways and a δ
+    along for a foot n from the path and an angle δ = Δs/r of turn between it and the COM, 1-4 cm in
+    CMU 16_51's 1.3 m turn, well below the contact test's speed). The inverse, point by point, is
+    ``synthesis.bend``. Returns a new Motion (meta "straightened": the heading change undone [rad]).
+    """
+    from dataclasses import replace
+
+    from ..core import quat
+
+    dpsi = path.heading_rad - path.heading_rad[0]  # (F,)
+    q = yaw_quat(-dpsi)  # (F, 4)
+    p0 = path.p_world_path[0]
+    fwd0 = direction_of(path.heading_rad[0])
+    rel = motion.root_positions - path.p_world_path
+    rel[:, UP_AXIS] = motion.root_positions[:, UP_AXIS]
+    root = p0 * (1 - UP) + path.arc_length_m[:, None] * fwd0 + quat.rotate(q, rel)
+    rot = motion.rotations.copy()
+    rot[:, 0] = quat.mul(q, rot[:, 0])
+    meta = dict(motion.meta)
+    meta["straightened"] = float(dpsi[-1]) if dpsi.size else 0.0
+    return replace(motion, root_positions=root, rotations=rot, meta=meta)

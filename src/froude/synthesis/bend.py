@@ -76,16 +76,18 @@ def bend(targets: Targets, path: MachinePath, clip: TakePath, L: float,
     """The straight output's IK targets and machine path rolled onto the clip's path scaled by L.
 
     COM, foot markers, the machine's COM and contact points are moved point by point; the initial motion's
-    root (the IK's start and the pose it is pulled toward) is moved point by point and turned by the
-    heading gained there. origin: (3,) [m] where the straight output starts (``Prepared.origin``).
+    pose (the IK's start and the pose it is pulled toward) is moved rigidly with its COM target, turned
+    by the heading gained there. origin: (3,) [m] where the straight output starts (``Prepared.origin``).
     """
     line = Centreline.of(clip, L, origin, path.frame[0])
     com = bend_points(targets.com, line, origin)
     markers = bend_points(targets.markers, line, origin)
     init = targets.initial
-    _, dpsi = line.at((init.root_positions - origin * (1 - UP)) @ line.fwd0)
-    q = yaw_quat(dpsi)  # the body turned as the path at its root
-    root = bend_points(init.root_positions, line, origin)
+    # the pose moved rigidly with its COM target: turned by the heading gained there, about it (a rig's root
+    # may lie far from the body: Bandai's joint_Root, 2.4 m ahead of the COM in a straightened turn)
+    _, dpsi = line.at((targets.com - origin * (1 - UP)) @ line.fwd0)
+    q = yaw_quat(dpsi)
+    root = com + quat.rotate(q, init.root_positions - targets.com)
     rot = init.rotations.copy()
     rot[:, 0] = quat.mul(q, rot[:, 0])
     initial = _replace(init, root_positions=root, rotations=rot)

@@ -23,7 +23,7 @@ from .body.model import BodyModel
 from .body.path import is_straight, straighten, take_path
 from .body.take import modelled_part, running_take, select_range
 from .core.motion import Motion
-from .errors import FroudeError, PlanError
+from .errors import FitError, FroudeError, PlanError
 from .machine import is_walking
 from .metrics import physics_report
 from .naive import naive_clip
@@ -74,14 +74,21 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
             f"{clip_path.length_m:.2f} m): the machine runs along its path, {clip_path.path_speed_m_s:.2f} m/s, "
             "and the output follows the path (scaled with the character)"]
     summary = summarize(motion, body, com, gait)
-    if summary.kind == "walking" and not running_only:  # a motion's kind chooses its machine
-        from .synthesis.walking import fit_walk
+    try:
+        if summary.kind == "walking" and not running_only:  # a motion's kind chooses its machine
+            from .synthesis.walking import fit_walk
 
-        fit, cycle = fit_walk(motion, body, com, markers, gait, source, mass)
-    else:
-        require_running(summary, source)
-        fit = fit_machine_detailed(motion, body, mass=mass, source=Path(source).name)
-        cycle = extract_cycle(motion, body, gait, com, markers, events=fit_events(fit.machine, motion))
+            fit, cycle = fit_walk(motion, body, com, markers, gait, source, mass)
+        else:
+            require_running(summary, source)
+            fit = fit_machine_detailed(motion, body, mass=mass, source=Path(source).name)
+            cycle = extract_cycle(motion, body, gait, com, markers, events=fit_events(fit.machine, motion))
+    except FitError as e:
+        if turn is None:
+            raise
+        name = Path(source).name  # say that the fit saw the take straightened
+        raise FitError(f"{'' if name in str(e) else name + ': '}{e} (fitted to the take straightened along its "
+                       f"{math.degrees(turn.heading_change_rad):+.0f} deg turn)") from e
     machine = fit.machine
     modelled, note = modelled_part(motion, summary, com, gait)
     return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source, fit,

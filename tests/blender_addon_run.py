@@ -3,19 +3,24 @@ gets them (Blender's own BVH importer, optionally through Blender's FBX exporter
 
     python blender_addon_run.py SPEC.json OUT_DIR
 
-SPEC: a list of cases {"name", "bvh", "import_scale", "fbx": bool, "glb": bool, "ops": [[operator, {setting:
-value}], ...]}; operator is "info", "scale" or "accelerate" (bpy.ops.froude.*), settings are scene.froude's;
-"disconnect" {"bones": [...]} disconnects those bones in Edit Mode, as a user does.
+SPEC: {"addons_dir": the folder ``froude blender --install-addon`` wrote into (its add-on is enabled and
+disabled first, result in OUT_DIR/addon.json), "cases": [{"name", "bvh", "import_scale", "fbx": bool, "glb":
+bool, "ops": [[operator, {setting: value}], ...]}]}; operator is "info", "scale" or "accelerate"
+(bpy.ops.froude.*), settings are scene.froude's; "disconnect" {"bones": [...]} disconnects those bones in
+Edit Mode, as a user does; "panel" draws the panel into a recording layout (the controls drawn, and any
+property that scene.froude lacks).
 For each case OUT_DIR/NAME.json holds per operator: the result ({'FINISHED'} or the error line), the panel's
 error, info and report, whether the original action is untouched (its keyframes, and the action still in
 bpy.data), the actions in the file; and OUT_DIR/NAME_K.npz the world joint positions of operator K's new
 action at its keys, in froude's axes (+Y up) and metres [m]: names (J,), heads (F, J, 3). With "glb", Blender's
-glTF exporter writes OUT_DIR/NAME.glb from the imported armature (before any operator).
+glTF exporter writes OUT_DIR/NAME.glb from the imported armature (before any operator), with its leaf bones
+(the chain ends: head top, toe and finger tips).
 """
 # ruff: noqa: I001  (Blender's addon_utils can be imported only once bpy is)
 import json
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import bpy
 import addon_utils
@@ -55,6 +60,46 @@ def heads(obj, names, frames) -> np.ndarray:
     return np.stack([out[..., 0], out[..., 2], -out[..., 1]], axis=-1) * unit
 
 
+class Layout:
+    """A stand-in for a panel's UILayout that records what is drawn: ("label" | "prop" | "operator", text)."""
+
+    def __init__(self, controls: list):
+        self.controls = controls
+
+    def label(self, text="", **_):
+        self.controls.append(("label", text))
+
+    def prop(self, data, name, **_):
+        self.controls.append(("prop", name))
+
+    def operator(self, idname, **_):
+        self.controls.append(("operator", idname))
+
+    def column(self, **_):
+        return self
+
+    def row(self, **_):
+        return self
+
+    def box(self, **_):
+        return self
+
+
+def check_installed_addon(addons_dir: str) -> dict:
+    """Enable the add-on that ``froude blender --install-addon`` wrote, as Blender does, then disable it."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sys.path.insert(0, addons_dir)
+    import froude_blender
+
+    froude_blender.register()
+    out = {"bl_info": froude_blender.bl_info["name"], "settings": hasattr(bpy.types.Scene, "froude"),
+           "operators": sorted(n for n in dir(bpy.ops.froude) if not n.startswith("_")),
+           "panel": hasattr(bpy.types, "FROUDE_PT_panel")}
+    froude_blender.unregister()
+    out["unregistered"] = not hasattr(bpy.types.Scene, "froude") and not hasattr(bpy.types, "FROUDE_PT_panel")
+    return out
+
+
 def load_case(case, out_dir: Path):
     """Import the case's BVH (and round-trip it through FBX); returns the active armature."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -71,7 +116,7 @@ def load_case(case, out_dir: Path):
     scene.frame_start, scene.frame_end = int(round(lo)), int(round(hi))
     if case.get("glb"):
         bpy.ops.export_scene.gltf(filepath=str(out_dir / f"{case['name']}.glb"), export_format="GLB",
-                                  use_selection=True, export_animations=True)
+                                  use_selection=True, export_animations=True, export_leaf_bone=True)
     if case.get("fbx"):
         fbx = out_dir / f"{case['name']}.fbx"
         # a mesh skinned to the armature, as in every character FBX: its bind pose carries the armature's rest
@@ -117,13 +162,22 @@ def run_case(case, out_dir: Path) -> dict:
             bpy.ops.object.mode_set(mode="OBJECT")
             log["ops"].append({"op": op, "bones": settings["bones"]})
             continue
+        if op == "panel":  # the panel drawn into a layout that records every control
+            controls: list = []
+            addon.FROUDE_PT_panel.draw(SimpleNamespace(layout=Layout(controls)), bpy.context)
+            known = set(st.bl_rna.properties.keys())
+            log["ops"].append({"op": op, "controls": controls,
+                               "unknown_props": [n for k, n in controls if k == "prop" and n not in known]})
+            continue
+        markers = sorted((m.name, m.frame) for m in bpy.context.scene.timeline_markers)
         try:
             result = sorted(getattr(bpy.ops.froude, op)())
         except RuntimeError as e:  # an operator that reports an error raises here
             result = ["ERROR: " + str(e).strip()]
         entry = {"op": op, "result": result, "error": st.error, "info": st.info_json, "report": st.report_json,
                  "actions_before": n_actions, "actions": sorted(a.name for a in bpy.data.actions),
-                 "active": obj.animation_data.action.name}
+                 "active": obj.animation_data.action.name,
+                 "markers_changed": markers != sorted((m.name, m.frame) for m in bpy.context.scene.timeline_markers)}
         new = obj.animation_data.action
         if op != "info" and result == ["FINISHED"]:
             names = [b.name for b in obj.data.bones if b.name in case.get("joints", [b.name for b in obj.data.bones])]
@@ -141,7 +195,9 @@ def run_case(case, out_dir: Path) -> dict:
 def main() -> None:
     spec = json.loads(Path(sys.argv[1]).read_text())
     out_dir = Path(sys.argv[2])
-    for case in spec:
+    if spec.get("addons_dir"):
+        (out_dir / "addon.json").write_text(json.dumps(check_installed_addon(spec["addons_dir"])))
+    for case in spec["cases"]:
         log = run_case(case, out_dir)
         (out_dir / f"{case['name']}.json").write_text(json.dumps(log, indent=1))
 

@@ -25,7 +25,7 @@ def register(sub) -> None:
         "frame rate, mean speed, Froude number U = u/sqrt(g L), foot contacts with stance and flight "
         "times, step frequency and length, COM vertical excursion, and what cleaning did.",
     )
-    p.add_argument("clip", help="BVH file")
+    p.add_argument("clip", help="BVH file, or glTF/GLB with a skinned animation")
     p.add_argument("--json", action="store_true", help="print the summary as JSON instead of a table")
     add_mass(p, "body mass [kg] for the COM model")
     add_quiet(p)

@@ -338,6 +338,12 @@ def test_bvh_export_options(session, tmp_path):
         cm, text = got[("centimetres", "30 Hz", "in place")]
         assert abs(cm.fps - 30.0) < 1e-3 and abs(cm.n_frames - res.duration * 30) <= 1
         assert np.ptp(cm.root_positions[:, [0, 2]], axis=0).max() < 0.3  # in place: no travel
+        # the same in-place motion as the CLI's (only the forward progression off the root: the sideways sway
+        # stays), at 30 Hz; the studio took the COM's whole horizontal motion off before
+        from froude.result import in_place_motion
+
+        cli = in_place_motion(tab.good.result).resample(30.0)
+        assert np.abs(cm.root_positions - cli.root_positions).max() < 1e-4
         assert cm.skeleton.standing_height() == pytest.approx(same.skeleton.standing_height(), rel=0.02)
 
         def offsets(t):

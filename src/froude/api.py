@@ -210,12 +210,14 @@ def info(clip: str | os.PathLike | Motion, *, mass: float = 70.0, length_scale: 
 
 @_checked_keywords
 def fit(clip: str | os.PathLike | Motion, *, reference_mass: float = 70.0, length_scale: float | None = None) -> Result:
-    """Fit the simple machine to a running clip (paper §4) and measure it: ``froude fit`` as a function.
+    """Fit the simple machine to a clip (paper §4: the running machine for a run, the walking machine for a
+    walk) and measure it: ``froude fit`` as a function.
 
     clip: a BVH/GLB path or a Motion; reference_mass: the performer's mass [kg]; length_scale: metres per
     BVH file unit (default: detected). The result's ground_force is eq. 1 from the clip's COM; its
     ``machine`` the fitted SimpleMachine; pass it to ``scale``/``accelerate`` to reuse the fit.
-    Raises NotARunningMotion for a walk, FroudeError for a bad file.
+    Raises NotARunningMotion for a clip that neither runs nor walks (in place, too few stances),
+    FroudeError for a bad file.
     """
     from .metrics import physics_report
 

@@ -180,6 +180,9 @@ def sample_armature(context) -> tuple[Armature, np.ndarray, np.ndarray]:
         for pb, m in zip(pbones, saved):
             pb.matrix_basis = m
         scene.frame_set(current, subframe=sub)
+    if np.abs(world - world[0]).max() > 1e-6 * max(float(np.abs(world[0, :3, :3]).max()), 1.0):
+        raise FroudeError(f"the armature object '{obj.name}' itself moves during the action; froude reads the "
+                          "bones' motion: move the object's animation onto the root bone first")
     arm = Armature(names, np.array([-1 if b.parent is None else index[b.parent.name] for b in bones]),
                    rest, tails, np.array([b.use_connect for b in bones]), object_world)
     # Blender's pose matrices are float32; composed again in float64 from the keyed values where that is
@@ -368,7 +371,7 @@ class _FroudeOperator(bpy.types.Operator):
 
     def execute(self, context):
         st = context.scene.froude
-        st.error = ""
+        st.error = st.report_json = ""
         progress = _Progress(context, self.what)
         try:
             progress.step(5, "reading the action")

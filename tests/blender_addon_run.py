@@ -18,6 +18,7 @@ glTF exporter writes OUT_DIR/NAME.glb from the imported armature (before any ope
 """
 # ruff: noqa: I001  (Blender's addon_utils can be imported only once bpy is)
 import json
+import os
 import sys
 from pathlib import Path
 from types import SimpleNamespace
@@ -204,3 +205,5 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+    sys.stdout.flush()
+    os._exit(0)  # bpy 4.5 can hang in its own shutdown; every output is written and closed by now

@@ -59,7 +59,7 @@ class Armature:
     object_world: np.ndarray
 
     def end_bones(self) -> np.ndarray:
-        """(B,) bool: leaf bones that mark a chain's end (FBX "_end" bones), not joints."""
+        """(B,) bool: leaf bones that mark a chain's end (an exporter's "_end" or "_leaf" bones), not joints."""
         has_child = np.zeros(len(self.names), bool)
         has_child[self.parents[self.parents >= 0]] = True
         return np.array([not has_child[b] and self.parents[b] >= 0

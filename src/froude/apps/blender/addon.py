@@ -252,8 +252,12 @@ def _channel_values(q: np.ndarray, mode: str) -> tuple[str, np.ndarray]:
 
 
 def _fcurve(action, obj, data_path: str, index: int, group: str):
+    """A new F-curve on the action for obj's property, grouped under the bone where Blender can."""
     if hasattr(action, "fcurve_ensure_for_datablock"):  # Blender 4.4+: layered actions with slots
-        return action.fcurve_ensure_for_datablock(obj, data_path, index=index, group_name=group)
+        params = action.bl_rna.functions["fcurve_ensure_for_datablock"].parameters
+        if "group_name" in params:  # 5.0; 4.4-4.5 have no group here (the curves are then ungrouped)
+            return action.fcurve_ensure_for_datablock(obj, data_path, index=index, group_name=group)
+        return action.fcurve_ensure_for_datablock(obj, data_path, index=index)
     return action.fcurves.new(data_path, index=index, action_group=group)
 
 

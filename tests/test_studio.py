@@ -266,7 +266,7 @@ def test_a_change_is_not_held_up_by_the_speed_range_search(session, monkeypatch)
     tabs: list = []
     ready = threading.Event()
 
-    def speed_ok(prep, character, s, numbers):  # a stand-in for a 4-stride output and its bars
+    def speed_ok(prep, character, s, numbers, unlimited):  # a stand-in for a 4-stride output and its bars
         ready.wait(30)
         checked.append((character, s))
         if character is None and len(checked) == 3:
@@ -434,8 +434,8 @@ def _free_port() -> int:
 
 
 def test_unreachable_speed_says_so_in_metres_per_second(monkeypatch):
-    """A speed with no running cycle (a Bandai run at x2, the slider's end) is refused in m/s with the fix,
-    not in the cycle solver's terms."""
+    """A speed with no running cycle (a Bandai run at x1.5, inside its human range, x1.58) is refused in m/s
+    with the fix, not in the cycle solver's terms; past the human range the refusal says the human limit."""
     from froude.errors import FitError
     from froude.prepared import Prepared
 
@@ -447,6 +447,8 @@ def test_unreachable_speed_says_so_in_metres_per_second(monkeypatch):
     def no_cycle(self, speed):
         raise FitError("no running cycle found: the search left the feasible region (liftoff with downward velocity)")
 
-    monkeypatch.setattr(Prepared, "faster_machine", no_cycle)
-    with pytest.raises(FroudeError, match=r"^same cannot run at ×2 \(\d\.\d\d m/s\) on this clip: .* nearer ×1$"):
+    monkeypatch.setattr(Prepared, "machine_at_speed", no_cycle)
+    with pytest.raises(FroudeError, match=r"^same cannot run at ×1.5 \(\d\.\d\d m/s\) on this clip: .* nearer ×1$"):
+        s.solve(Params(speed=1.5))
+    with pytest.raises(FroudeError, match=r"beyond the human range .* the human limit is \d\.\d\d m/s \(x1\.58\)"):
         s.solve(Params(speed=2.0))

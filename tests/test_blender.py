@@ -46,7 +46,9 @@ def blender(tmp_path_factory):
     assert cli_main(["blender", "--install-addon", "--addons-dir", str(addons), "-q"]) == 0
     cases = [
         {"name": "cmu", "bvh": str(clip(CMU)), "import_scale": IMPORT_SCALE[CMU], "fbx": True, "glb": True,
-         "ops": [["scale", {"character": "child", "speed_factor": 4.0}],  # misses a bar: refused
+         "ops": [["scale", {"character": "child", "speed_factor": 4.0}],  # beyond the human range: refused
+                 ["scale", {"unlimited": True}],  # allowed, but it misses a bar: refused
+                 ["panel", {"unlimited": False}],
                  ["scale", {"speed_factor": 1.2, "joint_map": str(out / "no_such_map.yaml")}],  # no file
                  ["info", {"joint_map": "", "length_unit": "DETECT"}],
                  ["info", {"length_unit": "SCENE"}],
@@ -135,16 +137,17 @@ def test_errors_are_one_line_in_the_panel_and_change_nothing(blender):
     _, logs = blender
     refused = [(case, e) for case, log in logs.items() for e in log["ops"]
                if e.get("result") and e["result"] != ["FINISHED"]]
-    assert len(refused) == 3, refused
+    assert len(refused) == 4, refused
     for case, e in refused:
         assert e["error"] and "\n" not in e["error"] and len(e["error"]) < 400, e["error"]
         assert "Traceback" not in e["result"][0] and e["error"] in e["result"][0]
         assert len(e["actions"]) == e["actions_before"] and e["active"] == logs[case]["original"]
         assert not e["markers_changed"]
     errors = [e["error"] for _, e in refused]
-    assert "physics bars" in errors[0] and "joint jump" in errors[0] and "Keep" in errors[0]
-    assert "no_such_map.yaml" in errors[1]
-    assert "'Hips'" in errors[2] and "Disconnect" in errors[2]
+    assert "beyond the human range" in errors[0] and "m/s" in errors[0] and "tick Unlimited" in errors[0]
+    assert "physics bars" in errors[1] and "Keep" in errors[1]
+    assert "no_such_map.yaml" in errors[2]
+    assert "'Hips'" in errors[3] and "Disconnect" in errors[3]
 
 
 @pytest.mark.parametrize("case,name", [("cmu", CMU), ("bandai", BANDAI)])
@@ -172,18 +175,19 @@ def test_panel_draws_every_control(blender):
     Analyse figures, and after Scale the physics report."""
     _, logs = blender
     panels = [e for e in logs["cmu"]["ops"] if e["op"] == "panel"]
-    assert len(panels) == 2
+    assert len(panels) == 3
     for p in panels:
         assert p["unknown_props"] == []
         props = {n for kind, n in p["controls"] if kind == "prop"}
         assert props == {"length_unit", "joint_map", "mass_kg", "mark_contacts", "character", "height_m",
-                         "character_mass_kg", "keep", "speed_factor", "strides", "to_factor", "steps"}
+                         "character_mass_kg", "keep", "unlimited", "speed_factor", "strides", "to_factor", "steps"}
         assert [n for kind, n in p["controls"] if kind == "operator"] == ["froude.info", "froude.scale",
                                                                            "froude.accelerate"]
     labels = [[t for kind, t in p["controls"] if kind == "label"] for p in panels]
-    assert any(t.startswith("speed: ") and "U = " in t for t in labels[0])
-    assert any(t.startswith("physics bars: all met") for t in labels[1])
-    assert any(t.startswith("new action: ") for t in labels[1])
+    assert any("physics bars" in t for t in labels[0])  # the last refusal, as the panel's error line
+    assert any(t.startswith("speed: ") and "U = " in t for t in labels[1])
+    assert any(t.startswith("physics bars: all met") for t in labels[2])
+    assert any(t.startswith("new action: ") for t in labels[2])
 
 
 def test_installed_addon_registers_in_blender(blender):

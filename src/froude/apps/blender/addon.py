@@ -301,8 +301,14 @@ def write_action(obj, arm: Armature, basis: np.ndarray, frames: np.ndarray, name
 
 
 # ---- the operators -------------------------------------------------------------------------------------------
+#: The end of froude's refusal of a speed beyond the human range, in the command line's and the API's terms,
+#: and the same in the panel's.
+_UNLIMITED_CLI = "; --unlimited (unlimited=True) lifts it"
+_UNLIMITED_PANEL = "; tick Unlimited to lift it"
+
+
 def _one_line(e: BaseException) -> str:
-    text = " ".join(str(e).split()) or type(e).__name__
+    text = (" ".join(str(e).split()) or type(e).__name__).replace(_UNLIMITED_CLI, _UNLIMITED_PANEL)
     return text if isinstance(e, (FroudeError, OSError, ValueError)) else f"internal error (a bug): {text}"
 
 
@@ -331,8 +337,9 @@ def typed(value: float) -> float:
 
 
 def _character_kwargs(st) -> dict:
-    """froude.scale/accelerate's character arguments from the panel (0 = not given)."""
-    kw: dict[str, Any] = {"character": None if st.character == SAME_BODY else st.character}
+    """froude.scale/accelerate's character arguments (and ``unlimited``) from the panel (0 = not given)."""
+    kw: dict[str, Any] = {"character": None if st.character == SAME_BODY else st.character,
+                          "unlimited": st.unlimited}
     if st.height_m > 0:
         kw["height"] = typed(st.height_m)
     if st.character_mass_kg > 0:
@@ -536,6 +543,7 @@ class FROUDE_PT_panel(bpy.types.Panel):
         box.prop(st, "height_m")
         box.prop(st, "character_mass_kg")
         box.prop(st, "keep")
+        box.prop(st, "unlimited")
         box = layout.box()
         box.prop(st, "speed_factor")
         box.prop(st, "strides")
@@ -577,6 +585,8 @@ def _settings_class():
         "character_mass_kg": P.FloatProperty(name="Mass [kg] (0: preset's)", default=0.0, min=0.0, max=5000.0),
         "keep": P.BoolProperty(name="Keep", default=False,
                                description="write the new action even when it misses a physics bar"),
+        "unlimited": P.BoolProperty(name="Unlimited", default=False,
+                                    description="allow speeds beyond what a human of the character's size runs"),
         "speed_factor": P.FloatProperty(name="Speed ×", default=1.0, min=0.05, max=10.0,
                                         description="factor on the character's dynamically scaled speed"),
         "strides": P.IntProperty(name="Strides", default=4, min=1, max=100),

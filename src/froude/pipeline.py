@@ -222,8 +222,9 @@ def check_human_speed(prep: Prepared, retarget: Retarget, factor: float, base_m_
 
 def check_step_lengths(path: MachinePath, stature_m: float, start_m_s: float, goal_m_s: float) -> None:
     """Refuse (BeyondHumanRange) a speed change whose machine path has a step longer than a human's
-    (``machine.speed_law.STEP_MAX_PER_STATURE`` × the character's stature ``stature_m`` [m]): the planner
-    keeps the fitted control's stance, so its steps grow with the speed where a runner's cadence would."""
+    (``machine.speed_law.STEP_MAX_PER_STATURE`` × the character's stature ``stature_m`` [m]): the §5.3 planner
+    keeps the fitted control's stance, so its steps grow with the speed where a runner's cadence would (the
+    law's steps stay inside below the human top; this guards the path whichever planned it)."""
     from .errors import BeyondHumanRange
     from .machine.speed_law import STEP_MAX_PER_STATURE
 
@@ -233,8 +234,8 @@ def check_step_lengths(path: MachinePath, stature_m: float, start_m_s: float, go
         raise BeyondHumanRange(
             f"the change from {start_m_s:.2f} to {goal_m_s:.2f} m/s (x{goal_m_s / start_m_s:.2f}) takes a step of "
             f"{steps_m[k]:.2f} m (step {k + 1}), {steps_m[k] / stature_m:.2f} x stature: longer than the "
-            f"{STEP_MAX_PER_STATURE:g} x stature a human sprinter takes (the planned steps keep the clip's "
-            "stance); choose a goal nearer x1, or --unlimited (unlimited=True)")
+            f"{STEP_MAX_PER_STATURE:g} x stature a human sprinter takes; choose a goal nearer x1, or --unlimited "
+            "(unlimited=True)")
 
 
 def accelerate(
@@ -252,14 +253,21 @@ def accelerate(
     policy: str = "ease",
     report: bool = True,
     unlimited: bool = False,
+    speed_model: str = "law",
     **character_numbers,
 ) -> Result:
-    """§5.3 + §6: speed up or slow down to ``to_speed`` [m/s] or ``to_factor`` × the start speed.
+    """§5.3 + §6: speed up or slow down to ``to_speed`` [m/s] or ``to_factor`` × the start speed (apex speeds).
 
     steps: the change takes this many steps (a step = one stance and the flight after it), or
     within: ... this many seconds; lead_steps / hold_steps: steady steps before / after the change.
     The plan is dimensionless, so it is the same for every dynamically similar character.
     unlimited: allow a goal past the human range for the character's size (see ``plan_scale``).
+    speed_model (runs): "law" (default): the change steps through the human speed law's cycles
+        (``machine.planner.law``: each step's control is the law's cycle at its speed, the goal's cycle is
+        the one ``scale`` runs at that speed), so step frequency and length move as a runner's do; "planner":
+        the paper's §5.3 planner (the fitted control's K, a, c, T_c kept, θ0 and δb per step; ``energy``).
+    policy: the profile of the change's speeds ("ease" or "even"), for both models.
+    Walks keep their own planner (``synthesis.walking.plan_walk_speed_change``): the law is the runners'.
     """
     from .machine.planner import plan_speed_change
     from .speed_range import plan_refusal, plan_report
@@ -276,14 +284,19 @@ def accelerate(
     v_unit = m.speed_unit
     start_speed = m.U * v_unit  # apex speed of the cycle [m/s]
     target = accelerate_goal(to_speed, to_factor, start_speed, steps, within)
+    if speed_model not in ("law", "planner"):
+        raise FroudeError(f"unknown speed model '{speed_model}' (law or planner)")
     if not unlimited:
         check_human_speed(prep, retarget, target / start_speed, start_speed)
     try:
-        plan = plan_speed_change(
-            m, target / v_unit, n_steps=None if within is not None else steps,
-            within_time=None if within is None else within / m.time_unit, energy=energy, policy=policy,
-            lead_steps=lead_steps, hold_steps=hold_steps,
-        )
+        if speed_model == "law":
+            plan = _law_plan(prep, m, target / v_unit, steps, within, policy, lead_steps, hold_steps)
+        else:
+            plan = plan_speed_change(
+                m, target / v_unit, n_steps=None if within is not None else steps,
+                within_time=None if within is None else within / m.time_unit, energy=energy, policy=policy,
+                lead_steps=lead_steps, hold_steps=hold_steps,
+            )
     except PlanError as e:
         raise PlanError(plan_refusal(e, start_speed, target, v_unit, steps, within)) from e
     fps = prep.motion.fps if fps is None else float(fps)
@@ -294,6 +307,63 @@ def accelerate(
     notes = list(prep.notes) + list(plan.notes)
     extras = {"plan": plan_report(plan, m, start_speed, target)}
     return finish(prep, path, retarget, 1.0, notes, "physical", plan=plan, report=report, extras=extras)
+
+
+#: A change along the law refused in n steps is tried in 2n and 4n steps (at most this many), to say how
+#: many are enough (each try costs a plan, 1.5-3 s for 16-32 steps: no search for the fewest).
+LAW_MAX_STEPS = 32
+
+
+def _law_steps_enough(plan_of, n: int) -> int | None:
+    """2n or 4n (≤ LAW_MAX_STEPS): the first in which plan_of succeeds, or None."""
+    for k in (2 * n, 4 * n):
+        if k > LAW_MAX_STEPS:
+            break
+        try:
+            plan_of(k)
+            return k
+        except PlanError:
+            continue
+    return None
+
+
+def _law_plan(prep: Prepared, m, U_goal: float, steps, within, policy: str, lead_steps: int, hold_steps: int):
+    """``machine.planner.law.plan_law_change`` for a run: the change through the law's cycles at the policy's
+    factors to the goal apex speed U_goal [√(g l0)] (m: the character's machine, the start). within [s]: the
+    most change steps whose change lasts no longer (the gentlest that fits). Raises PlanError."""
+    from .errors import FitError
+    from .machine.planner import POLICIES
+    from .machine.planner.law import law_cycles, law_factors, law_goal_factor, plan_law_change
+
+    if policy not in POLICIES:
+        raise PlanError(f"unknown policy '{policy}' ({' or '.join(POLICIES)})")
+    try:
+        s_goal, goal = law_goal_factor(prep.machine_at_speed, m.U, U_goal)
+    except FitError as e:
+        raise PlanError(f"the speed law has no running cycle at the goal ({e})", U_goal=U_goal) from None
+
+    def plan_of(n: int):
+        cycles = law_cycles(prep.machine_at_speed, law_factors(s_goal, n, policy))
+        return plan_law_change(m, cycles, policy=policy, lead_steps=lead_steps, hold_steps=hold_steps)
+
+    if within is None:
+        try:
+            return plan_of(int(steps))
+        except PlanError as e:  # say how many steps are enough, if more would do
+            raise PlanError(str(e), U_goal=U_goal, steps_enough=_law_steps_enough(plan_of, int(steps))) from None
+    limit = within / m.time_unit
+
+    def lasts(p) -> float:
+        idx = p.change_steps
+        return float(p.t_apex[idx[-1] + 1] - p.t_apex[idx[0]])
+
+    n = max(1, int(limit // min(m.step_time, goal.step_time)))
+    while n >= 1:
+        p = plan_of(n)
+        if lasts(p) <= limit:
+            return p
+        n -= 1
+    raise PlanError(f"the change takes more than {within:g} s even in one step", U_goal=U_goal)
 
 
 #: A steady (periodic) output longer than this many strides is corrected by solving the IK of one stride

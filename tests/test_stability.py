@@ -46,11 +46,12 @@ EVERY_CLIP = (*ALL_CLIPS, *BANDAI_RUNS, *BANDAI_WALKS, *LOCO_RUNS, *LOCO_WALKS, 
 #: Every other shared clip (all runs, the refused clips, 02_01, 07_01, dataset-1_walk_normal_001) is in CI.
 WALK_FITS = tuple(n for n in (*LOCO_WALKS, *LOCO_TURNS, *LOCO_RUNS)
                   if not n.endswith(("_walk-turn-left_elderly_001", "_walk-turn-right_elderly_001",
-                                     "_walk-turn-left_exhausted_001", "_walk_active_009", "_walk_elderly_001",
+                                     "_walk_active_009", "_walk_elderly_001",
                                      "_run_elderly_002", "_run_masculine_001", "_run_masculine_005")))
-#: The walks among the rest are marked slow (three fits each): CI's second pass, under other kernels, leaves
-#: them out (kernels.SECOND_PASS) and reruns 02_01-folded's walk fit, the one that flipped, instead.
-CLIPS = [pytest.param(n, marks=pytest.mark.slow) if n in (*WALK_FITS, *WALKING, *BANDAI_WALKS) else n
+#: The walks among the rest (and CMU's turns: 16_18 fits as a walk) are marked slow (three fits each): CI's
+#: second pass, under other kernels, leaves them out (kernels.SECOND_PASS) and reruns 02_01-folded's walk fit,
+#: the one that flipped, instead.
+CLIPS = [pytest.param(n, marks=pytest.mark.slow) if n in (*WALK_FITS, *WALKING, *BANDAI_WALKS, *CMU_TURN_CLIPS) else n
          for n in (EVERY_CLIP if os.environ.get("FROUDE_EVERY_CLIP") else
                    tuple(n for n in EVERY_CLIP if n not in WALK_FITS))]
 #: How far an output may move under the perturbations [m]: the goldens' bar, ten times the spread of the

@@ -2,34 +2,36 @@
 
 Run ``python tests/golden/make_golden.py`` to (re)write ``tests/fixtures/golden/outputs.npz``; the commit it
 was made at is stored in the file. ``tests/test_golden.py`` recomputes every output through the public
-pipeline and compares joint world positions within ``TOL_M`` (2.5e-6 m; see below).
+pipeline and compares joint world positions within ``TOL_M`` (3.5e-5 m; see below).
 
 What is exact and what is not (issue 26). Exact everywhere: every output's frame count, and so every
 decision before the arithmetic (which machine, how many strides, accepted or not). Not exact: the last bits
-of the positions, which depend on the BLAS kernel and the SIMD path chosen at run time by CPU, and which the
-planner's Newton iterations (accelerate) carry up to a few 1e-7 m. Measured with
+of the positions, which depend on the BLAS kernel and the SIMD path chosen at run time by CPU, and which
+accelerate's Newton iterations and shooting carry up to a few 1e-6 m. Measured with
 ``python tests/golden/make_golden.py --spread`` (every output recomputed under each setting of
 ``kernels.settings()`` in a fresh process, compared with the default one) on this machine, an AMD EPYC with
-AVX-512 (NumPy 2.4.6, SciPy 1.17.1, scipy-openblas 0.3.31), at 26ec188 and again at 049af6e (the speed law's
-goldens), with the same figures both times:
+AVX-512 (NumPy 2.4.6, SciPy 1.17.1, scipy-openblas 0.3.31), at c3b6cac (accelerate along the human speed
+law):
 
-    setting (kernels that ran)                          largest |position - default| [m]
-    OPENBLAS_CORETYPE=Haswell  (Haswell)                1.5e-07   accelerate/09_06/0.5
-    OPENBLAS_CORETYPE=SkylakeX (SkylakeX = default)     0
-    OPENBLAS_CORETYPE=Zen      (Haswell kernels)        1.5e-07   accelerate/09_06/0.5
-    OPENBLAS_CORETYPE=Sandybridge (Sandybridge)         9.9e-08   accelerate/09_07/1.3
-    OPENBLAS_CORETYPE=Prescott (Katmai)                 1.0e-07   accelerate/09_07/1.3
-    NumPy without AVX-512 (X86_V4 AVX512_ICL AVX512_SPR) 1.2e-07  accelerate/09_07/0.5
-    NumPy without AVX2 (X86_V3 as well)                 1.2e-07   accelerate/09_07/0.5
-    Prescott + NumPy without AVX-512 (CI's second pass) 2.4e-07   accelerate/02_03/0.5
+    setting (kernels that ran)                            largest |position - default| [m]
+    OPENBLAS_CORETYPE=Haswell  (Haswell)                  1.8e-06   accelerate/09_07/1.3
+    OPENBLAS_CORETYPE=SkylakeX (SkylakeX = default)       0
+    OPENBLAS_CORETYPE=Zen      (Haswell kernels)          1.8e-06   accelerate/09_07/1.3
+    OPENBLAS_CORETYPE=Sandybridge (Sandybridge)           1.8e-06   accelerate/09_07/1.3
+    OPENBLAS_CORETYPE=Prescott (Katmai)                   1.8e-06   accelerate/09_07/1.3
+    NumPy without AVX-512 (X86_V4 AVX512_ICL AVX512_SPR)  3.3e-06   accelerate/09_02/1.3
+    NumPy without AVX2 (X86_V3 as well)                   3.3e-06   accelerate/09_02/1.3
+    Prescott + NumPy without AVX-512 (CI's second pass)   2.2e-06   accelerate/09_02/1.3
 
-The spread over all of them (largest max - min of a coordinate) is 2.4e-07 m; the scale outputs alone stay
-within 1.1e-09 m. So the bar for a platform with the same libraries (architecture, NumPy, SciPy, BLAS
-version; any CPU features and kernels) is ``TOL_M`` = 2.5e-6 m, ten times the measured spread and still
-0.0025 mm, far below a visible difference or any bar (millimetres). A platform with other libraries
-(another NumPy, an ARM Mac's Accelerate, …) was not measured here: there the bar is
-``TOL_OTHER_PLATFORM_M`` (0.1 mm: far below what a physics or synthesis change moves, which is
-millimetres or frames), and the test says which bar it used and why.
+The spread over all of them (largest max - min of a coordinate) is 3.3e-06 m (before the law, at 26ec188
+and 049af6e, it was 2.4e-07 m, with the scale outputs within 1.1e-09 m). So the bar for a platform with the
+same libraries (architecture, NumPy, SciPy, BLAS version; any CPU features and kernels) is ``TOL_M`` =
+3.5e-5 m, ten times the measured spread and still 0.035 mm, far below a visible difference or any bar
+(millimetres). Rerun ``--spread`` after a change to the planner or the fits: a spread above a tenth of
+``TOL_M`` means the bar must be measured again. A platform with other libraries (another NumPy, an ARM
+Mac's Accelerate, …) was not measured here: there the bar is ``TOL_OTHER_PLATFORM_M`` (0.1 mm: far below
+what a physics or synthesis change moves, which is millimetres or frames), and the test says which bar it
+used and why.
 
 When a change is *meant* to move the physics (a bug fix, a new bar, another synthesis), regenerate the file
 with this script at that commit and say in the commit message which change moved the goldens. A refactor
@@ -63,8 +65,8 @@ FACTORS = (0.5, 1.3)
 STRIDE = 10  # every STRIDE-th frame keeps all joints
 #: Largest spread of the outputs across the kernels and SIMD paths of ``kernels.settings()`` [m] (measured,
 #: see the module docstring) and the bar: ten times it, for any platform with the goldens' libraries.
-MEASURED_SPREAD_M = 2.4e-7
-TOL_M = 2.5e-6  # [m]: 10 x MEASURED_SPREAD_M, rounded up
+MEASURED_SPREAD_M = 3.3e-6
+TOL_M = 3.5e-5  # [m]: 10 x MEASURED_SPREAD_M, rounded up
 TOL_OTHER_PLATFORM_M = 1e-4  # [m] with other libraries: not measured (see the module docstring)
 
 

@@ -336,6 +336,8 @@ def vertical_force_bw(com: np.ndarray, frame_time: float) -> np.ndarray:
     return 1.0 + acc[:, UP_AXIS] / GRAVITY
 
 
+# Long because every figure of the report is measured here from the motion alone, one call each, in the order
+# the report lists them: splitting it would pass the contacts, floor and COM through several signatures.
 def physics_report(
     motion: Motion,
     body: BodyModel | None = None,

@@ -20,16 +20,17 @@ import numpy as np
 from .body.characters import Retarget
 from .body.gait import detect_gait, require_running, summarize
 from .body.model import BodyModel
-from .body.path import is_straight, straighten, take_path
+from .body.path import is_straight, straighten, take_path, turn_note
 from .body.take import modelled_part, running_take, select_range
 from .core.motion import Motion
-from .errors import FitError, FroudeError, PlanError
+from .errors import FitError, FroudeError
 from .machine import is_walking
 from .metrics import physics_report
 from .naive import naive_clip
 from .prepared import Prepared
 from .result import Result, report_path, write_result
-from .speed_goal import accelerate_goal, scale_factor
+from .speed_change import check_human_speed, output_steps, plan_run_speed_change, speed_range_notes
+from .speed_goal import scale_factor
 from .synthesis.cycle import extract_cycle, fit_events
 from .synthesis.targets import build_targets, stance_only
 from .synthesis.timewarp import MachinePath, machine_path
@@ -37,14 +38,10 @@ from .synthesis.timewarp import MachinePath, machine_path
 __all__ = ["PERIODIC_MIN_STRIDES", "Prepared", "Result", "ScalePlan", "accelerate", "add_report", "finish",
            "naive_clip", "plan_scale", "prepare", "report_path", "scale", "targets_of", "write_result"]
 
-#: Speed factors outside this range leave what a reference clip supports: a warning, not an error.
-SUPPORTED_SPEED_RANGE = (0.6, 1.6)
-
 
 def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, length_scale=None,
             time_range=None, running_only: bool = False) -> Prepared:
-    """Load (if given a path), model, find its kind (running or walking), fit its simple machine and build
-    the cycle.
+    """Load (if given a path), model, find the kind of motion, fit its simple machine, build the cycle.
 
     time_range: (T0, T1) [s] (either None): model only that part of the take (its speed, cadence and
     strides); the whole take by default. running_only: refuse a walk (NotARunningMotion) before fitting.
@@ -63,16 +60,12 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers)
     clip_path = take_path(motion, body, com, gait)
-    turn = None
-    if not is_straight(clip_path):  # the machines run along the path: the take is straightened for them
-        turn = clip_path
-        motion = straighten(motion, clip_path)
+    turn = None if is_straight(clip_path) else clip_path
+    if turn is not None:  # the machines run along the path: the take is straightened for them
+        motion = straighten(motion, turn)
         com, markers = body.com_and_markers(motion)
         gait = detect_gait(motion, body, markers)
-        take_notes = list(take_notes) + [
-            f"a turning take ({math.degrees(clip_path.heading_change_rad):+.0f} deg over "
-            f"{clip_path.length_m:.2f} m): the machine runs along its path, {clip_path.path_speed_m_s:.2f} m/s, "
-            "and the output follows the path (scaled with the character)"]
+        take_notes = list(take_notes) + [turn_note(turn)]
     summary = summarize(motion, body, com, gait)
     try:
         if summary.kind == "walking" and not running_only:  # a motion's kind chooses its machine
@@ -162,21 +155,8 @@ def plan_scale(
     notes = list(prep.notes)
     m_scaled = prep.machine.scaled(retarget.L, retarget.M)
     speed = scale_factor(speed, target_speed, m_scaled.mean_speed * m_scaled.speed_unit)
-    lo, hi = SUPPORTED_SPEED_RANGE
-    if not lo <= speed <= hi:
-        notes.append(
-            f"speed factor {speed:.2f} is outside {lo}-{hi}, the range a single reference clip supports well "
-            "(the poses come from one clip at one speed)"
-        )
-    step_time = m_scaled.step_time * m_scaled.time_unit
-    if duration is not None:
-        if not (np.isfinite(duration) and duration > 0):
-            raise FroudeError(f"duration must be > 0 s, got {duration}")
-        n_steps = max(2, int(math.ceil(duration / step_time)))
-    else:
-        if strides is None or strides < 1:
-            raise FroudeError(f"strides must be >= 1, got {strides}")
-        n_steps = 2 * int(strides)
+    notes += speed_range_notes(speed)
+    n_steps = output_steps(strides, duration, m_scaled.step_time * m_scaled.time_unit)
     if method == "naive":
         from .naive import naive_cycle
 
@@ -206,38 +186,6 @@ def plan_scale(
     return ScalePlan(prep, path, retarget, speed, tuple(notes), method, (machine, stretch, fps))
 
 
-def check_human_speed(prep: Prepared, retarget: Retarget, factor: float, base_m_s: float) -> None:
-    """Refuse (BeyondHumanRange) a run's speed factor past the human range for the character's size
-    (``Prepared.human_top``), saying the human limit in m/s. base_m_s: the character's speed at x1 [m/s]."""
-    from .errors import BeyondHumanRange
-    from .machine.speed_law import HUMAN_TOP_TOL
-
-    top = prep.human_top(retarget)
-    if factor > top.factor + HUMAN_TOP_TOL:
-        raise BeyondHumanRange(
-            f"{factor * base_m_s:.2f} m/s (x{factor:.2f}) is beyond the human range for this character "
-            f"({retarget.body.stature:.2f} m tall): the human limit is {top.sentence(base_m_s, retarget.body.stature)}"
-            "; --unlimited (unlimited=True) lifts it")
-
-
-def check_step_lengths(path: MachinePath, stature_m: float, start_m_s: float, goal_m_s: float) -> None:
-    """Refuse (BeyondHumanRange) a speed change whose machine path has a step longer than a human's
-    (``machine.speed_law.STEP_MAX_PER_STATURE`` × the character's stature ``stature_m`` [m]): the §5.3 planner
-    keeps the fitted control's stance, so its steps grow with the speed where a runner's cadence would (the
-    law's steps stay inside below the human top; this guards the path whichever planned it)."""
-    from .errors import BeyondHumanRange
-    from .machine.speed_law import STEP_MAX_PER_STATURE
-
-    steps_m = np.linalg.norm(np.diff(path.contacts, axis=0), axis=1)
-    if steps_m.size and steps_m.max() > STEP_MAX_PER_STATURE * stature_m:
-        k = int(np.argmax(steps_m))
-        raise BeyondHumanRange(
-            f"the change from {start_m_s:.2f} to {goal_m_s:.2f} m/s (x{goal_m_s / start_m_s:.2f}) takes a step of "
-            f"{steps_m[k]:.2f} m (step {k + 1}), {steps_m[k] / stature_m:.2f} x stature: longer than the "
-            f"{STEP_MAX_PER_STATURE:g} x stature a human sprinter takes; choose a goal nearer x1, or --unlimited "
-            "(unlimited=True)")
-
-
 def accelerate(
     prep: Prepared,
     character=None,
@@ -262,16 +210,12 @@ def accelerate(
     within: ... this many seconds; lead_steps / hold_steps: steady steps before / after the change.
     The plan is dimensionless, so it is the same for every dynamically similar character.
     unlimited: allow a goal past the human range for the character's size (see ``plan_scale``).
-    speed_model (runs): "law" (default): the change steps through the human speed law's cycles
-        (``machine.planner.law``: each step's control is the law's cycle at its speed, the goal's cycle is
-        the one ``scale`` runs at that speed), so step frequency and length move as a runner's do; "planner":
-        the paper's §5.3 planner (the fitted control's K, a, c, T_c kept, θ0 and δb per step; ``energy``).
+    speed_model (runs): "law" (default): each change step runs the human speed law's cycle at its speed
+        (``machine.planner.law``; the goal's is the one ``scale`` runs), so step frequency and length move as
+        a runner's do; "planner": the paper's §5.3 planner (fitted K, a, c, T_c kept; θ0, δb per step; energy).
     policy: the profile of the change's speeds ("ease" or "even"), for both models.
     Walks keep their own planner (``synthesis.walking.plan_walk_speed_change``): the law is the runners'.
     """
-    from .machine.planner import plan_speed_change
-    from .speed_range import plan_refusal, plan_report
-
     if is_walking(prep.machine):  # a motion's kind chooses its machine
         from .synthesis.walking import plan_walk_speed_change
 
@@ -280,90 +224,10 @@ def accelerate(
                                                  within=within, lead_steps=lead_steps, hold_steps=hold_steps, fps=fps)
         return finish(prep, path, rt, 1.0, list(prep.notes), "physical", report=report, extras={"plan": walk_plan})
     retarget = prep.retarget(character, **character_numbers)
-    m = prep.machine.scaled(retarget.L, retarget.M)
-    v_unit = m.speed_unit
-    start_speed = m.U * v_unit  # apex speed of the cycle [m/s]
-    target = accelerate_goal(to_speed, to_factor, start_speed, steps, within)
-    if speed_model not in ("law", "planner"):
-        raise FroudeError(f"unknown speed model '{speed_model}' (law or planner)")
-    if not unlimited:
-        check_human_speed(prep, retarget, target / start_speed, start_speed)
-    try:
-        if speed_model == "law":
-            plan = _law_plan(prep, m, target / v_unit, steps, within, policy, lead_steps, hold_steps)
-        else:
-            plan = plan_speed_change(
-                m, target / v_unit, n_steps=None if within is not None else steps,
-                within_time=None if within is None else within / m.time_unit, energy=energy, policy=policy,
-                lead_steps=lead_steps, hold_steps=hold_steps,
-            )
-    except PlanError as e:
-        raise PlanError(plan_refusal(e, start_speed, target, v_unit, steps, within)) from e
-    fps = prep.motion.fps if fps is None else float(fps)
-    path = machine_path(prep.cycle, m, retarget.L, prep.origin, n_steps=plan.n_steps, fps=fps,
-                        theta0=plan.theta0, controls=plan.controls, start_state=(float(plan.U[0]), float(plan.H[0])))
-    if not unlimited:
-        check_step_lengths(path, retarget.body.stature, start_speed, target)
-    notes = list(prep.notes) + list(plan.notes)
-    extras = {"plan": plan_report(plan, m, start_speed, target)}
+    path, plan, notes, extras = plan_run_speed_change(
+        prep, retarget, to_speed=to_speed, to_factor=to_factor, steps=steps, within=within, lead_steps=lead_steps,
+        hold_steps=hold_steps, fps=fps, energy=energy, policy=policy, unlimited=unlimited, speed_model=speed_model)
     return finish(prep, path, retarget, 1.0, notes, "physical", plan=plan, report=report, extras=extras)
-
-
-#: A change along the law refused in n steps is tried in 2n and 4n steps (at most this many), to say how
-#: many are enough (each try costs a plan, 1.5-3 s for 16-32 steps: no search for the fewest).
-LAW_MAX_STEPS = 32
-
-
-def _law_steps_enough(plan_of, n: int) -> int | None:
-    """2n or 4n (≤ LAW_MAX_STEPS): the first in which plan_of succeeds, or None."""
-    for k in (2 * n, 4 * n):
-        if k > LAW_MAX_STEPS:
-            break
-        try:
-            plan_of(k)
-            return k
-        except PlanError:
-            continue
-    return None
-
-
-def _law_plan(prep: Prepared, m, U_goal: float, steps, within, policy: str, lead_steps: int, hold_steps: int):
-    """``machine.planner.law.plan_law_change`` for a run: the change through the law's cycles at the policy's
-    factors to the goal apex speed U_goal [√(g l0)] (m: the character's machine, the start). within [s]: the
-    most change steps whose change lasts no longer (the gentlest that fits). Raises PlanError."""
-    from .errors import FitError
-    from .machine.planner import POLICIES
-    from .machine.planner.law import law_cycles, law_factors, law_goal_factor, plan_law_change
-
-    if policy not in POLICIES:
-        raise PlanError(f"unknown policy '{policy}' ({' or '.join(POLICIES)})")
-    try:
-        s_goal, goal = law_goal_factor(prep.machine_at_speed, m.U, U_goal)
-    except FitError as e:
-        raise PlanError(f"the speed law has no running cycle at the goal ({e})", U_goal=U_goal) from None
-
-    def plan_of(n: int):
-        cycles = law_cycles(prep.machine_at_speed, law_factors(s_goal, n, policy))
-        return plan_law_change(m, cycles, policy=policy, lead_steps=lead_steps, hold_steps=hold_steps)
-
-    if within is None:
-        try:
-            return plan_of(int(steps))
-        except PlanError as e:  # say how many steps are enough, if more would do
-            raise PlanError(str(e), U_goal=U_goal, steps_enough=_law_steps_enough(plan_of, int(steps))) from None
-    limit = within / m.time_unit
-
-    def lasts(p) -> float:
-        idx = p.change_steps
-        return float(p.t_apex[idx[-1] + 1] - p.t_apex[idx[0]])
-
-    n = max(1, int(limit // min(m.step_time, goal.step_time)))
-    while n >= 1:
-        p = plan_of(n)
-        if lasts(p) <= limit:
-            return p
-        n -= 1
-    raise PlanError(f"the change takes more than {within:g} s even in one step", U_goal=U_goal)
 
 
 #: A steady (periodic) output longer than this many strides is corrected by solving the IK of one stride

@@ -137,6 +137,8 @@ def load_plan(path) -> Plan:
     return parse_plan(data, source=str(path), base_dir=path.parent)
 
 
+# Long because a plan's keys are checked in one pass, each with the one-line message that names it, before any
+# clip is read (a batch must refuse a bad plan before hours of work).
 def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
     """A Plan from the parsed YAML mapping; every problem is one BatchError line naming the key."""
     from ..body.characters import list_presets, resolve_character

@@ -285,6 +285,13 @@ def is_straight(path: TakePath) -> bool:
     return not abs(path.heading_change_rad) >= STRAIGHT_TAKE_RAD
 
 
+def turn_note(path: TakePath) -> str:
+    """What a turning take's output does, in the user's terms (a note of ``pipeline.prepare``)."""
+    return (f"a turning take ({math.degrees(path.heading_change_rad):+.0f} deg over {path.length_m:.2f} m): the "
+            f"machine runs along its path, {path.path_speed_m_s:.2f} m/s, and the output follows the path (scaled "
+            "with the character)")
+
+
 def yaw_quat(angle_rad: np.ndarray) -> np.ndarray:
     """(..., 4) rotations (w, x, y, z) by angle_rad (...,) about the up axis (+ = to the left)."""
     from ..core import quat

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .body.characters import Retarget
-from .body.gait import detect_gait, require_running, summarize
+from .body.gait import detect_gait, require_running, summarize, walks
 from .body.model import BodyModel
 from .body.take import modelled_part, running_take, select_range
 from .core.motion import Motion
@@ -60,9 +60,9 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     body = BodyModel.from_skeleton(motion.skeleton, mass=mass, sex=sex, joint_map=joint_map)
     motion, take_notes = running_take(motion, body)
     com, markers = body.com_and_markers(motion)
-    gait = detect_gait(motion, body, markers)
+    gait = detect_gait(motion, body, markers, com)
     summary = summarize(motion, body, com, gait)
-    if summary.kind == "walking" and not running_only:  # a motion's kind chooses its machine
+    if walks(summary) and not running_only:  # a motion's kind chooses its machine (body.gait decides it)
         from .synthesis.walking import fit_walk
 
         fit, cycle = fit_walk(motion, body, com, markers, gait, source, mass)

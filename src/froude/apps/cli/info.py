@@ -118,7 +118,7 @@ def run(args) -> int:
                        args.up)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
     com, markers = body.com_and_markers(motion)
-    gait = detect_gait(motion, body, markers)
+    gait = detect_gait(motion, body, markers, com)  # the feet reconciled with the COM force (body.gait)
     summary = summarize(motion, body, com, gait)
     from ...io.jsonable import dumps, jsonable
 

@@ -386,7 +386,7 @@ def understand(motion: Motion, *, joint_map=None, length_scale: float | None = N
             if g_u is not None and not flights_between_steps(n_flights, hz, m.duration):
                 # a few windows where both feet read high (a tilted floor, a foot's marker placement) are
                 # no flight: the gravity they give weighs nothing (a brisk walk read as a 3.8 m performer)
-                flight_note = (f"; {n_flights} brief 'flight(s)' in about {hz * m.duration:.0f} steps are "
+                flight_note = (f"; {n_flights} brief 'flight(s)' in about {(hz or 0.0) * m.duration:.0f} steps are "
                                "no flight phase")
                 g_u = None
             duty = float(planted.mean()) if planted.size else 0.0

@@ -340,7 +340,7 @@ def reconcile_contacts(gait: Gait, fy_bw: np.ndarray, h_foot: np.ndarray) -> Gai
         contact[st.start:st.stop, st.foot] = True
     flights = []
     first, last = min(st.start for st in kept), max(st.stop for st in kept)
-    for a, b in _runs(~contact.any(axis=1)[first:last]):
+    for a, b in _runs(~np.asarray(contact.any(axis=1), bool)[first:last]):
         flights.append((first + a, first + b))
     return replace(gait, contact=contact, stances=tuple(kept), flights=tuple(flights),
                    double_support_fraction=float(contact.all(axis=1).mean()))
@@ -492,7 +492,7 @@ def single_support_vault(gait: Gait, com: np.ndarray) -> float:
     the stance leg (walking), < 0 when it bounces on it (running, grounded or not). NaN without a complete
     single support. com: (F, 3) [m]."""
     h = com[:, UP_AXIS]
-    single = gait.contact.sum(axis=1) == 1
+    single = np.asarray(gait.contact.sum(axis=1) == 1, bool)
     out = []
     for a, b in _runs(single):
         if a == 0 or b >= len(h) or b - a < 3:
@@ -526,7 +526,7 @@ def classify(gait: Gait, speed: float, distance: float, leg_length: float, has_f
     if has_flight:
         return "running", f"flight phases between contacts, {speed:.2f} m/s"
     n_flights = int((gait.flight_times() >= MIN_FLIGHT_S).sum())
-    n_double = len(_runs(gait.contact.all(axis=1)))
+    n_double = len(_runs(np.asarray(gait.contact.all(axis=1), bool)))
     if n_flights and n_flights >= n_double:
         return "running", (f"short flight phases between {n_flights} of the contacts, more often than both feet "
                            f"are down ({n_double}), {speed:.2f} m/s")

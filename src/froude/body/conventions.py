@@ -46,10 +46,10 @@ WALK_STEP_FREQ_LOG_SD = 0.2
 RUN_STEP_FREQ_HAT = 0.95
 RUN_STEP_FREQ_LOG_SD = 0.3
 #: Spread (log) of statures around TYPICAL_STATURE_M when weighed with the cadence: wide (0.5 m children to
-#: 5 m giants are ordinary outputs), so that a cadence far from human walking's decides; narrow enough that
-#: a human stature wins where the cadence fits a human's run as well as a giant's walk (the in-between
-#: gaits: 0.8 read a 1.49 m performer's grounded run at 2.5 steps/s as a 3.3 m giant's walk).
-STATURE_LOG_SD = 0.5
+#: 5 m giants are ordinary outputs), so that a cadence far from human walking's decides (0.5 read a 0.5 m
+#: walker's output as a 1.27 m one); narrow enough that a human stature wins where the cadence fits a
+#: human's run about as well as a giant's walk (0.8 read a 1.49 m tired jogger as a 3.3 m one).
+STATURE_LOG_SD = 0.65
 #: A unit whose score (squared log distances) is within this of the best one is a plausible alternative.
 UNIT_SCORE_MARGIN = 2.0
 #: At most this many frames (from the middle of the clip) are analysed: long clips load fast.
@@ -222,7 +222,7 @@ def flights_between_steps(n_flights: int, step_hz: float | None, duration: float
 #: runs 0.32-0.51, walks 0.51-0.66).
 WALKING_DUTY = 0.5
 #: Within this of WALKING_DUTY the feet do not tell the gait (a light walk, a tired jog: 0.51 both).
-DUTY_MARGIN = 0.05
+DUTY_MARGIN = 0.03
 
 
 def planted_feet(markers: np.ndarray, com: np.ndarray, frame_time: float) -> np.ndarray:

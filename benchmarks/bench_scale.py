@@ -54,7 +54,11 @@ def gaits() -> None:
     from froude.io.bvh import load_bvh
     from froude.machine.walk_fit import fit_walking_detailed
 
-    data = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data")
+    repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    # ../shared/data beside the repository, or two levels up from a worktree (as tests/conftest.py looks)
+    data = next((d for d in (os.path.join(repo, "..", "shared", "data"), os.path.join(repo, "..", "..", "shared",
+                                                                                       "data"))
+                 if os.path.isdir(d)), os.path.join(repo, "..", "shared", "data"))
     walks = [os.path.join(data, "mocap", "07_01.bvh"), os.path.join(data, "bandai", "dataset-1_walk_normal_001.bvh")]
     for path in [froude.sample_path()] + [w for w in walks if os.path.exists(w)]:
         name = os.path.basename(str(path))

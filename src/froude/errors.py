@@ -46,13 +46,15 @@ class PlanError(FroudeError):
 
     When the planner knows what is reachable it says so in dimensionless apex speeds U (the machine's own
     units; the pipeline turns them into m/s for the character): ``U_goal``, ``U_start``, ``U_one_step``
-    (the fastest, or slowest, apex speed one step from the start reaches), ``U_sustainable`` (lo, hi) and
-    ``steps_needed`` (None when more steps would not help). Any of them may be None.
+    (the fastest, or slowest, apex speed one step from the start reaches), ``U_sustainable`` (lo, hi),
+    ``steps_needed`` (None when more steps would not help) and ``steps_enough`` (a number of steps that is
+    known to do, not necessarily the fewest). Any of them may be None.
     """
 
     def __init__(self, message: str, *, U_goal=None, U_start=None, U_one_step=None, U_sustainable=None,
-                 steps_needed=None):
+                 steps_needed=None, steps_enough=None):
         super().__init__(message)
+        self.steps_enough = steps_enough
         self.U_goal = U_goal
         self.U_start = U_start
         self.U_one_step = U_one_step

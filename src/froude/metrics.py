@@ -12,6 +12,7 @@ import numpy as np
 
 from .body.gait import Gait, detect_gait, summarize
 from .body.model import BodyModel
+from .body.path import TakePath, is_straight, take_path
 from .constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
 from .core import quat
 from .core.motion import Motion
@@ -103,6 +104,8 @@ class Report:
     def check_bars(self) -> list[str]:
         """Which of the project's physics bars this report fails (empty list: all pass)."""
         fails = []
+        # the output's path against the clip's (``path_report``): a turn lost is a bar missed
+        fails += list(self.extras.get("path_vs_clip", {}).get("misses", []))
         g_err = abs(self.flight_gravity_m_s2 - GRAVITY) / GRAVITY
         # a walk has no flight: its machine is the walking one and the bar does not apply
         if self.extras.get("machine") != "walking" and not g_err <= BARS["flight_gravity_rel_tol"]:
@@ -343,6 +346,8 @@ def physics_report(
     reference_pose: Motion | None = None,
     reference_max_joint_jump_deg: float | None = None,
     com_and_markers: tuple[np.ndarray, np.ndarray] | None = None,
+    reference_path: TakePath | None = None,
+    reference_leg_length: float | None = None,
 ) -> Report:
     """The physics report (docs/architecture.md) for any motion; tracking figures when targets are given.
 
@@ -350,6 +355,9 @@ def physics_report(
     machine_com: (F, 3) the simple machine's COM path [m]; marker_targets: (F, 2, 3, 3) [m], NaN where
     a marker had no target; reference_pose: the time-warped reference on the same frames (pose deviation);
     reference_max_joint_jump_deg: the reference's own largest frame-to-frame joint change.
+    reference_path: the clip's path (``body.path.take_path``) and reference_leg_length [m] its leg length:
+    the output's path, measured here from the motion, is compared with it (``path_report``; a turn lost is
+    a bar missed). Every report carries the motion's own path in ``extras["path"]``.
     """
     if body is None:
         body = BodyModel.from_skeleton(motion.skeleton)
@@ -389,6 +397,19 @@ def physics_report(
         penetration_mm=penetration, float_mm=float_mm, peak_vertical_force_bw=peak_bw,
         leg_stiffness_n_m=k_leg, leg_stiffness_K=K, max_joint_jump_deg=max_joint_jump_deg(motion),
     )
+    if motion.n_frames >= 3:
+        # compared with a turning clip, the output's heading is measured over the clip's share of a stride
+        # (take_path); against a straight one over its own window (at least a stride: its sway cancels)
+        window_strides = None
+        if reference_path is not None and not is_straight(reference_path):
+            window_strides = reference_path.window_s / reference_path.stride_s
+        path = take_path(motion, body, com, gait, window_strides=window_strides)
+        rep.extras["path"] = path.to_dict()
+        if reference_path is not None:
+            from .path_report import path_comparison
+
+            ref_L = L if reference_leg_length is None else float(reference_leg_length)
+            rep.extras["path_vs_clip"] = path_comparison(reference_path, path, ref_L, L)
     if machine_com is not None:
         err = np.linalg.norm(com - machine_com, axis=1)
         rep.com_tracking_rms_mm = 1000.0 * float(np.sqrt(np.mean(err**2)))

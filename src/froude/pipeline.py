@@ -20,9 +20,10 @@ import numpy as np
 from .body.characters import Retarget
 from .body.gait import detect_gait, require_running, summarize, walks
 from .body.model import BodyModel
+from .body.path import is_straight, straighten, take_path
 from .body.take import modelled_part, running_take, select_range
 from .core.motion import Motion
-from .errors import FroudeError, PlanError
+from .errors import FitError, FroudeError, PlanError
 from .machine import is_walking
 from .metrics import physics_report
 from .naive import naive_clip
@@ -61,19 +62,38 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     motion, take_notes = running_take(motion, body)
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers, com)
+    clip_path = take_path(motion, body, com, gait)
+    turn = None
+    if not is_straight(clip_path):  # the machines run along the path: the take is straightened for them
+        turn = clip_path
+        motion = straighten(motion, clip_path)
+        com, markers = body.com_and_markers(motion)
+        gait = detect_gait(motion, body, markers, com)
+        take_notes = list(take_notes) + [
+            f"a turning take ({math.degrees(clip_path.heading_change_rad):+.0f} deg over "
+            f"{clip_path.length_m:.2f} m): the machine runs along its path, {clip_path.path_speed_m_s:.2f} m/s, "
+            "and the output follows the path (scaled with the character)"]
     summary = summarize(motion, body, com, gait)
-    if walks(summary) and not running_only:  # a motion's kind chooses its machine (body.gait decides it)
-        from .synthesis.walking import fit_walk
+    try:
+        if walks(summary) and not running_only:  # a motion's kind chooses its machine (body.gait decides it)
+            from .synthesis.walking import fit_walk
 
-        fit, cycle = fit_walk(motion, body, com, markers, gait, source, mass)
-    else:
-        require_running(summary, source)
-        fit = fit_machine_detailed(motion, body, mass=mass, source=Path(source).name)
-        cycle = extract_cycle(motion, body, gait, com, markers, events=fit_events(fit.machine, motion))
+            fit, cycle = fit_walk(motion, body, com, markers, gait, source, mass)
+        else:
+            require_running(summary, source)
+            fit = fit_machine_detailed(motion, body, mass=mass, source=Path(source).name)
+            cycle = extract_cycle(motion, body, gait, com, markers, events=fit_events(fit.machine, motion))
+    except FitError as e:
+        if turn is None:
+            raise
+        name = Path(source).name  # say that the fit saw the take straightened
+        raise FitError(f"{'' if name in str(e) else name + ': '}{e} (fitted to the take straightened along its "
+                       f"{math.degrees(turn.heading_change_rad):+.0f} deg turn)") from e
     machine = fit.machine
     modelled, note = modelled_part(motion, summary, com, gait)
     return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source, fit,
-                    modelled=modelled, notes=tuple(take_notes) + ((note,) if note else ()))
+                    modelled=modelled, notes=tuple(take_notes) + ((note,) if note else ()), clip_path=clip_path,
+                    turn=turn)
 
 
 @dataclass(frozen=True, eq=False)
@@ -202,8 +222,9 @@ def check_human_speed(prep: Prepared, retarget: Retarget, factor: float, base_m_
 
 def check_step_lengths(path: MachinePath, stature_m: float, start_m_s: float, goal_m_s: float) -> None:
     """Refuse (BeyondHumanRange) a speed change whose machine path has a step longer than a human's
-    (``machine.speed_law.STEP_MAX_PER_STATURE`` × the character's stature ``stature_m`` [m]): the planner
-    keeps the fitted control's stance, so its steps grow with the speed where a runner's cadence would."""
+    (``machine.speed_law.STEP_MAX_PER_STATURE`` × the character's stature ``stature_m`` [m]): the §5.3 planner
+    keeps the fitted control's stance, so its steps grow with the speed where a runner's cadence would (the
+    law's steps stay inside below the human top; this guards the path whichever planned it)."""
     from .errors import BeyondHumanRange
     from .machine.speed_law import STEP_MAX_PER_STATURE
 
@@ -213,8 +234,8 @@ def check_step_lengths(path: MachinePath, stature_m: float, start_m_s: float, go
         raise BeyondHumanRange(
             f"the change from {start_m_s:.2f} to {goal_m_s:.2f} m/s (x{goal_m_s / start_m_s:.2f}) takes a step of "
             f"{steps_m[k]:.2f} m (step {k + 1}), {steps_m[k] / stature_m:.2f} x stature: longer than the "
-            f"{STEP_MAX_PER_STATURE:g} x stature a human sprinter takes (the planned steps keep the clip's "
-            "stance); choose a goal nearer x1, or --unlimited (unlimited=True)")
+            f"{STEP_MAX_PER_STATURE:g} x stature a human sprinter takes; choose a goal nearer x1, or --unlimited "
+            "(unlimited=True)")
 
 
 def accelerate(
@@ -232,14 +253,21 @@ def accelerate(
     policy: str = "ease",
     report: bool = True,
     unlimited: bool = False,
+    speed_model: str = "law",
     **character_numbers,
 ) -> Result:
-    """§5.3 + §6: speed up or slow down to ``to_speed`` [m/s] or ``to_factor`` × the start speed.
+    """§5.3 + §6: speed up or slow down to ``to_speed`` [m/s] or ``to_factor`` × the start speed (apex speeds).
 
     steps: the change takes this many steps (a step = one stance and the flight after it), or
     within: ... this many seconds; lead_steps / hold_steps: steady steps before / after the change.
     The plan is dimensionless, so it is the same for every dynamically similar character.
     unlimited: allow a goal past the human range for the character's size (see ``plan_scale``).
+    speed_model (runs): "law" (default): the change steps through the human speed law's cycles
+        (``machine.planner.law``: each step's control is the law's cycle at its speed, the goal's cycle is
+        the one ``scale`` runs at that speed), so step frequency and length move as a runner's do; "planner":
+        the paper's §5.3 planner (the fitted control's K, a, c, T_c kept, θ0 and δb per step; ``energy``).
+    policy: the profile of the change's speeds ("ease" or "even"), for both models.
+    Walks keep their own planner (``synthesis.walking.plan_walk_speed_change``): the law is the runners'.
     """
     from .machine.planner import plan_speed_change
     from .speed_range import plan_refusal, plan_report
@@ -256,14 +284,19 @@ def accelerate(
     v_unit = m.speed_unit
     start_speed = m.U * v_unit  # apex speed of the cycle [m/s]
     target = accelerate_goal(to_speed, to_factor, start_speed, steps, within)
+    if speed_model not in ("law", "planner"):
+        raise FroudeError(f"unknown speed model '{speed_model}' (law or planner)")
     if not unlimited:
         check_human_speed(prep, retarget, target / start_speed, start_speed)
     try:
-        plan = plan_speed_change(
-            m, target / v_unit, n_steps=None if within is not None else steps,
-            within_time=None if within is None else within / m.time_unit, energy=energy, policy=policy,
-            lead_steps=lead_steps, hold_steps=hold_steps,
-        )
+        if speed_model == "law":
+            plan = _law_plan(prep, m, target / v_unit, steps, within, policy, lead_steps, hold_steps)
+        else:
+            plan = plan_speed_change(
+                m, target / v_unit, n_steps=None if within is not None else steps,
+                within_time=None if within is None else within / m.time_unit, energy=energy, policy=policy,
+                lead_steps=lead_steps, hold_steps=hold_steps,
+            )
     except PlanError as e:
         raise PlanError(plan_refusal(e, start_speed, target, v_unit, steps, within)) from e
     fps = prep.motion.fps if fps is None else float(fps)
@@ -274,6 +307,63 @@ def accelerate(
     notes = list(prep.notes) + list(plan.notes)
     extras = {"plan": plan_report(plan, m, start_speed, target)}
     return finish(prep, path, retarget, 1.0, notes, "physical", plan=plan, report=report, extras=extras)
+
+
+#: A change along the law refused in n steps is tried in 2n and 4n steps (at most this many), to say how
+#: many are enough (each try costs a plan, 1.5-3 s for 16-32 steps: no search for the fewest).
+LAW_MAX_STEPS = 32
+
+
+def _law_steps_enough(plan_of, n: int) -> int | None:
+    """2n or 4n (≤ LAW_MAX_STEPS): the first in which plan_of succeeds, or None."""
+    for k in (2 * n, 4 * n):
+        if k > LAW_MAX_STEPS:
+            break
+        try:
+            plan_of(k)
+            return k
+        except PlanError:
+            continue
+    return None
+
+
+def _law_plan(prep: Prepared, m, U_goal: float, steps, within, policy: str, lead_steps: int, hold_steps: int):
+    """``machine.planner.law.plan_law_change`` for a run: the change through the law's cycles at the policy's
+    factors to the goal apex speed U_goal [√(g l0)] (m: the character's machine, the start). within [s]: the
+    most change steps whose change lasts no longer (the gentlest that fits). Raises PlanError."""
+    from .errors import FitError
+    from .machine.planner import POLICIES
+    from .machine.planner.law import law_cycles, law_factors, law_goal_factor, plan_law_change
+
+    if policy not in POLICIES:
+        raise PlanError(f"unknown policy '{policy}' ({' or '.join(POLICIES)})")
+    try:
+        s_goal, goal = law_goal_factor(prep.machine_at_speed, m.U, U_goal)
+    except FitError as e:
+        raise PlanError(f"the speed law has no running cycle at the goal ({e})", U_goal=U_goal) from None
+
+    def plan_of(n: int):
+        cycles = law_cycles(prep.machine_at_speed, law_factors(s_goal, n, policy))
+        return plan_law_change(m, cycles, policy=policy, lead_steps=lead_steps, hold_steps=hold_steps)
+
+    if within is None:
+        try:
+            return plan_of(int(steps))
+        except PlanError as e:  # say how many steps are enough, if more would do
+            raise PlanError(str(e), U_goal=U_goal, steps_enough=_law_steps_enough(plan_of, int(steps))) from None
+    limit = within / m.time_unit
+
+    def lasts(p) -> float:
+        idx = p.change_steps
+        return float(p.t_apex[idx[-1] + 1] - p.t_apex[idx[0]])
+
+    n = max(1, int(limit // min(m.step_time, goal.step_time)))
+    while n >= 1:
+        p = plan_of(n)
+        if lasts(p) <= limit:
+            return p
+        n -= 1
+    raise PlanError(f"the change takes more than {within:g} s even in one step", U_goal=U_goal)
 
 
 #: A steady (periodic) output longer than this many strides is corrected by solving the IK of one stride
@@ -298,8 +388,12 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
     from .ik.correct import WALK_REPAIR_ROUNDS, correct, tile_stride
 
     targets = targets_of(prep, path, retarget)
+    if prep.turn is not None:  # the straight output rolled back onto the clip's path, scaled
+        from .synthesis.bend import bend
+
+        targets, path = bend(targets, path, prep.turn, retarget.L, prep.origin)
     n_strides = len(path.foot_of_step) / 2
-    if periodic is not None and n_strides > PERIODIC_MIN_STRIDES:
+    if periodic is not None and n_strides > PERIODIC_MIN_STRIDES and prep.turn is None:
         machine, stretch, fps = periodic
         m = machine.scaled(retarget.L, retarget.M)
         dense_fps = PERIODIC_OVERSAMPLE * fps
@@ -328,6 +422,7 @@ def add_report(prep: Prepared, res: Result) -> Result:
         res.motion, res.retarget.body, ground_height=0.0, machine_com=res.path.com,
         marker_targets=stance_only(res.targets), reference_pose=res.targets.initial,
         reference_max_joint_jump_deg=prep.cycle.max_joint_jump_deg,
+        reference_path=prep.path, reference_leg_length=prep.body.leg_length,
     )
     report.extras.update({"character": res.retarget.character.name, "L": res.retarget.L, "M": res.retarget.M,
                           "speed_factor": res.speed_factor, "method": res.method, "notes": list(res.notes),

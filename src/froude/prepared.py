@@ -11,6 +11,7 @@ import numpy as np
 from .body.characters import Retarget, apply_character, resolve_character
 from .body.gait import Gait, GaitSummary
 from .body.model import BodyModel
+from .body.path import TakePath
 from .core.motion import Motion
 from .synthesis.cycle import ReferenceCycle
 
@@ -56,8 +57,21 @@ class Prepared:
     #: the take (its speed changes: which part is modelled, how to choose another).
     modelled: str = ""
     notes: tuple = ()
+    #: The take's path as it was taken (``body.path.take_path``); turn: the same when the take turns
+    #: (``body.path.is_straight`` is False), in which case ``motion`` (and com, markers, gait, the machine,
+    #: the cycle) is the take straightened along it (``body.path.straighten``) and outputs are bent back
+    #: onto it (``synthesis.bend``); None for a straight take, modelled as it is.
+    clip_path: TakePath | None = None
+    turn: TakePath | None = None
     #: What is built on demand for this clip and remembered (see Memo).
     memo: Memo = field(default_factory=lambda: Memo(), repr=False)
+
+    @property
+    def path(self) -> TakePath:
+        """The clip's path (``body.path.take_path``) as taken, before any straightening: what an output's
+        path is compared with."""
+        assert self.clip_path is not None, "pipeline.prepare measures the clip's path"
+        return self.clip_path
 
     @property
     def origin(self) -> np.ndarray:

@@ -55,6 +55,10 @@ class Result:
             ("joint jump",
              f"{f(r.max_joint_jump_deg, '.1f')} deg (reference {f(r.reference_max_joint_jump_deg, '.1f')})"),
         ]
+        if "path_vs_clip" in r.extras:
+            from .path_report import path_rows
+
+            rows += path_rows(r.extras["path_vs_clip"])
         if r.extras.get("machine") == "walking":
             from .walk_report import walking_rows
 

@@ -172,6 +172,8 @@ def plan_refusal(err, start_m_s: float, goal_m_s: float, v_unit: float, steps, w
     in_steps = f"in {steps} step{'' if steps == 1 else 's'}"
     if getattr(err, "steps_needed", None):
         return f"{head} {in_steps}: too abrupt; give at least {err.steps_needed} steps"
+    if getattr(err, "steps_enough", None):
+        return f"{head} {in_steps}: too abrupt; {err.steps_enough} steps are enough"
     if within is not None:
         return f"{head} within {within:g} s: too abrupt; allow more time"
     one = getattr(err, "U_one_step", None)

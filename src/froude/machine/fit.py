@@ -321,6 +321,13 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
             sg = replace(sg, t_touchdown=td_c * dt, t_liftoff=lo_c * dt)
         geo.append(sg)
     full = [sg for sg in geo if not sg.partial]
+    if not full:
+        # Full stances by the markers whose force events both fall near the clip's edges (where the COM
+        # filter's extension holds the force up) are measured as cut: nothing is left to fit the control to.
+        raise NotARunningMotion(
+            f"{src}: no stance with both its touchdown and liftoff seen in the ground force inside the clip "
+            f"(of {len(gait.stances)} contacts; near the clip's edges the filtered force does not show them); "
+            "the fit needs two consecutive full stances")
 
     # Per-stance and pooled control fits (dimensionless).
     fits = []

@@ -32,7 +32,9 @@ squares of the machine's total vertical force over a stance (measured through th
 COM height over a step against the clip's, with periodicity and the three targets as heavily weighted
 residuals, the force weighted up around the clip's two peaks and trough (``LANDMARK_WEIGHT``: the
 acceptance is on those landmarks, and a plain least-squares fit of the CMU clips' W-shaped single
-support flattens them); the exact cycle is then found again from its result. Each of the two starts is
+support flattens them), the landing leg kept ``MIN_CLEARANCE`` above the ground where the COM dips in
+single support (at a graze the step map jumps, and the exact cycle's existence would hang on the last
+bits); the exact cycle is then found again from its result. Each of the two starts is
 fitted without the control's pulses and with them (``PULSE_START``: a push-off pulse just past the other
 foot's touchdown, a weight-acceptance pulse at the clip's first peak, their amplitudes fitted by the
 shape fit); of the four the best shape wins.
@@ -325,6 +327,16 @@ SHAPE_WEIGHTS = {"periodic": 100.0, "targets": 30.0, "prior": 0.05, "com": 10.0}
 #: widths 0.04-0.06 all put 02_01 and the Bandai walk within the acceptance, 6 and 0.06 with most margin.
 LANDMARK_WEIGHT = 6.0
 LANDMARK_WIDTH = 0.06
+#: Least clearance of the landing leg in single support [l0] that the shape fit keeps, and the weight of a
+#: shortfall (``_clearance_shortfall``). The machine's landing leg, held at θ0 with length l_td, touches the
+#: ground when the COM falls to l_td cos θ0; a COM that dips towards that height in late single support and
+#: rises again (the W-shaped single support of the CMU walks) has a second, earlier touchdown within reach:
+#: at the graze the step map jumps (02_01's step time by 14 %), and a shape fit that ends 0.0004 l0 above it
+#: (0.4 mm) left the exact cycle search's success to the BLAS kernel (issue 26). 1 % of l0 (about 9 mm, below
+#: a walker's least toe clearance of 1-2 cm) is 25 times that and 20-100 times how far the fit's end point
+#: moves between kernels.
+MIN_CLEARANCE = 0.01
+CLEARANCE_WEIGHT = 100.0
 #: Simulator resolution and evaluation budget of the shape fit (the exact cycle is found after it).
 SHAPE_N_PER_STANCE = 120
 SHAPE_MAX_EVALUATIONS = 120
@@ -354,6 +366,24 @@ def step_phase_times(t_double, t_step):
     return np.concatenate([np.linspace(0.0, t_double, n1, endpoint=False), np.linspace(t_double, t_step, n2)])
 
 
+def _clearance_shortfall(rec, theta0: float, l_td: float, n_samples: int = 200) -> float:
+    """max(0, MIN_CLEARANCE − c) / MIN_CLEARANCE [-] of one machine step (``record_step``'s RecordedStep).
+
+    c [l0]: the lowest dip of the COM below which the step would end early, the least height above the
+    landing height l_td cos θ0 at which the COM, in single support and past the stance foot, stops
+    descending and rises again (the landing leg's least clearance before its touchdown); no such dip: 0.
+    """
+    w = rec.step
+    t = np.linspace(w.t_double, w.t_step, n_samples)
+    tr = rec.sample(t)
+    past = tr.pos[:-1, 0] > l_td * math.sin(theta0)
+    turn = past & (tr.vel[:-1, 1] < 0.0) & (tr.vel[1:, 1] >= 0.0)  # a local minimum of the COM height
+    if not turn.any():
+        return 0.0
+    c = float(np.min(tr.pos[:-1, 1][turn])) - l_td * math.cos(theta0)
+    return max(0.0, MIN_CLEARANCE - c) / MIN_CLEARANCE
+
+
 def _control(z, T_c) -> WalkControl:
     """The leg control of the cycle variables z (``_VARS``) with T_c [√(l0/g)]."""
     return WalkControl(T_c=T_c, **{k: float(v) for k, v in zip(_VARS, z) if k in WalkControl.NAMES})
@@ -366,8 +396,9 @@ def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_un
     Residuals: the vertical force over a stance at tau [BW], weighted up around the clip's landmarks at
     phases tau_landmarks (``LANDMARK_WEIGHT``); the COM height over a step; the periodicity and the
     relative errors of stance time, double-support time and speed, weighted up (``SHAPE_WEIGHTS``); a weak
-    pull to the periodic start z1 in CYCLE_SCALES units. Returns z (11,); the exact cycle is found from it
-    after.
+    pull to the periodic start z1 in CYCLE_SCALES units; the landing leg's clearance kept above
+    MIN_CLEARANCE (``_clearance_shortfall``, so that the exact cycle found after it is not at a graze).
+    Returns z (11,); the exact cycle is found from it after.
     """
     from scipy.optimize import least_squares
 
@@ -393,6 +424,12 @@ def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_un
         per = np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3]]) * wp
         tg = np.array([(w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
                        (w.step_length / w.t_step - tgt[2]) / tgt[2]]) * wt
+        # The clearance shortfall shares the step-time residual r: copysign(√(r² + g²), r) adds g² to the
+        # cost as a residual of its own would, and is r to the last bit where the clearance is kept (g = 0),
+        # so a fit the margin does not touch runs the same arithmetic as without it (a residual more, even
+        # a zero one, changes the solver's rounding, and the walks' shape fits follow rounding: issue 26).
+        graze = CLEARANCE_WEIGHT * _clearance_shortfall(rec, z[4], z[9])
+        tg[0] = math.copysign(math.sqrt(tg[0] * tg[0] + graze * graze), tg[0])
         return np.concatenate([wf * (prof - prof_ref), wc * (h - h_ref), per, tg, wr * (x - z1[fr]) / s])
 
     sol = least_squares(resid, z1[fr], x_scale=s, diff_step=1e-6, max_nfev=SHAPE_MAX_EVALUATIONS, method="trf")

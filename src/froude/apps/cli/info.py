@@ -1,7 +1,6 @@
 """``froude info CLIP.bvh``: what is in a clip — skeleton, units, cleaning, speed, steps, phases."""
 from __future__ import annotations
 
-import math
 import sys
 
 from .common import (
@@ -26,76 +25,13 @@ def register(sub) -> None:
         "frame rate, mean speed, Froude number U = u/sqrt(g L), foot contacts with stance and flight "
         "times, step frequency and length, COM vertical excursion, and what cleaning did.",
     )
-    p.add_argument("clip", help="BVH file")
+    p.add_argument("clip", help="BVH file, or glTF/GLB with a skinned animation")
     p.add_argument("--json", action="store_true", help="print the summary as JSON instead of a table")
     add_mass(p, "body mass [kg] for the COM model")
     add_quiet(p)
     add_data_option(p)
     add_load_options(p)
     p.set_defaults(func=run)
-
-
-def _take(motion, body) -> dict | None:
-    """How fit and scale take a loop or an in-place take (``body.take.running_take``): its notes and the
-    speed and cadence measured on the take so analysed (a loop's own stride, an in-place take's speed from
-    its feet); None for a take analysed as it is. ``scale`` with no change reproduces these figures."""
-    from ...body.gait import summarize
-    from ...body.take import running_take
-
-    if motion.n_frames < 3:
-        return None
-    taken, notes = running_take(motion, body)
-    if not notes:
-        return None
-    s = summarize(taken, body)
-    return {"notes": notes, "mean_speed_m_s": round(s.mean_speed, 4), "froude_U": round(s.froude, 4),
-            "step_frequency_hz": round(s.step_frequency, 4) if math.isfinite(s.step_frequency) else None}
-
-
-def info_dict(motion, body, summary, gait) -> dict:
-    """The JSON-able summary of a clip (SI units)."""
-    sk = motion.skeleton
-    return {
-        "schema": "froude.info/1",
-        "file": motion.meta.get("source"),
-        "skeleton": {
-            "joints": sk.n_joints,
-            "dof": sk.n_channels,
-            "end_sites": len(sk.end_sites),
-            "leg_length_m": round(body.leg_length, 4),
-            "height_m": round(body.stature, 4),
-            "units": motion.meta.get("units"),
-            "length_scale_m_per_unit": motion.meta.get("length_scale"),
-        },
-        "cleaning": list(motion.meta.get("cleaning", ())),
-        "frames": motion.n_frames,
-        "frame_rate_hz": round(motion.fps, 3),
-        "duration_s": round(motion.duration, 4),
-        "kind": summary.kind,
-        "verdict": summary.reason,
-        "mean_speed_m_s": round(summary.mean_speed, 4),
-        "froude_U": round(summary.froude, 4),
-        "contacts": [
-            {"foot": s.side, "start_s": round(s.start * motion.frame_time, 4),
-             "stop_s": round(s.stop * motion.frame_time, 4), "partial": s.partial,
-             "ground_m": round(s.ground, 4)}
-            for s in gait.stances
-        ],
-        "stance_times_s": [round(float(t), 4) for t in summary.stance_times],
-        "flight_times_s": [round(float(t), 4) for t in summary.flight_times],
-        "has_flight_phase": summary.has_flight,
-        "double_support_fraction": round(summary.double_support_fraction, 4),
-        "step_frequency_hz": _finite(summary.step_frequency),
-        "step_length_m": _finite(summary.step_length),
-        "com_vertical_excursion_m": round(summary.com_vertical_excursion, 4),
-        "ground_height_m": round(gait.ground, 4),
-    }
-
-
-def _finite(v, digits: int = 4):
-    """A rounded float, or None (JSON null) for NaN and infinities: JSON has no such numbers."""
-    v = float(v)
-    return round(v, digits) if math.isfinite(v) else None
 
 
 def _n(v, spec: str = ".3f") -> str:
@@ -106,24 +42,43 @@ def _fmt_list(values, unit="s") -> str:
     return ", ".join(f"{v:.3f}" for v in values) + f" {unit}" if len(values) else "none"
 
 
+def _path_rows(p: dict | None) -> list[tuple[str, str]]:
+    """The table rows of the path (``clipinfo.path_dict``): heading change, speed along it, facing vs
+    travel, turn, radius and lean per step."""
+    if p is None:
+        return []
+    h = p["heading_change_deg"]
+    side = "" if h is None else " (left)" if h > 0 else " (right)" if h < 0 else ""
+    f = p["facing_vs_travel_deg"]
+    facing = ("n/a" if f is None else f"{f:+.0f} deg (" + ("forwards" if abs(f) < 30 else "backwards" if abs(f) > 150
+                                                           else "sideways") + ")")
+    steps = p["steps"]
+    return [
+        ("heading change", f"{_n(h, '+.1f')} deg{side}: COM travel over the last {p['heading_window_s']:.2f} s "
+                           "against the first"),
+        ("speed along the path", f"{_n(p['path_speed_m_s'])} m/s over {_n(p['path_length_m'], '.2f')} m"),
+        ("facing vs travel", facing),
+        ("turn per step", " ".join(_n(s["heading_change_deg"], "+.0f") for s in steps) + " deg" if steps else "n/a"),
+        ("radius per step", " ".join("straight" if s["radius_m"] is None else f"{s['radius_m']:.1f}"
+                                     for s in steps) + " m" if steps else "n/a"),
+        ("lean per step", " ".join(_n(s["lean_deg"], "+.0f") for s in steps) + " deg (COM over the stance foot, "
+                                                                               "+ = left)" if steps else "n/a"),
+    ]
+
+
 def run(args) -> int:
     check_inputs(args.clip)
     data = data_output(args)
     if data is not None:
         guard_outputs([data], [args.clip])
-    from ...body.gait import detect_gait, summarize
     from ...body.model import BodyModel
+    from ...clipinfo import clip_info
 
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.json or args.quiet, args.joint_map,
                        args.up)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
-    com, markers = body.com_and_markers(motion)
-    gait = detect_gait(motion, body, markers, com)  # the feet reconciled with the COM force (body.gait)
-    summary = summarize(motion, body, com, gait)
-    from ...io.jsonable import dumps, jsonable
-
-    d = jsonable(info_dict(motion, body, summary, gait))
-    d["take"] = jsonable(_take(motion, body))
+    d, summary = clip_info(motion, body)
+    from ...io.jsonable import dumps
     if data is not None:
         from ...io.framedata import frame_table, write_frame_data
 
@@ -155,6 +110,7 @@ def run(args) -> int:
         ("double support",
          f"{_n(d['double_support_fraction'] and 100 * d['double_support_fraction'], '.0f')}% of frames"),
     ]
+    rows += _path_rows(d["path"])
     if d["take"] is not None:  # a loop or an in-place take: what fit/scale model
         t = d["take"]
         rows.append(("as analysed", f"{'; '.join(t['notes'])}: {_n(t['mean_speed_m_s'])} m/s, "

@@ -108,12 +108,18 @@ _STEP_FIELDS = tuple(f.name for f in fields(StepResult))
 
 def _steps(U, H, theta0, b, control: Control) -> StepResult:
     """step() on rows (m,) of apex U, H, touchdown angle θ0 and control b (broadcast), the rest of
-    the control fixed. Results are the simulator's own (scalar and batched paths agree to 1e-12)."""
+    the control fixed (or per row: its K, a, c, T_c may be (m,) arrays). Results are the simulator's own
+    (scalar and batched paths agree to 1e-12)."""
     U, H, th, bb = np.broadcast_arrays(*(np.atleast_1d(np.asarray(v, float)) for v in (U, H, theta0, b)))
     if U.size > _SMALL:
         return step(U, H, th, replace(control, b=bb))  # type: ignore[arg-type]  # step() broadcasts fields
-    rows = [step(float(u), float(h), float(t), replace(control, b=float(v)))
-            for u, h, t, v in zip(U, H, th, bb)]
+    if all(np.ndim(getattr(control, f)) == 0 for f in Control.NAMES if f != "b"):
+        rows = [step(float(u), float(h), float(t), replace(control, b=float(v)))
+                for u, h, t, v in zip(U, H, th, bb)]
+    else:  # per-row controls (a change through several cycles): row i takes its own K, a, c, T_c
+        per = {f: np.broadcast_to(np.asarray(getattr(control, f), float), U.shape) for f in ("K", "a", "c", "T_c")}
+        rows = [step(float(U[i]), float(H[i]), float(th[i]),
+                     Control(b=float(bb[i]), **{f: float(v[i]) for f, v in per.items()})) for i in range(U.size)]
     return StepResult(**{f: np.array([getattr(r, f) for r in rows]).reshape(U.shape)
                          for f in _STEP_FIELDS})
 
@@ -309,16 +315,17 @@ def _solve_step(U, H, t0, ref, th_guess, b_guess, cyc, mode, th_b, b_b):
 
 
 # --- multi-step optimisation of a change (multiple shooting, finite-difference Jacobian rows) -----
-def _shoot(U0, H0, t0, tau, b, ctl):
+def _shoot(U0, H0, t0, tau, b, ctl, bases=None):
     """Simulate steps with inputs (τ_k, b_k) from apex (U0, H0) at time t0 (scalar simulator path,
-    the one ``simulate`` uses). Returns (U (n+1,), H (n+1,), t (n+1,), θ0 (n,), results list, ok)."""
+    the one ``simulate`` uses); step k's control is bases[k] (default ctl) with b_k.
+    Returns (U (n+1,), H (n+1,), t (n+1,), θ0 (n,), results list, ok)."""
     n = len(tau)
     U, H, t, th = np.empty(n + 1), np.empty(n + 1), np.empty(n + 1), np.full(n, np.nan)
     U[0], H[0], t[0] = U0, H0, t0
     res: list[StepResult] = []
     for k in range(n):
         th[k] = _theta_of(H[k], tau[k])
-        r = step(U[k], H[k], th[k], replace(ctl, b=float(b[k])))
+        r = step(U[k], H[k], th[k], replace(ctl if bases is None else bases[k], b=float(b[k])))
         if not (bool(r.valid) and math.isfinite(th[k])):
             return U, H, t, th, res, False
         res.append(r)
@@ -327,10 +334,15 @@ def _shoot(U0, H0, t0, tau, b, ctl):
     return U, H, t, th, res, True
 
 
+#: How far a step's duration may move from the one asked (``step_times``) per unit cost [√(l0/g)]: 1 % of a
+#: fitted cycle's step (≈ 1.1), as firm as the touchdown fall time's prior.
+_S_STEP_TIME = 0.01
+
+
 # Long because the multiple-shooting problem's unknown layout (index offsets iT, iB, iU, iH, it_, ih_) is
 # shared by its residual, Jacobian and unpacking closures; split apart they would each re-derive it.
 def _optimise_change(cyc, U0, H0, t0, n, U_ref, prior, H_t, mode, comfort, tau_start=None,
-                     max_iter=80):
+                     max_iter=80, bases=None, step_times=None):
     """Inputs of n change steps from apex (U0, H0) at t0, by constrained Gauss–Newton on the exact
     simulator with *multiple shooting*: the unknowns are the inputs (τ_k, b_k) and the apex states
     (U_k, H_k, t_k), k = 1..n, tied by continuity constraints s_{k+1} = S(s_k, u_k). The per-step
@@ -344,6 +356,9 @@ def _optimise_change(cyc, U0, H0, t0, n, U_ref, prior, H_t, mode, comfort, tau_s
     periodic end, S(s_n, τ_h) = (U_n, H_n) with one more unknown τ_h (the change ends on whichever
     orbit of the fitted control it reaches); soft: U_k near U_ref (σ 0.002) and monotone
     (penalty), τ_k near the prior. Both: penalties keep H_k in the band and θ0_k in the touchdown-angle band.
+    bases (energy "b" only): n Controls, step k's K, a, c, T_c (a change through several cycles, e.g. the
+    speed law's; b_k then stays within b_band of the prior's b_k); default the cycle's control for every step.
+    step_times (energy "b" only): (n,) [√(l0/g)] soft durations of the steps (σ ``_S_STEP_TIME``; the law's).
     Returns (τ (n,), b (n,), θ0 of the periodic step that follows (θ0-only; else None)); raises
     _StepFail when the constraints cannot be met.
     """
@@ -353,6 +368,7 @@ def _optimise_change(cyc, U0, H0, t0, n, U_ref, prior, H_t, mode, comfort, tau_s
     th_b, b_b = _bounds(cyc, comfort, mode)
     H_lo, H_hi = cyc.H + comfort.H_band[0], cyc.H + comfort.H_band[1]
     s_tau, s_b, s_H, s_U, s_pen = 0.05, 0.01, 0.05, 2e-3, 1e-3
+    s_T = _S_STEP_TIME
     sgn_dU = 1.0 if U_ref(n - 1, t0) >= U0 else -1.0
     nb = n if use_b else 0
     # z = [τ (n), b (nb), U_1..n, H_1..n, t_1..n, (θ0-only: τ_h, the fall time of the periodic
@@ -360,8 +376,15 @@ def _optimise_change(cyc, U0, H0, t0, n, U_ref, prior, H_t, mode, comfort, tau_s
     iT, iB, iU, iH, it_ = 0, n, n + nb, 2 * n + nb, 3 * n + nb
     ih_ = 4 * n + nb
     m = 4 * n + nb + (0 if use_b else 1)
-    lo = np.r_[np.zeros(n), np.full(nb, b_b[0]), np.full(3 * n, -np.inf), np.zeros(m - ih_)]
-    hi = np.r_[np.full(n, 10.0), np.full(nb, b_b[1]), np.full(3 * n, np.inf), np.full(m - ih_, 10.0)]
+    if bases is not None and not use_b:
+        raise ValueError("per-step controls need energy 'b'")
+    b_lo, b_hi = (b_b[0], b_b[1]) if bases is None else (b_p - comfort.b_band, b_p + comfort.b_band)
+    lo = np.r_[np.zeros(n), np.broadcast_to(b_lo, (nb,)), np.full(3 * n, -np.inf), np.zeros(m - ih_)]
+    hi = np.r_[np.full(n, 10.0), np.broadcast_to(b_hi, (nb,)), np.full(3 * n, np.inf), np.full(m - ih_, 10.0)]
+    # the control of each simulated row: (steps, 1 or 5 rows each) -> (K, a, c, T_c) arrays
+    row_ctl = {nr: ctl if bases is None else
+               replace(ctl, **{f: np.repeat([getattr(c, f) for c in bases], nr) for f in ("K", "a", "c", "T_c")})
+               for nr in (1, 5)}
     eye = np.eye(n)
     nrow = n if use_b else n + 1
 
@@ -387,7 +410,7 @@ def _optimise_change(cyc, U0, H0, t0, n, U_ref, prior, H_t, mode, comfort, tau_s
             base = np.vstack([base, [U[n], H[n], z[ih_], b_p[-1]]])
         X = (base[:, None, :] + d[None]).reshape(-1, 4)
         th_rows = _theta_of(X[:, 1], X[:, 2])
-        r = _steps(X[:, 0], X[:, 1], th_rows, X[:, 3], ctl)
+        r = _steps(X[:, 0], X[:, 1], th_rows, X[:, 3], row_ctl[nr])
         if not np.all(r.valid & np.isfinite(th_rows)):
             return None
         Y = np.stack([r.U_next, r.H_next, r.t_fall + r.t_stance + r.t_rise], 1).reshape(nrow, nr, 3)
@@ -398,6 +421,8 @@ def _optimise_change(cyc, U0, H0, t0, n, U_ref, prior, H_t, mode, comfort, tau_s
         if use_b:
             c = np.r_[cont, U[1:] - Ur, H[n] - H_t]
             rr = [(tau - tau_p) / s_tau, (b - b_p) / s_b, (H[1:n] - H_p[:n - 1]) / s_H]
+            if step_times is not None:
+                rr.append((np.diff(t) - step_times) / s_T)
         else:
             c = np.r_[cont, U[n] - Ur[n - 1], Y[n, 0, 0] - U[n], Y[n, 0, 1] - H[n]]
             rr = [(tau - tau_p) / s_tau, (U[1:n] - Ur[:n - 1]) / s_U,
@@ -450,6 +475,10 @@ def _optimise_change(cyc, U0, H0, t0, n, U_ref, prior, H_t, mode, comfort, tau_s
             JH = np.zeros((n - 1, m))
             JH[:, iH:iH + n - 1] = np.eye(n - 1) / s_H
             Jr += [Jb, JH]
+            if step_times is not None:  # t_{k+1} − t_k, t_0 fixed
+                JT = np.zeros((n, m))
+                JT[:, it_:it_ + n] = (eye - np.eye(n, k=-1)) / s_T
+                Jr.append(JT)
         else:
             Jr.append(Jp[:n - 1] / s_U)
             act = (-sgn_dU * np.diff(U) > 0).astype(float)
@@ -477,7 +506,7 @@ def _optimise_change(cyc, U0, H0, t0, n, U_ref, prior, H_t, mode, comfort, tau_s
     tau0 = tau_p if tau_start is None else np.asarray(tau_start, float)
     z = None
     for tau_g, b_g in ((tau0, b_p), (tau_p, b_p), (np.full(n, cyc.t_fall), np.full(n, ctl.b))):
-        U, H, t, th, res, ok = _shoot(U0, H0, t0, tau_g, b_g, ctl)
+        U, H, t, th, res, ok = _shoot(U0, H0, t0, tau_g, b_g, ctl, bases)
         if ok:
             z = np.r_[tau_g, b_g[:nb], U[1:], H[1:], t[1:], tau_g[-1:] if not use_b else []]
             break

@@ -1,0 +1,323 @@
+"""The path of a take: where the body travels, how it turns, how it faces and leans (issue 28).
+
+A take is a gait travelling along a path. The path is the whole-body COM's horizontal track smoothed over
+one stride (a box average one stride long removes the step-by-step sway exactly and keeps the turn); along
+it, per frame: arc length, travel heading, curvature, speed along the path, the facing of the pelvis against
+the direction of travel; per step (touchdown to the next touchdown): heading change, radius, speed and the
+lean (frontal-plane angle of the COM over the stance foot). The take's total heading change is the
+direction of the COM's horizontal travel over the last W seconds minus that over the first W seconds, W =
+0.6 s or one stride, whichever is longer, or a quarter of the take if that is shorter (``heading_change``).
+
+Angles are about the up axis, + = to the left seen from above (a left turn is positive), in radians inside;
+the ``*_deg`` figures are for reports. Everything here is measured from a motion alone, so the same code
+describes a clip and an output made from it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..constants import HORIZONTAL_AXES, UP, UP_AXIS
+from ..core.motion import Motion
+from .gait import Gait, step_period
+from .model import BodyModel
+
+#: Window over which the travel direction at each end of a take is taken for its total heading change [s]
+#: (the SOURCES.md of ../shared/data/cmu-turns), or a quarter of the take if that is shorter.
+HEADING_WINDOW_S = 0.6
+#: Stride time [s] used to smooth the path when the take has too few contacts to measure its own: an adult's
+#: walking stride (about 1.1 s) and running stride (0.7 s) lie about it.
+FALLBACK_STRIDE_S = 1.0
+#: A step whose heading changes less than this [rad] has no finite radius worth reporting (0.5 degree).
+STRAIGHT_STEP_RAD = math.radians(0.5)
+#: A clip whose total heading change is smaller than this [rad] is a straight take that veers: its outputs
+#: are meant to run straight (the machines model it as it is, not straightened), and the report says how
+#: much the clip veers. The straight takes of the shared data veer by up to 6.4 degrees (Bandai
+#: dataset-2_walk_exhausted_001, whose SOURCES.md also says +6; CMU 02_01 +6.4); its turns turn 84-97 degrees.
+STRAIGHT_TAKE_RAD = math.radians(10.0)
+#: The reference horizontal direction from which headings are measured (the first horizontal axis, +X).
+_E_REF = np.eye(3)[HORIZONTAL_AXES[0]]
+
+
+@dataclass(frozen=True)
+class PathStep:
+    """One step of a take along its path: touchdown of ``foot`` to the next touchdown (either foot).
+
+    t0_s, t1_s: its start and end [s]; heading_change_rad: travel heading at its end minus at its start
+    (+ = left); radius_m: arc length / heading change (signed like the turn; inf when straight);
+    speed_m_s: arc length / duration; lean_rad: mean frontal-plane angle of the COM over the stance foot's
+    contact point while that foot is on the ground (+ = the COM left of the foot); facing_vs_travel_rad:
+    mean facing minus travel heading.
+    """
+
+    foot: int
+    t0_s: float
+    t1_s: float
+    arc_length_m: float
+    heading_change_rad: float
+    radius_m: float
+    speed_m_s: float
+    lean_rad: float
+    facing_vs_travel_rad: float
+
+
+@dataclass(frozen=True)
+class TakePath:
+    """The path of a take (SI units; angles [rad] about the up axis, + = left seen from above).
+
+    p_world_path: (F, 3) the COM smoothed over a stride, on the COM's mean height [m]; arc_length_m: (F,)
+    distance travelled along it from the first frame [m]; heading_rad: (F,) travel direction (unwrapped);
+    curvature_1_m: (F,) dheading/ds [1/m]; speed_m_s: (F,) speed along the path; facing_rad: (F,) the
+    pelvis' facing (unwrapped; NaN without hip joints); facing_vs_travel_rad: (F,) facing minus travel,
+    wrapped to (-pi, pi]: 0 forwards, +-pi/2 side steps, pi backwards. heading_change_rad: the take's
+    total (windowed, see the module); window_s: the window used; stride_s: the smoothing length.
+    """
+
+    frame_time: float
+    p_world_path: np.ndarray
+    arc_length_m: np.ndarray
+    heading_rad: np.ndarray
+    curvature_1_m: np.ndarray
+    speed_m_s: np.ndarray
+    facing_rad: np.ndarray
+    facing_vs_travel_rad: np.ndarray
+    heading_change_rad: float
+    window_s: float
+    stride_s: float
+    steps: tuple[PathStep, ...]
+
+    @property
+    def length_m(self) -> float:
+        """Arc length of the whole path [m]."""
+        return float(self.arc_length_m[-1]) if self.arc_length_m.size else 0.0
+
+    @property
+    def path_speed_m_s(self) -> float:
+        """Mean speed along the path [m/s]: its arc length over the take's duration."""
+        n = self.arc_length_m.size
+        return self.length_m / ((n - 1) * self.frame_time) if n > 1 else float("nan")
+
+    @property
+    def n_steps(self) -> float:
+        """How many steps the take spans: its duration over the step time (half the stride) [-]."""
+        return (self.arc_length_m.size - 1) * self.frame_time / (0.5 * self.stride_s)
+
+    @property
+    def mean_facing_vs_travel_rad(self) -> float:
+        """Circular mean of the facing-vs-travel angle [rad] (NaN without a facing)."""
+        a = self.facing_vs_travel_rad[np.isfinite(self.facing_vs_travel_rad)]
+        return float(np.angle(np.mean(np.exp(1j * a)))) if a.size else float("nan")
+
+    def to_dict(self) -> dict:
+        """The figures ``info`` and the report print, in degrees and SI units (JSON-able, no NaN)."""
+        def deg(v):
+            return _finite(math.degrees(v), 2)
+
+        return {
+            "heading_change_deg": deg(self.heading_change_rad),
+            "heading_window_s": round(self.window_s, 3),
+            "path_length_m": round(self.length_m, 4),
+            "path_speed_m_s": _finite(self.path_speed_m_s, 4),
+            "facing_vs_travel_deg": deg(self.mean_facing_vs_travel_rad),
+            "steps": [{"foot": "left" if s.foot == 0 else "right", "start_s": round(s.t0_s, 4),
+                       "stop_s": round(s.t1_s, 4), "heading_change_deg": deg(s.heading_change_rad),
+                       "radius_m": _finite(s.radius_m, 3), "speed_m_s": _finite(s.speed_m_s, 4),
+                       "lean_deg": deg(s.lean_rad), "facing_vs_travel_deg": deg(s.facing_vs_travel_rad)}
+                      for s in self.steps],
+        }
+
+
+def _finite(v: float, digits: int):
+    return round(float(v), digits) if math.isfinite(v) else None
+
+
+def yaw_of(v_world: np.ndarray) -> np.ndarray:
+    """(...,) heading angle [rad] of horizontal directions (..., 3) about the up axis from +X, + = left.
+
+    The angle turning _E_REF into v about UP (right-handed): with Y up, a direction rotated towards -Z.
+    """
+    v = np.asarray(v_world, float)
+    return np.arctan2(np.cross(_E_REF, v) @ UP, v @ _E_REF)
+
+
+def direction_of(yaw_rad: np.ndarray) -> np.ndarray:
+    """(..., 3) horizontal unit directions of heading angles (...,) [rad]: the inverse of ``yaw_of``."""
+    a = np.asarray(yaw_rad, float)[..., None]
+    return np.cos(a) * _E_REF + np.sin(a) * np.cross(UP, _E_REF)
+
+
+def wrap_angle(a):
+    """Angles [rad] wrapped to (-pi, pi]."""
+    return np.pi - np.mod(np.pi - np.asarray(a, float), 2.0 * np.pi)
+
+
+def heading_window_s(duration_s: float, stride_s: float) -> float:
+    """W [s] of the total heading change: the longer of HEADING_WINDOW_S and one stride (stride_s [s]), or a
+    quarter of the take if that is shorter."""
+    return min(max(HEADING_WINDOW_S, stride_s), 0.25 * duration_s)
+
+
+def heading_change(com: np.ndarray, frame_time: float, stride_s: float,
+                   window_s: float | None = None) -> tuple[float, float]:
+    """Total heading change of a take [rad] and the window W [s] it was measured over.
+
+    com: (F, 3) [m]; stride_s: the take's stride time [s]. The direction of the horizontal COM travel over
+    the last W s (the chord from the frame W before the end to the end) minus that over the first W s,
+    wrapped to (-pi, pi]; + = left. W (``heading_window_s``) is 0.6 s as in the shared data's SOURCES.md,
+    but at least one stride: over a whole stride the COM's side-to-side sway from one foot to the other
+    cancels, while over half a stride it tilts a walk's chord by up to 7 degrees either way (Bandai
+    straight walks, measured). window_s: that window given instead. NaN when the take has fewer than 3
+    frames or does not travel in a window.
+    """
+    F = com.shape[0]
+    w = heading_window_s((F - 1) * frame_time, stride_s) if window_s is None else float(window_s)
+    n = max(1, int(round(w / frame_time)))
+    if F < 3 or n >= F:
+        return float("nan"), w
+    first, last = com[n] - com[0], com[-1] - com[-1 - n]
+    first[UP_AXIS] = last[UP_AXIS] = 0.0
+    if not (np.linalg.norm(first) > 0 and np.linalg.norm(last) > 0):
+        return float("nan"), w
+    return float(wrap_angle(yaw_of(last) - yaw_of(first))), n * frame_time
+
+
+def smooth_path(com: np.ndarray, n_box: int) -> np.ndarray:
+    """(F, 3) the COM's horizontal track averaged over n_box frames (its height: the mean) [m].
+
+    A centred box average one stride (n_box frames) long. Beyond the ends the track is continued by its
+    first (last) stride repeated, moved on by that stride's travel: the sway then cancels at the ends
+    too, and the path's heading there is the travel direction over the first (last) stride. A take of
+    one stride or less is continued by point reflection about its end frames (2 p_0 − p_k).
+    """
+    F = com.shape[0]
+    out = np.empty_like(com, dtype=float)
+    out[:, UP_AXIS] = com[:, UP_AXIS].mean() if F else 0.0
+    h = min(n_box // 2, F - 1)
+    if h < 1:
+        out[:, HORIZONTAL_AXES] = com[:, HORIZONTAL_AXES]
+        return out
+    x = com[:, HORIZONTAL_AXES]
+    n = 2 * h + 1
+    if F > n:
+        head = x[n - h : n] - (x[n] - x[0])  # x[-j] = x[n - j] - (x[n] - x[0]), j = h..1
+        tail = x[F - 1 - n + 1 : F - n + h] + (x[-1] - x[F - 1 - n])
+    else:
+        head, tail = 2 * x[0] - x[h:0:-1], 2 * x[-1] - x[-2 : -2 - h : -1]
+    padded = np.concatenate([head, x, tail])
+    c = np.cumsum(np.concatenate([np.zeros((1, x.shape[1])), padded]), axis=0)
+    out[:, HORIZONTAL_AXES] = (c[2 * h + 1 :] - c[: -2 * h - 1]) / (2 * h + 1)
+    return out
+
+
+def facing_yaw(motion: Motion, body: BodyModel) -> np.ndarray:
+    """(F,) the pelvis' facing [rad] (unwrapped): forward = UP × (right hip − left hip). NaN without hips."""
+    roles = body.roles
+    if "left_hip" not in roles or "right_hip" not in roles:
+        return np.full(motion.n_frames, np.nan)
+    hips = body.joint_positions(motion, [roles["left_hip"], roles["right_hip"]])  # (F, 2, 3)
+    fwd = np.cross(UP, hips[:, 1] - hips[:, 0])
+    return np.unwrap(yaw_of(fwd))
+
+
+def take_path(motion: Motion, body: BodyModel, com: np.ndarray, gait: Gait,
+              window_strides: float | None = None) -> TakePath:
+    """The path of a take (``TakePath``) from its COM (F, 3) [m] and gait (for the stride and the steps).
+
+    window_strides: measure the total heading change over this many of the take's strides at each end
+    instead of ``heading_window_s``'s window: an output is measured over the same share of its stride as
+    the clip it is compared with (the COM's sway then tilts both chords alike; a short clip's window is a
+    quarter of it, less than a stride).
+    """
+    F, dt = motion.n_frames, motion.frame_time
+    period = step_period(gait, F, com)
+    stride_s = 2.0 * period if np.isfinite(period) and period > 0 else FALLBACK_STRIDE_S
+    n_box = max(1, int(round(stride_s / dt)))
+    p = smooth_path(com, n_box)
+    d = np.diff(p[:, HORIZONTAL_AXES], axis=0) if F > 1 else np.zeros((0, 2))
+    ds = np.linalg.norm(d, axis=1)
+    s = np.concatenate([[0.0], np.cumsum(ds)])
+    vel = np.gradient(p, dt, axis=0) if F > 1 else np.zeros_like(p)
+    vel[:, UP_AXIS] = 0.0
+    heading = np.unwrap(yaw_of(vel)) if F else np.zeros(0)
+    speed = np.linalg.norm(vel, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        curvature = np.gradient(heading, dt) / speed if F > 1 else np.zeros(F)
+    curvature = np.where(speed > 0, curvature, np.nan)
+    facing = facing_yaw(motion, body)
+    fvt = wrap_angle(facing - heading)
+    total, w = heading_change(com, dt, stride_s, None if window_strides is None else window_strides * stride_s)
+    steps = _steps(gait, com, s, heading, fvt, F, dt)
+    return TakePath(dt, p, s, heading, curvature, speed, facing, fvt, total, w, stride_s, steps)
+
+
+def _steps(gait: Gait, com: np.ndarray, s: np.ndarray, heading: np.ndarray, fvt: np.ndarray, F: int,
+           dt: float) -> tuple[PathStep, ...]:
+    """Per step, touchdown to the next touchdown (stances that begin inside the take)."""
+    on = sorted((st for st in gait.stances if st.start > 0), key=lambda st: st.start)
+    frames = np.arange(F)
+    out = []
+    for a, b in zip(on[:-1], on[1:]):
+        t0 = a.t_on if math.isfinite(a.t_on) else float(a.start)
+        t1 = b.t_on if math.isfinite(b.t_on) else float(b.start)
+        if not t1 > t0:
+            continue
+        arc = float(np.interp(t1, frames, s) - np.interp(t0, frames, s))
+        dpsi = float(np.interp(t1, frames, heading) - np.interp(t0, frames, heading))
+        radius = arc / dpsi if abs(dpsi) >= STRAIGHT_STEP_RAD else math.copysign(math.inf, dpsi or 1.0)
+        # lean: the COM over the stance foot's contact point, in the frontal plane of the travel direction
+        i0, i1 = a.start, min(a.stop, F)
+        dcom = com[i0:i1] - a.contact_point
+        psi = heading[i0:i1]
+        # left of travel: the travel direction turned a quarter turn to the left about UP
+        left = direction_of(psi + 0.5 * np.pi)
+        lean = float(np.mean(np.arctan2(np.einsum("ij,ij->i", dcom, left), dcom[:, UP_AXIS])))
+        seg = fvt[int(t0) : int(math.ceil(t1)) + 1]
+        seg = seg[np.isfinite(seg)]
+        f_t = float(np.angle(np.mean(np.exp(1j * seg)))) if seg.size else float("nan")
+        out.append(PathStep(a.foot, t0 * dt, t1 * dt, arc, dpsi, radius, arc / ((t1 - t0) * dt), lean, f_t))
+    return tuple(out)
+
+
+def is_straight(path: TakePath) -> bool:
+    """A take that veers by less than STRAIGHT_TAKE_RAD (or whose heading change is not measurable)."""
+    return not abs(path.heading_change_rad) >= STRAIGHT_TAKE_RAD
+
+
+def yaw_quat(angle_rad: np.ndarray) -> np.ndarray:
+    """(..., 4) rotations (w, x, y, z) by angle_rad (...,) about the up axis (+ = to the left)."""
+    from ..core import quat
+
+    a = np.asarray(angle_rad, float)
+    return quat.from_axis_angle(np.broadcast_to(UP, a.shape + (3,)), a)
+
+
+def straighten(motion: Motion, path: TakePath) -> Motion:
+    """The take unrolled onto a straight line: each frame moved rigidly so that its point of the path
+    lands at its arc length along the path's first direction, turned by the heading it has gained.
+
+    Frame i is turned about the up axis by −(heading_i − heading_0) about the path point P_i and carried to
+    P_0 + s_i · direction(heading_0): the COM keeps its offset from the path (its sway and lean) in the
+    path's own frame, the travel becomes straight at the speed along the path. A foot planted while the
+    path turns moves a little in the straightened take (rigid per frame: about a δ²/2 sideways and a δ
+    along for a foot n from the path and an angle δ = Δs/r of turn between it and the COM, 1-4 cm in
+    CMU 16_51's 1.3 m turn, well below the contact test's speed). The inverse, point by point, is
+    ``synthesis.bend``. Returns a new Motion (meta "straightened": the heading change undone [rad]).
+    """
+    from dataclasses import replace
+
+    from ..core import quat
+
+    dpsi = path.heading_rad - path.heading_rad[0]  # (F,)
+    q = yaw_quat(-dpsi)  # (F, 4)
+    p0 = path.p_world_path[0]
+    fwd0 = direction_of(path.heading_rad[0])
+    rel = motion.root_positions - path.p_world_path
+    rel[:, UP_AXIS] = motion.root_positions[:, UP_AXIS]
+    root = p0 * (1 - UP) + path.arc_length_m[:, None] * fwd0 + quat.rotate(q, rel)
+    rot = motion.rotations.copy()
+    rot[:, 0] = quat.mul(q, rot[:, 0])
+    meta = dict(motion.meta)
+    meta["straightened"] = float(dpsi[-1]) if dpsi.size else 0.0
+    return replace(motion, root_positions=root, rotations=rot, meta=meta)

@@ -12,7 +12,9 @@ motion in the world (to rounding), only the file's conventions change:
 - ``extra_root``: a static reference root at the origin above the old root;
 - ``six_channels``: position channels (equal to the OFFSET) on every joint;
 - ``every``: every n-th frame (120 Hz -> 30 or 60 Hz);
-- ``resampled``: the rate divided by n through an anti-alias low-pass (SciPy's polyphase resampler).
+- ``resampled``: the rate divided by n through an anti-alias low-pass (SciPy's polyphase resampler);
+- ``upsampled``: the rate multiplied by n by spline interpolation (a 30 Hz clip at 60 or 120 Hz);
+- ``shifted_end_site``: one end site moved (another performer's toe marker).
 """
 from __future__ import annotations
 
@@ -212,6 +214,58 @@ def resampled(b: OracleBvh, n: int, pose_frames: int = 0) -> OracleBvh:
     v[:, rot] = np.unwrap(v[:, rot], period=360.0, axis=0)
     out = resample_poly(v, 1, n, axis=0, padtype="line")
     return replace(b, values=np.concatenate([b.values[:pose_frames], out]), frame_time=b.frame_time * n)
+
+
+def upsampled(b: OracleBvh, n: int, pose_frames: int = 0) -> OracleBvh:
+    """The rate multiplied by n as an exporter sampling the same take at a higher rate writes it: each
+    joint's rotation through SciPy's ``RotationSpline`` and its translation through a ``CubicSpline`` (both
+    twice differentiable, so the COM keeps its curvature; a channel-wise filter of Euler angles would ring
+    across their wraps). pose_frames as in ``every``."""
+    from scipy.interpolate import CubicSpline
+    from scipy.spatial.transform import RotationSpline
+
+    body = replace(b, values=np.asarray(b.values[pose_frames:], float))
+    trans, rots = _decompose(body)
+    F = len(body.values)
+    t = np.arange(F, dtype=float)
+    t_new = np.arange((F - 1) * n + 1, dtype=float) / n
+    trans_new = CubicSpline(t, trans, axis=0)(t_new)
+    rots_new = [RotationSpline(t, r)(t_new) for r in rots]
+    out = _compose(body, trans_new, rots_new)
+    return replace(b, values=np.concatenate([b.values[:pose_frames], out]), frame_time=b.frame_time / n)
+
+
+def _world_rotations(b: OracleBvh, joint: int) -> Rotation:
+    """World rotations (F,) of one joint: its chain's local rotations composed from the root."""
+    _, rots = _decompose(b)
+    chain = []
+    j = joint
+    while j >= 0:
+        chain.append(j)
+        j = b.parents[j]
+    R = rots[chain[-1]]
+    for k in reversed(chain[:-1]):
+        R = R * rots[k]
+    return R
+
+
+def shifted_end_site(b: OracleBvh, joint_name: str, metres_per_unit: float, shift_m=(0.0, 0.03, 0.0),
+                     frame: int | None = None) -> OracleBvh:
+    """Another performer's marker placement: the end site(s) of one joint (a foot's toe tip) moved by
+    shift_m [m], a vector in the file's world axes at ``frame`` (default: where the joint is lowest on
+    the file's Y axis), so the end site moves by the same amount in the joint's own axes at every frame.
+
+    The joints and the motion are unchanged; only that end site (and so the foot's tip) is elsewhere."""
+    j = b.names.index(joint_name)
+    R = _world_rotations(b, j)
+    if frame is None:
+        from conftest import oracle_fk
+
+        p, _ = oracle_fk(b, 1.0)
+        frame = int(np.argmin(p[:, j, 1]))
+    local = R[frame].inv().apply(np.asarray(shift_m, float)) / metres_per_unit
+    ends = [(k, np.asarray(o, float) + local if k == j else o) for k, o in b.end_sites]
+    return replace(b, end_sites=ends)
 
 
 # ---- writing ---------------------------------------------------------------------------------------------

@@ -15,7 +15,7 @@ def clip_info(motion, body) -> tuple[dict, GaitSummary]:
     from .io.jsonable import jsonable
 
     com, markers = body.com_and_markers(motion)
-    gait = detect_gait(motion, body, markers)
+    gait = detect_gait(motion, body, markers, com)  # the feet reconciled with the COM force (body.gait)
     summary = summarize(motion, body, com, gait)
     d = jsonable(info_dict(motion, body, summary, gait))
     d["take"] = jsonable(_take(motion, body))

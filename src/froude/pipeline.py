@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .body.characters import Retarget
-from .body.gait import detect_gait, require_running, summarize
+from .body.gait import detect_gait, require_running, summarize, walks
 from .body.model import BodyModel
 from .body.path import is_straight, straighten, take_path, turn_note
 from .body.take import modelled_part, running_take, select_range
@@ -58,17 +58,17 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     body = BodyModel.from_skeleton(motion.skeleton, mass=mass, sex=sex, joint_map=joint_map)
     motion, take_notes = running_take(motion, body)
     com, markers = body.com_and_markers(motion)
-    gait = detect_gait(motion, body, markers)
+    gait = detect_gait(motion, body, markers, com)
     clip_path = take_path(motion, body, com, gait)
     turn = None if is_straight(clip_path) else clip_path
     if turn is not None:  # the machines run along the path: the take is straightened for them
         motion = straighten(motion, turn)
         com, markers = body.com_and_markers(motion)
-        gait = detect_gait(motion, body, markers)
+        gait = detect_gait(motion, body, markers, com)
         take_notes = list(take_notes) + [turn_note(turn)]
     summary = summarize(motion, body, com, gait)
     try:
-        if summary.kind == "walking" and not running_only:  # a motion's kind chooses its machine
+        if walks(summary) and not running_only:  # a motion's kind chooses its machine (body.gait decides it)
             from .synthesis.walking import fit_walk
 
             fit, cycle = fit_walk(motion, body, com, markers, gait, source, mass)

@@ -40,9 +40,16 @@ GRAVITY_DECIDES = 1.33
 #: about 0.4-0.7 (1.3-2.3 steps/s at L = 0.9 m; REFERENCE.md): centre and spread in log terms.
 WALK_STEP_FREQ_HAT = 0.55
 WALK_STEP_FREQ_LOG_SD = 0.2
+#: The same for a run without a usable flight (too short to fit a parabola, a small character at 30 Hz):
+#: joggers and distance runners step at 2.6-3.0 Hz at L ≈ 0.9 m (0.85-0.9), children at 4 Hz at L ≈ 0.45 m
+#: (0.86), sprinters at 4.5-5 Hz (1.4-1.5) (REFERENCE.md): a wider spread around 0.95.
+RUN_STEP_FREQ_HAT = 0.95
+RUN_STEP_FREQ_LOG_SD = 0.3
 #: Spread (log) of statures around TYPICAL_STATURE_M when weighed with the cadence: wide (0.5 m children to
-#: 5 m giants are ordinary outputs), so that the cadence, which does not depend on size, decides.
-STATURE_LOG_SD = 0.8
+#: 5 m giants are ordinary outputs), so that a cadence far from human walking's decides (0.5 read a 0.5 m
+#: walker's output as a 1.27 m one); narrow enough that a human stature wins where the cadence fits a
+#: human's run about as well as a giant's walk (0.8 read a 1.49 m tired jogger as a 3.3 m one).
+STATURE_LOG_SD = 0.65
 #: A unit whose score (squared log distances) is within this of the best one is a plausible alternative.
 UNIT_SCORE_MARGIN = 2.0
 #: At most this many frames (from the middle of the clip) are analysed: long clips load fast.
@@ -206,26 +213,67 @@ def reference_pose(motion: Motion, roles) -> tuple[np.ndarray, int]:
     return m.rotations[f].copy(), f + (motion.n_frames - m.n_frames) // 2
 
 
-def flight_gravity_units(com: np.ndarray, foot_low: np.ndarray, leg_length: float, frame_time: float):
-    """Gravity seen in the flight phases, in file units/s², or None when the motion has no flight of
-    three frames or more.
+def flight_gravity_units(com: np.ndarray, foot_low: np.ndarray, leg_length: float, frame_time: float,
+                         planted: np.ndarray | None = None):
+    """(gravity seen in the flight phases [file units/s²] or None when the motion has no flight of three
+    frames or more, the number of those flights).
 
     com: (F, 3) COM; foot_low: (F, 2) lowest foot marker height per foot; leg_length in the same
     units. A frame is in flight when both feet are above the ground (5th percentile of the lower foot)
-    by 3 % of the leg, a scale-free test. The curvature is fitted by ``metrics.flight_gravity`` (one
-    gravity shared by every flight, each its own height and vertical speed). Flights cut by the clip's
-    edges are left out (a jump off or a stumble).
+    by 3 % of the leg and neither is planted (``planted_feet``, when given), a scale-free test. The
+    curvature is fitted by ``metrics.flight_gravity`` (one gravity shared by every flight, each its own
+    height and vertical speed). Flights cut by the clip's edges are left out (a jump off or a stumble).
     """
     from ..metrics import flight_gravity
     from .gait import _runs
 
     ground = np.percentile(foot_low.min(axis=1), 5)
     air = (foot_low > ground + 0.03 * leg_length).all(axis=1)
+    if planted is not None:  # a foot resting on a floor that rises by a few centimetres is not in the air
+        air &= ~planted.any(axis=1)
     flights = [(a, b) for a, b in _runs(air) if a > 0 and b < len(air)]
     g, per_phase, _ = flight_gravity(com, frame_time, flights, min_frames=3)
     if not per_phase or not np.isfinite(g):
         return None, 0
     return float(g), len(per_phase)
+
+
+#: The flight gravity weighs the unit only when the feet show flights between at least this share of the
+#: steps (the share ``gait.RUNNING_FLIGHT_SHARE`` that makes a run): a few isolated windows where both feet
+#: read high are no flight phase, and their COM curvature is not gravity.
+FLIGHT_STEP_SHARE = 0.5
+
+
+def flights_between_steps(n_flights: int, step_hz: float | None, duration: float) -> bool:
+    """Whether n_flights flight phases in a take of ``duration`` [s] stepping at ``step_hz`` [1/s] are a
+    running gait's (one flight in at least FLIGHT_STEP_SHARE of the steps). A take whose steps cannot be
+    counted (fewer than three plants: a short run) keeps its flights."""
+    if step_hz is None or not step_hz > 0:
+        return True
+    return n_flights >= FLIGHT_STEP_SHARE * step_hz * duration
+
+
+#: A take whose feet are planted more than this share of the time (duty factor, both feet averaged) has a
+#: foot on the ground at every instant: a walk (or the in-between grounded run), whose cadence weighs the
+#: unit; a run's feet are planted 30-45 % of the time (measured on the shared clips with ``planted_feet``:
+#: runs 0.32-0.51, walks 0.51-0.66).
+WALKING_DUTY = 0.5
+#: Within this of WALKING_DUTY the feet do not tell the gait (a light walk, a tired jog: 0.51 both).
+DUTY_MARGIN = 0.03
+
+
+def planted_feet(markers: np.ndarray, com: np.ndarray, frame_time: float) -> np.ndarray:
+    """(F, 2) bool: each foot planted, measured without knowing the unit: its slowest marker moves
+    horizontally slower than a third of the COM's mean horizontal speed (all False for a take with no
+    travel). markers: (F, 2, M, 3) foot markers; com: (F, 3) [file units, +Y up]."""
+    F = com.shape[0]
+    if F < 3:
+        return np.zeros((F, 2), bool)
+    v_com = np.linalg.norm((com[-1] - com[0])[HORIZONTAL_AXES]) / (frame_time * (F - 1))
+    if not v_com > 0:
+        return np.zeros((F, 2), bool)
+    v = np.linalg.norm(np.gradient(markers[..., HORIZONTAL_AXES], frame_time, axis=0), axis=-1).min(axis=2)
+    return np.asarray(v < v_com / 3.0)
 
 
 def step_frequency_hz(foot_xyz: np.ndarray, com: np.ndarray, frame_time: float) -> float | None:
@@ -234,9 +282,10 @@ def step_frequency_hz(foot_xyz: np.ndarray, com: np.ndarray, frame_time: float) 
 
     foot_xyz: (F, 2, 3) a point of each foot; com: (F, 3) [file units, +Y up]. A foot is planted while its
     horizontal speed stays below a third of the COM's mean horizontal speed for at least 0.1 s: a
-    scale-free test (heights are not used: floors in captures tilt and drift by a few centimetres).
+    scale-free test (heights are not used: floors in captures tilt and drift by a few centimetres). A
+    plant interrupted for less than 0.05 s (a marker's jitter at a high frame rate) is one plant.
     """
-    from .gait import _runs
+    from .gait import _close_gaps, _runs
 
     dt = frame_time
     v_com = np.linalg.norm((com[-1] - com[0])[HORIZONTAL_AXES]) / (dt * (len(com) - 1))
@@ -246,7 +295,8 @@ def step_frequency_hz(foot_xyz: np.ndarray, com: np.ndarray, frame_time: float) 
     min_frames = max(2, int(round(0.1 / dt)))
     touchdowns = []
     for k in range(foot_xyz.shape[1]):
-        touchdowns += [a for a, b in _runs(v_foot[:, k] < v_com / 3) if b - a >= min_frames and a > 0]
+        slow = _close_gaps(v_foot[:, k] < v_com / 3, max(1, int(round(0.05 / dt))))
+        touchdowns += [a for a, b in _runs(slow) if b - a >= min_frames and a > 0]
     if len(touchdowns) < 3:
         return None
     t = np.sort(np.asarray(touchdowns)) * dt
@@ -254,15 +304,17 @@ def step_frequency_hz(foot_xyz: np.ndarray, com: np.ndarray, frame_time: float) 
 
 
 def choose_unit(stature_units: float, gravity_units: float | None, *, step_hz: float | None = None,
-                leg_units: float | None = None) -> tuple[float, str, str, bool]:
+                leg_units: float | None = None, walking: bool | None = True) -> tuple[float, str, str, bool]:
     """(metres per unit, unit name, a sentence saying why, ambiguous?) from the stature and the flight
     gravity measured in file units.
 
     Among the units giving a stature in STATURE_RANGE_M, the flight gravity (when the motion flies)
     picks the one making it 9.81 m/s²: this does not depend on the character's size. Without a flight
     the unit wins whose stature is most human and, when the step frequency ``step_hz`` [1/s] and leg
-    length ``leg_units`` [file units] are given (a walk), whose dimensionless cadence f·√(L/g) is most like
-    human walking's; the choice is flagged ambiguous when another unit scores nearly as well.
+    length ``leg_units`` [file units] are given, whose dimensionless cadence f·√(L/g) is most like human
+    walking's (``walking`` True: the feet are planted most of the time) or running's (False: a run whose
+    flights are too short to weigh; None: the feet cannot tell, the likelier of the two); the choice is
+    flagged ambiguous when another unit scores nearly as well.
     """
     lo, hi = STATURE_RANGE_M
     plausible = [(n, s) for n, s in UNITS if lo <= stature_units * s <= hi]
@@ -284,24 +336,30 @@ def choose_unit(stature_units: float, gravity_units: float | None, *, step_hz: f
             others = [desc(*c) for k, c in enumerate(plausible) if k != i]
             why = f"{desc(n, s)}, detected by the flight gravity" + (f"; not {', '.join(others)}" if others else "")
             return s, n, why, False
-    # a walk: no flight, or "flights" so flat in every plausible unit (under g/3) that they are noise
+    # no flight, or "flights" so flat in every plausible unit (under g/3) that they are noise: the cadence weighs
     no_flight = gravity_units is None or max(gravity_units * s for _, s in plausible) < GRAVITY / 3
-    walk = no_flight and step_hz is not None and leg_units is not None and leg_units > 0
+    by_cadence = no_flight and step_hz is not None and leg_units is not None and leg_units > 0
+    priors = {"walking": (WALK_STEP_FREQ_HAT, WALK_STEP_FREQ_LOG_SD), "running": (RUN_STEP_FREQ_HAT,
+                                                                             RUN_STEP_FREQ_LOG_SD)}
+    if walking is not None:  # the feet tell the gait; None: either (the cadence most like one of them)
+        priors = {k: v for k, v in priors.items() if (k == "walking") == walking}
     score = [(np.log(stature_units * s / TYPICAL_STATURE_M) / STATURE_LOG_SD) ** 2 for _, s in plausible]
-    if walk:
+    if by_cadence:
         assert step_hz is not None and leg_units is not None
         f_hat = [step_hz * np.sqrt(leg_units * s / GRAVITY) for _, s in plausible]
-        score = [a + (np.log(f / WALK_STEP_FREQ_HAT) / WALK_STEP_FREQ_LOG_SD) ** 2 for a, f in zip(score, f_hat)]
+        terms = [{g: (np.log(f / c) / sd) ** 2 for g, (c, sd) in priors.items()} for f in f_hat]
+        score = [a + min(t.values()) for a, t in zip(score, terms)]
     i = int(np.argmin(score))
     n, s = plausible[i]
     # stature alone cannot tell a 1.5 m actor from a 3.8 m giant: every human size is an alternative;
     # with the cadence, only a unit that scores nearly as well is
-    close = [k for k in range(len(plausible)) if k != i and (not walk or score[k] - score[i] < UNIT_SCORE_MARGIN)]
+    close = [k for k in range(len(plausible)) if k != i and (not by_cadence or score[k] - score[i] < UNIT_SCORE_MARGIN)]
     others = [desc(*plausible[k]) for k in close if 0.5 <= stature_units * plausible[k][1] <= 5.0]
-    if walk:
-        reason = (f"no flight phase to weigh; {step_hz:.2f} steps/s, a walking cadence of "
+    if by_cadence:
+        gait = min(terms[i], key=terms[i].__getitem__)
+        reason = (f"no flight phase to weigh; {step_hz:.2f} steps/s, a {gait} cadence of "
                   f"{f_hat[i]:.2f} in dynamically similar terms")
-        why = f"{desc(n, s)}, detected by the stature and the walking cadence ({reason})"
+        why = f"{desc(n, s)}, detected by the stature and the {gait} cadence ({reason})"
     else:
         reason = "no flight phase to weigh" if gravity_units is None else \
             f"the flight gravity ({gravity_units:g} units/s²) fits no unit"
@@ -358,10 +416,22 @@ def understand(motion: Motion, *, joint_map=None, length_scale: float | None = N
             m = _analysed(motion)
             com, mk = body.com_and_markers(m)
             foot_low = mk[..., UP_AXIS].min(axis=2)
-            g_u, _ = flight_gravity_units(com, foot_low, body.leg_length, m.frame_time)
+            planted = planted_feet(mk, com, m.frame_time)
+            g_u, n_flights = flight_gravity_units(com, foot_low, body.leg_length, m.frame_time, planted)
             hz = step_frequency_hz(mk.mean(axis=2), com, m.frame_time)
+            flight_note = ""
+            if g_u is not None and not flights_between_steps(n_flights, hz, m.duration):
+                # a few windows where both feet read high (a tilted floor, a foot's marker placement) are
+                # no flight: the gravity they give weighs nothing (a brisk walk read as a 3.8 m performer)
+                flight_note = (f"; {n_flights} brief 'flight(s)' in about {(hz or 0.0) * m.duration:.0f} steps are "
+                               "no flight phase")
+                g_u = None
+            duty = float(planted.mean()) if planted.size else 0.0
+            walking = True if duty > WALKING_DUTY + DUTY_MARGIN else False if duty < WALKING_DUTY - DUTY_MARGIN \
+                else None
             length_scale, name, units, ambiguous = choose_unit(body.stature, g_u, step_hz=hz,
-                                                               leg_units=body.leg_length)
+                                                               leg_units=body.leg_length, walking=walking)
+            units += flight_note
         else:
             stature = motion.skeleton.standing_height()
             length_scale, name, units, ambiguous = choose_unit(stature, None)

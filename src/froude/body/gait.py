@@ -1,20 +1,38 @@
-"""Ground height, foot contacts (stance intervals), flight phases and the gait summary of a motion.
+"""Ground height, foot contacts (stance intervals), flight phases and the gait summary of a motion: the one
+decision about what a clip is (running, walking, the in-between grounded running, in place, unknown), which
+``info``, ``fit`` and every verb take from here.
 
 Thresholds scale with the leg length L so that a child and a giant are judged alike:
 a foot is a contact candidate while its slowest marker moves horizontally slower than 0.3 √(g L)
 (≈ 0.87 m/s for an adult) and its lowest marker is within 0.05 L (≈ 4 cm) of the ground under it.
 The floor of real captures is uneven by a few centimetres, so the ground is estimated per stance.
+
+The feet are one witness, the COM the other: the vertical ground force of eq. 1 (``body.com_force``) is
+below FLIGHT_FORCE_BW in a flight and above it whenever a foot bears the body. A gap between the feet's
+contacts in which the COM force never falls below it is no flight (a toe marker placed higher than the
+thresholds expect, a foot rolling off slowly): the weight passes from one foot to the other there, and the
+contacts are joined where the landing foot comes lower than the leaving one (``reconcile_contacts``).
+Walking and grounded running both keep a foot on the ground; they differ in the COM's path over a single
+support: a walk vaults (highest in mid single support), a run bounces (lowest there).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
 from ..core.motion import Motion
 from ..errors import NotARunningMotion
+from .com_force import vertical_force_bw
 from .model import SIDES, BodyModel
+
+#: Vertical ground force of eq. 1 [body weights] below which the body is in flight: a gap between the feet's
+#: contacts is a flight only where the COM force falls below it, and a double support a time when it is above.
+FLIGHT_FORCE_BW = 0.2
+#: The kinds of motion the walking machine models (a foot always on the ground); "running" gets the running
+#: machine; the others are refused with their reason.
+WALKING_MACHINE_KINDS = ("walking", "grounded running")
 
 
 @dataclass(frozen=True)
@@ -219,10 +237,13 @@ def step_period(gait: Gait, n_frames: int, com: np.ndarray | None = None) -> flo
     return float(sum(spans) / sum(steps))
 
 
-def detect_gait(motion: Motion, body: BodyModel, markers: np.ndarray | None = None) -> Gait:
+def detect_gait(motion: Motion, body: BodyModel, markers: np.ndarray | None = None,
+                com: np.ndarray | None = None) -> Gait:
     """Foot contacts, stances, flight phases and ground height of a motion.
 
-    markers: optional precomputed foot markers (F, 2, 3, 3) [m] (``body.foot_markers(motion)``).
+    markers: optional precomputed foot markers (F, 2, 3, 3) [m] (``body.foot_markers(motion)``); com: the
+    COM path (F, 3) [m]: when given, the feet's contacts are reconciled with its eq. 1 force
+    (``reconcile_contacts``: a gap in which the COM is never in flight is no flight).
     """
     if markers is None:
         markers = body.foot_markers(motion)
@@ -272,8 +293,57 @@ def detect_gait(motion: Motion, body: BodyModel, markers: np.ndarray | None = No
             flights.append((first + a, first + b))
     ground = float(np.median([s.ground for s in stance_list])) if stance_list else global_ground
     both = contact.all(axis=1)
-    return Gait(contact, tuple(stance_list), tuple(flights), ground, dt, L, float(both.mean()) if F else 0.0,
+    gait = Gait(contact, tuple(stance_list), tuple(flights), ground, dt, L, float(both.mean()) if F else 0.0,
                 markers[:, :, 1])
+    if com is not None and F >= 8:
+        gait = reconcile_contacts(gait, vertical_force_bw(com, dt), h_foot)
+    return gait
+
+
+def reconcile_contacts(gait: Gait, fy_bw: np.ndarray, h_foot: np.ndarray) -> Gait:
+    """The feet's contacts made to agree with the COM: every gap between contacts in which the vertical
+    force of eq. 1 stays at or above FLIGHT_FORCE_BW is closed.
+
+    fy_bw: (F,) COM-derived vertical ground force [body weights]; h_foot: (F, 2) each foot's lowest marker
+    height [m]. In such a gap the body is borne by a foot the thresholds missed: the foot that lifted
+    keeps the weight until the landing foot comes lower above its own ground than it (each foot's height
+    over its stance's ground), and the two stances meet there. Gaps the COM confirms stay flights.
+    """
+    F = gait.contact.shape[0]
+    stances: list[Stance | None] = list(gait.stances)
+    changed = False
+    for a, b in gait.flights:
+        if float(fy_bw[a:b].min()) < FLIGHT_FORCE_BW:
+            continue
+        before = [i for i, st in enumerate(stances) if st is not None and st.stop == a]
+        after = [i for i, st in enumerate(stances) if st is not None and st.start == b]
+        if not before or not after:
+            continue
+        i, j = before[0], after[0]
+        s_off, s_on = stances[i], stances[j]
+        assert s_off is not None and s_on is not None
+        if s_off.foot == s_on.foot:  # the same foot again: it never left the ground
+            stances[i] = replace(s_off, stop=s_on.stop, t_off=s_on.t_off, partial=s_off.partial or s_on.partial)
+            stances[j] = None
+        else:
+            lower = (h_foot[a:b, s_on.foot] - s_on.ground) <= (h_foot[a:b, s_off.foot] - s_off.ground)
+            k = a + (int(np.argmax(lower)) if lower.any() else b - a)
+            t = k - 0.5  # the handover between frames k - 1 and k
+            stances[i] = replace(s_off, stop=int(k), t_off=float(t), partial=bool(s_off.start == 0 or k == F))
+            stances[j] = replace(s_on, start=int(k), t_on=float(t), partial=bool(k == 0 or s_on.stop == F))
+        changed = True
+    if not changed:
+        return gait
+    kept = sorted((st for st in stances if st is not None), key=lambda st: st.start)
+    contact = np.zeros_like(gait.contact)
+    for st in kept:
+        contact[st.start:st.stop, st.foot] = True
+    flights = []
+    first, last = min(st.start for st in kept), max(st.stop for st in kept)
+    for a, b in _runs(~np.asarray(contact.any(axis=1), bool)[first:last]):
+        flights.append((first + a, first + b))
+    return replace(gait, contact=contact, stances=tuple(kept), flights=tuple(flights),
+                   double_support_fraction=float(contact.all(axis=1).mean()))
 
 
 @dataclass(frozen=True)
@@ -323,7 +393,7 @@ def summarize(motion: Motion, body: BodyModel, com: np.ndarray | None = None, ga
     if com is None or gait is None:
         c, mk = body.com_and_markers(motion)
         com = c if com is None else com
-        gait = detect_gait(motion, body, mk) if gait is None else gait
+        gait = detect_gait(motion, body, mk, com) if gait is None else gait
     disp = com[-1, HORIZONTAL_AXES] - com[0, HORIZONTAL_AXES]
     dist = float(np.linalg.norm(disp))
     duration = motion.duration
@@ -338,7 +408,7 @@ def summarize(motion: Motion, body: BodyModel, com: np.ndarray | None = None, ga
     flight_times = gait.flight_times()
     has_flight = flight_share(gait) >= RUNNING_FLIGHT_SHARE
     excursion = float(com[:, UP_AXIS].max() - com[:, UP_AXIS].min())
-    kind, reason = classify(gait, speed, dist, L, has_flight)
+    kind, reason = classify(gait, speed, dist, L, has_flight, single_support_vault(gait, com))
     return GaitSummary(
         duration=duration, frame_rate=motion.fps, mean_speed=speed, heading=heading,
         froude=speed / np.sqrt(GRAVITY * L), leg_length=L, n_contacts=len(gait.stances),
@@ -420,25 +490,68 @@ def _planted_speeds(x: np.ndarray, rest: np.ndarray, frame_time: float) -> np.nd
     return np.asarray(out)
 
 
-def classify(gait: Gait, speed: float, distance: float, leg_length: float, has_flight: bool) -> tuple[str, str]:
-    """('running' | 'walking' | 'in place' | 'unknown', reason)."""
+def single_support_vault(gait: Gait, com: np.ndarray) -> float:
+    """Median over the clip's single supports (one foot down, between two changes of support) of the COM's
+    height at the middle less the mean of its heights at the two ends [m]: > 0 when the COM vaults over
+    the stance leg (walking), < 0 when it bounces on it (running, grounded or not). NaN without a complete
+    single support. com: (F, 3) [m]."""
+    h = com[:, UP_AXIS]
+    single = np.asarray(gait.contact.sum(axis=1) == 1, bool)
+    out = []
+    for a, b in _runs(single):
+        if a == 0 or b >= len(h) or b - a < 3:
+            continue
+        out.append(h[(a + b - 1) // 2] - 0.5 * (h[a] + h[b - 1]))
+    return float(np.median(out)) if out else float("nan")
+
+
+#: Below this share of the time with both feet down a gait without flight has no double support.
+DOUBLE_SUPPORT_MIN = 0.02
+
+
+def classify(gait: Gait, speed: float, distance: float, leg_length: float, has_flight: bool,
+             vault: float = float("nan")) -> tuple[str, str]:
+    """('running' | 'walking' | 'grounded running' | 'in place' | 'unknown', reason): the one decision.
+
+    has_flight: flights (confirmed by the COM force when the gait was reconciled) between at least
+    RUNNING_FLIGHT_SHARE of the steps; vault: ``single_support_vault`` [m]. A take with flights runs; one
+    with flights between fewer steps runs too when it has them more often than double supports (a jog
+    whose short flights the COM confirms in some steps only). Without a flight, a foot is always down:
+    walking when the COM vaults over the stance leg, grounded running when it bounces on it; the walking
+    machine models both and needs both feet down at each handover (a double support).
+    """
     if distance < 1.0 * leg_length or speed < 0.15 * np.sqrt(GRAVITY * leg_length):
         return "in place", (
             f"no forward progression (travels {distance:.2f} m at {speed:.2f} m/s): not locomotion"
         )
     if len(gait.stances) < 2:
-        return "unknown", f"only {len(gait.stances)} foot contact(s) found: a running fit needs at least two stances"
-    if not has_flight:
-        if gait.double_support_fraction > 0.02:
-            return "walking", (
-                f"no flight phase (both feet on the ground {100 * gait.double_support_fraction:.0f}% of the time): "
-                "this is walking, not running"
+        return "unknown", f"only {len(gait.stances)} foot contact(s) found: a gait needs at least two stances"
+    ds = gait.double_support_fraction
+    if has_flight:
+        return "running", f"flight phases between contacts, {speed:.2f} m/s"
+    n_flights = int((gait.flight_times() >= MIN_FLIGHT_S).sum())
+    n_double = len(_runs(np.asarray(gait.contact.all(axis=1), bool)))
+    if n_flights and n_flights >= n_double:
+        return "running", (f"short flight phases between {n_flights} of the contacts, more often than both feet "
+                           f"are down ({n_double}), {speed:.2f} m/s")
+    if ds > DOUBLE_SUPPORT_MIN:
+        both = f"both feet on the ground {100 * ds:.0f}% of the time"
+        if np.isfinite(vault) and vault < 0:
+            return "grounded running", (
+                f"no flight phase ({both}) but the body bounces on the stance leg (COM {1000 * -vault:.0f} mm "
+                "lower in mid single support): running without flight, between walking and running"
             )
-        return "unknown", "no flight phase between foot contacts: not running"
-    return "running", f"flight phases between contacts, {speed:.2f} m/s"
+        return "walking", f"no flight phase ({both}): this is walking, not running"
+    return "unknown", ("no flight phase and never both feet on the ground: neither walking nor running "
+                       "as the machines model them")
 
 
 def require_running(summary: GaitSummary, source: str = "motion") -> None:
     """Raise NotARunningMotion with a one-line reason unless the summary describes running."""
     if summary.kind != "running":
-        raise NotARunningMotion(f"{source}: {summary.reason}")
+        raise NotARunningMotion(f"{source}: {summary.kind}: {summary.reason}")
+
+
+def walks(summary: GaitSummary) -> bool:
+    """Whether the walking machine models this motion (walking or grounded running: a foot always down)."""
+    return summary.kind in WALKING_MACHINE_KINDS

@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..body.gait import detect_gait, summarize
+from ..body.gait import detect_gait, summarize, walks
 from ..body.model import BodyModel
 from ..constants import GRAVITY, UP_AXIS, heading_frame
 from ..core.motion import Motion
@@ -242,6 +242,11 @@ class WalkFitResult:
     steps: np.ndarray
 
 
+#: Touchdown speeds (× the measured) the cycle search starts from when the measured touchdown state gives no
+#: valid machine step.
+START_SPEED_FACTORS = (0.95, 0.9, 0.85, 0.8, 0.7)
+
+
 def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40 * 32):
     """The periodic walking cycle matching targets nearest the priors (``machine.orbit.solve_orbit``, see
     the module doc): Newton with a fresh Jacobian every iteration at ``n_per_stance``, one candidate at a
@@ -267,8 +272,18 @@ def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40 *
                          (w.step_length / w.t_step - tgt[2]) / tgt[2]]), w
 
     _, w0 = evaluate(z0, n_per_stance)
+    for slower in START_SPEED_FACTORS:
+        if w0.valid:
+            break
+        # A brisk walk's measured touchdown state can vault the machine off its stance leg (the clip's
+        # own force nearly unloads in single support): start slower; the search restores the speed.
+        z_try = z0.copy()
+        z_try[0] *= slower
+        _, w_try = evaluate(z_try, n_per_stance)
+        if w_try.valid:
+            z0, w0 = z_try, w_try
     if not w0.valid:
-        raise FitError(f"the measured walking step is not a valid machine step: {REASONS[w0.reason]}")
+        raise FitError(f"the walking machine has no valid step at the clip's measured step: {REASONS[w0.reason]}")
     z, rows, calls, R = solve_orbit(rowwise(evaluate, 7), z0, s, h, tol=tol, max_iter=max_iter,
                                     resolutions=(n_per_stance, n_per_stance), chord=False, batched=False,
                                     max_halvings=30, what="walking cycle", reasons=REASONS)
@@ -439,10 +454,10 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     mass = body.total_mass
     mg = mass * GRAVITY
     com, markers = body.com_and_markers(motion)
-    gait = detect_gait(motion, body, markers)
+    gait = detect_gait(motion, body, markers, com)
     summary = summarize(motion, body, com, gait)
-    if summary.kind != "walking":
-        raise NotAWalkingMotion(f"{src}: not a walk ({summary.reason})")
+    if not walks(summary):
+        raise NotAWalkingMotion(f"{src}: {summary.kind}, not a walk: {summary.reason}")
     dt = motion.frame_time
     F = motion.n_frames
     times = np.arange(F) * dt
@@ -532,23 +547,32 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     # the best shape fit wins.
     pulses_on = (PULSE_START["p"], step_time / stance_time + PULSE_START["dtau_p"], PULSE_START["w_p"],
                  PULSE_START["q"], lm_ref["tau_peak1"], PULSE_START["w_q"])
-    best = None
-    errors = []
+    errors: list[str] = []
     pulses_off = tuple(PULSES_OFF[k] for k in PULSE_VARS)
-    for ctl0, pulses in [(c, pl) for c in starts for pl in (pulses_off, pulses_on)]:
+
+    def attempt(ctl0, pulses, free):
         z0 = np.array([u0, v0, d0, step_time / T, th0, *ctl0, 1.0, 0.0, *pulses])
-        free = ("p", "q") if pulses is pulses_on else ()
         try:
             z1, _, it1, _ = _cycle_search(z0, T_c, roll, targets, n_per_stance)
             z2, cost = _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref_step, dt, T, tau_landmarks, free)
+        except FitError as e:
+            errors.append(str(e))
+            return None
+        return z2, cost, it1, z0
+
+    tried = [r for r in (attempt(c, pl, fr) for c in starts
+                         for pl, fr in ((pulses_off, ()), (pulses_on, ("p", "q")))) if r is not None]
+    best = None
+    for z2, cost, it1, z0 in sorted(tried, key=lambda r: r[1]):
+        try:
             z, w, it2, _ = _cycle_search(z2, T_c, roll, targets, n_per_stance)
         except FitError as e:
             errors.append(str(e))
             continue
-        if best is None or cost < best[1]:
-            best = (z, cost, w, it1 + it2, z0)
-    if best is None:
-        raise FitError(f"{src}: {errors[-1]}")
+        best = (z, cost, w, it1 + it2, z0)
+        break
+    if best is None:  # what the clip is (the gait's decision, as info says it), then why it is refused
+        raise FitError(f"{src}: {summary.kind} that the walking machine cannot follow: {errors[-1]}")
     z, cost, w, iters, z0 = best
     state = WalkState(*map(float, z[:4]))
     th, ctl = float(z[4]), _control(z, T_c)

@@ -73,7 +73,8 @@ REASONS = {
     NO_DOUBLE_SUPPORT: "the trailing leg is already unloaded at touchdown (no double support)",
     COLLAPSE: "COM collapsed (height <= 0.2 l0)", STALL: "forward velocity <= 0 (stall)",
     NO_EVENT: "no liftoff or touchdown within the phase time limit",
-    FLIGHT: "the stance leg unloaded in single support (a flight phase: running, not walking)",
+    FLIGHT: "the machine's stance leg unloaded in single support (the machine would take off where a walk "
+            "keeps its foot down)",
     LOW_VAULT: "the COM fell below the landing height before vaulting over the stance foot",
 }
 

@@ -91,13 +91,16 @@ def run(args) -> int:
 
         motion = select_range(motion, args.range, Path(args.clip).name)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
-    from ...body.gait import summarize
-
-    if summarize(motion, body).kind == "walking":  # a walk gets the walking machine
-        return _run_walk(args, motion, body, out, plot)
+    from ...body.gait import require_running, summarize, walks
     from ...body.take import running_take
 
-    motion, notes = running_take(motion, body)  # a loop unrolled, an in-place take given its travel
+    # the take as ``prepare`` analyses it (a loop unrolled, an in-place take given its travel) and the one
+    # decision of body.gait about what it is: the same as ``info`` says and ``scale`` models
+    motion, notes = running_take(motion, body)
+    summary = summarize(motion, body)
+    if walks(summary):  # walking or grounded running gets the walking machine
+        return _run_walk(args, motion, body, out, plot)
+    require_running(summary, Path(args.clip).name)  # in place, unknown: refused in info's words, before a fit
     for note in notes:
         say(f"note: {note}", args.quiet)
     res = fit_machine_detailed(motion, body, source=Path(args.clip).name)

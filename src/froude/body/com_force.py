@@ -1,0 +1,128 @@
+"""Eq. 1 of Pollard 1999 from the motion alone: the whole-body COM low-passed and differentiated twice, the
+ground force f = m (a_com − g).
+
+The differentiation is documented in :mod:`froude.machine.forces` (the fit's home of forces, which imports
+these): a 2nd-order Butterworth filter run forward and backward (zero lag, −6 dB at ``CUTOFF_HZ`` = 8 Hz),
+the clip extended at each edge by its constant-acceleration continuation. It lives here, in the body
+layer, because the gait decision (:mod:`froude.body.gait`) weighs the feet's contacts against this force:
+a flight is a time when it is below 0.2 body weights.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..constants import G_WORLD, GRAVITY, UP_AXIS
+from ..errors import FitError
+
+__all__ = ["CUTOFF_HZ", "FILTER_ORDER", "EDGE_PAD_S", "EDGE_FIT_S", "butter_lowpass", "filtfilt", "smooth_com",
+           "ground_force", "vertical_force_bw"]
+
+#: Low-pass cutoff of the COM filter [Hz] (−6 dB point of the forward-backward filter).
+CUTOFF_HZ = 8.0
+#: Order of the Butterworth section (run twice: effective order 2 × FILTER_ORDER).
+FILTER_ORDER = 2
+#: Length of the constant-acceleration extension added at each edge before filtering [s].
+EDGE_PAD_S = 0.5
+#: Length of the clip's edge used to fit that extension [s].
+EDGE_FIT_S = 0.1
+def _quadratic_extension(y: np.ndarray, dt: float, n_fit: int, n_pad: int) -> np.ndarray:
+    """(F + 2 n_pad, C) signal extended at both ends by least-squares parabolas of n_fit samples."""
+    F = y.shape[0]
+    n_fit = max(3, min(n_fit, F))
+    t_fit = np.arange(n_fit) * dt
+    # Design of a parabola in time; solve both ends with one lstsq each (columns = components).
+    A = np.stack([np.ones(n_fit), t_fit, t_fit ** 2], axis=1)
+    c0, *_ = np.linalg.lstsq(A, y[:n_fit], rcond=None)
+    c1, *_ = np.linalg.lstsq(A, y[F - n_fit:], rcond=None)
+    t0 = -np.arange(n_pad, 0, -1) * dt  # before the first sample
+    t1 = (n_fit - 1 + np.arange(1, n_pad + 1)) * dt  # after the last sample (time from the fit's start)
+    head = np.stack([np.ones(n_pad), t0, t0 ** 2], axis=1) @ c0
+    tail = np.stack([np.ones(n_pad), t1, t1 ** 2], axis=1) @ c1
+    return np.concatenate([head, y, tail], axis=0)
+
+
+def butter_lowpass(order: int, cutoff_hz: float, fs: float) -> list[tuple[tuple, tuple]]:
+    """Digital Butterworth low-pass as second-order sections [(b0, b1, b2), (1, a1, a2)], each with unit
+    gain at 0 Hz; the same filter as ``scipy.signal.butter(order, cutoff_hz, fs=fs, output="sos")``
+    (analogue prototype, pre-warped bilinear transform). Written here because importing scipy.signal
+    costs the command line about a second (it pulls in scipy.stats)."""
+    warped = 2.0 * fs * math.tan(math.pi * cutoff_hz / fs)
+    sections = []
+    for k in range(order // 2):  # one conjugate pole pair per section, zeros at z = -1 (Nyquist)
+        p = warped * complex(math.cos(math.pi * (2 * k + order + 1) / (2 * order)),
+                             math.sin(math.pi * (2 * k + order + 1) / (2 * order)))
+        z = (2 * fs + p) / (2 * fs - p)
+        a1, a2 = -2.0 * z.real, abs(z) ** 2
+        g = (1.0 + a1 + a2) / 4.0
+        sections.append(((g, 2 * g, g), (1.0, a1, a2)))
+    if order % 2:  # the real pole
+        z = (2 * fs - warped) / (2 * fs + warped)
+        g = (1.0 - z) / 2.0
+        sections.append(((g, g, 0.0), (1.0, -z, 0.0)))
+    return sections
+
+
+def _sos_pass(sections, x: np.ndarray) -> np.ndarray:
+    """One causal pass over axis 0 of x (N, C), every section started in its steady state for x[0]
+    (as scipy's ``sosfilt`` with ``sosfilt_zi(sos) * x[0]``: unit DC gain, so each state is set by x[0])."""
+    y = np.array(x, float)
+    for (b0, b1, b2), (_, a1, a2) in sections:
+        for c in range(y.shape[1]):
+            col = y[:, c].tolist()
+            x0 = col[0]
+            # transposed direct form II; steady state for a constant input x0 (output x0)
+            z1 = (b2 - a2) * x0
+            z0 = (b1 - a1) * x0 + z1
+            for i, xi in enumerate(col):
+                yi = b0 * xi + z0
+                z0 = b1 * xi - a1 * yi + z1
+                z1 = b2 * xi - a2 * yi
+                col[i] = yi
+            y[:, c] = col
+    return y
+
+
+def filtfilt(sections, x: np.ndarray) -> np.ndarray:
+    """Zero-phase forward-backward filtering of x (N, C) along axis 0, without padding (the callers
+    extend the signal themselves): ``scipy.signal.sosfiltfilt(sos, x, axis=0, padtype=None)``."""
+    forward = _sos_pass(sections, x)
+    return _sos_pass(sections, forward[::-1])[::-1]
+
+
+def smooth_com(p_world_com: np.ndarray, frame_time: float, cutoff_hz: float = CUTOFF_HZ):
+    """Zero-lag low-pass COM and its first two derivatives.
+
+    p_world_com: (F, 3) COM positions [m]; frame_time [s]; cutoff_hz: −6 dB cutoff [Hz].
+    Returns (p (F, 3) [m], v (F, 3) [m/s], a (F, 3) [m/s²]).
+    """
+    p = np.asarray(p_world_com, float)
+    F = p.shape[0]
+    if F < 8:
+        raise FitError(f"the clip is too short to differentiate ({F} frames)")
+    fs = 1.0 / frame_time
+    if not 0 < cutoff_hz < 0.5 * fs:
+        raise FitError(f"COM filter cutoff {cutoff_hz} Hz must lie in (0, {0.5 * fs:.1f}) Hz")
+    n_pad = int(round(EDGE_PAD_S / frame_time))
+    n_fit = int(round(EDGE_FIT_S / frame_time))
+    ext = _quadratic_extension(p, frame_time, n_fit, n_pad)
+    ps = filtfilt(butter_lowpass(FILTER_ORDER, cutoff_hz, fs), ext)
+    v = np.gradient(ps, frame_time, axis=0)
+    a = np.gradient(v, frame_time, axis=0)
+    sl = slice(n_pad, n_pad + F)
+    return ps[sl], v[sl], a[sl]
+
+
+def ground_force(a_world_com: np.ndarray, mass: float) -> np.ndarray:
+    """Eq. 1: total ground force f = m (a_com − g) (F, 3) [N]; a_world_com (F, 3) [m/s²], mass [kg]."""
+    return mass * (np.asarray(a_world_com, float) - G_WORLD)
+
+
+
+
+def vertical_force_bw(p_world_com: np.ndarray, frame_time: float, cutoff_hz: float = CUTOFF_HZ) -> np.ndarray:
+    """(F,) vertical ground force of eq. 1 [body weights] from the COM path p_world_com (F, 3) [m]
+    (``smooth_com``; 1 for a body at rest, 0 in flight)."""
+    _, _, a = smooth_com(p_world_com, frame_time, cutoff_hz)
+    return 1.0 + a[:, UP_AXIS] / GRAVITY

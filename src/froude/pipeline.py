@@ -21,10 +21,11 @@ from .body.characters import Retarget
 from .body.gait import detect_gait, require_running, summarize
 from .body.model import BodyModel
 from .body.take import modelled_part, running_take, select_range
+from .constants import UP_AXIS
 from .core.motion import Motion
 from .errors import FroudeError, PlanError
 from .machine import is_walking
-from .metrics import physics_report
+from .metrics import floor_height, physics_report, stance_rest_heights
 from .naive import naive_clip
 from .prepared import Prepared
 from .result import Result, report_path, write_result
@@ -34,7 +35,8 @@ from .synthesis.targets import build_targets, stance_only
 from .synthesis.timewarp import MachinePath, machine_path
 
 __all__ = ["PERIODIC_MIN_STRIDES", "Prepared", "Result", "ScalePlan", "accelerate", "add_report", "finish",
-           "naive_clip", "plan_scale", "prepare", "report_path", "scale", "targets_of", "write_result"]
+           "naive_clip", "plan_scale", "prepare", "report_path", "scale", "source_rest_heights", "targets_of",
+           "write_result"]
 
 #: Speed factors outside this range leave what a reference clip supports: a warning, not an error.
 SUPPORTED_SPEED_RANGE = (0.6, 1.6)
@@ -272,8 +274,33 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
             bad = np.flatnonzero(ik.failed)
             notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]
         motion = ik.motion
+    motion, path, targets = _raised(motion, path, targets, retarget.L * prep.cycle.floor_clearance)
     res = Result(motion, None, path, targets, retarget, method, speed, tuple(notes), plan, dict(extras or {}))
     return add_report(prep, res) if report else res
+
+
+def _raised(motion: Motion, path: MachinePath, targets, rise: float):
+    """The output, its machine path and its targets raised by rise [m]: the synthesis puts the clip's ground
+    (``ReferenceCycle.ground``: the median of its stances' lowest points) on y = 0, and that ground is
+    ``floor_clearance`` above the clip's floor (a joint centre rests a sole's thickness above the floor), so
+    the output, raised by it × L, stands on its floor y = 0 as the clip does on its own."""
+    if rise == 0.0:
+        return motion, path, targets
+    up = np.zeros(3)
+    up[UP_AXIS] = rise
+    motion = motion.with_(root_positions=motion.root_positions + up)
+    path = _replace(path, com=path.com + up, contacts=path.contacts + up)
+    floor_top = None if targets.floor_top is None else targets.floor_top + rise
+    targets = _replace(targets, initial=targets.initial.with_(root_positions=targets.initial.root_positions + up),
+                       com=targets.com + up, markers=targets.markers + up, floor_top=floor_top)
+    return motion, path, targets
+
+
+def source_rest_heights(prep: Prepared) -> np.ndarray:
+    """(2, 3) [m] how high the clip's foot markers rest in stance above its floor, both found from the clip
+    by the physics report's own measures (``metrics.floor_height``, ``metrics.stance_rest_heights``)."""
+    floor, _ = floor_height(prep.markers, prep.gait, prep.body.leg_length)
+    return stance_rest_heights(prep.markers, prep.gait, floor)[0]
 
 
 def add_report(prep: Prepared, res: Result) -> Result:
@@ -286,6 +313,7 @@ def add_report(prep: Prepared, res: Result) -> Result:
         res.motion, res.retarget.body, ground_height=0.0, machine_com=res.path.com,
         marker_targets=stance_only(res.targets), reference_pose=res.targets.initial,
         reference_max_joint_jump_deg=prep.cycle.max_joint_jump_deg,
+        source_rest_heights=res.retarget.L * source_rest_heights(prep),
     )
     report.extras.update({"character": res.retarget.character.name, "L": res.retarget.L, "M": res.retarget.M,
                           "speed_factor": res.speed_factor, "method": res.method, "notes": list(res.notes),

@@ -281,7 +281,6 @@ class BodyModel:
         # Built in the upright reference pose: the zero-rotation rest pose for most rigs, a pose read from
         # the motion for rigs whose rest pose is folded by bind orientations (see Skeleton.reference_pose).
         rest, R_ref = skeleton.reference_world()
-        zero = skeleton.rest_positions()  # every rotation at identity: joint frames are world-aligned
         # first end site wins; zero-length end sites (some exporters write "OFFSET 0 0 0") mark nothing
         ends = {j: R_ref[j] @ np.asarray(off) for j, off in reversed(skeleton.end_sites)
                 if np.linalg.norm(off) > 1e-9}
@@ -300,15 +299,11 @@ class BodyModel:
             kids = skeleton.children(j)
             if kids:
                 return rest[kids[0]] if np.linalg.norm(skeleton.offsets[kids[0]]) > 0 else rest[j]
-            # estimate: continue the parent bone by half its length, as it lies in the zero-rotation pose,
-            # fixed in the joint's frame. Not as it lies in the reference pose: for a folded rig that is a
-            # frame of the motion, whose bend at this joint (the toes' in mid-stance) then decides where the
-            # point is, so the same rig read from another frame (froude's own output of a clip) got other
-            # toe tips, one foot's 20 mm from the other's (dataset-2_run_masculine_005 as a giant).
-            direction = zero[j] - zero[roles[fallback_from]]
+            # estimate: continue the parent bone by half its length
+            direction = rest[j] - pos(fallback_from)
             if f"no end point for '{skeleton.names[j]}': estimated" not in notes:
                 notes.append(f"no end point for '{skeleton.names[j]}': estimated")
-            return rest[j] + R_ref[j] @ (0.5 * direction)
+            return rest[j] + 0.5 * direction
 
         segs = []  # (name, joint, rest COM point, de Leva key)
 

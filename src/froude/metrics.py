@@ -378,9 +378,11 @@ def stance_rest_heights(markers: np.ndarray, gait: Gait, floor: float) -> tuple[
     stance (foot, start, stop, (3,) lowest heights [m]). About the stance: widened as the skate measure's
     (_skate_windows: SKATE_MARGIN_S, not past the middle of the swings), because a toe tip comes lowest as
     the heel rises at push-off, where the contact test may already have let the foot go (a frame earlier in
-    one motion than in another would change the figure by the tip's drop in that frame).
+    one motion than in another would change the figure by the tip's drop in that frame). A point below the
+    floor rests on it (0): how deep it goes is the penetration's bar (a folded rig's estimated toe tip rests
+    5 mm under the floor of dataset-1_run_tired_001, which its troll, copying it, took 8 mm deep).
     """
-    per = [(foot, s.start, s.stop, markers[a:b, foot, :, UP_AXIS].min(axis=0) - floor)
+    per = [(foot, s.start, s.stop, np.maximum(markers[a:b, foot, :, UP_AXIS].min(axis=0) - floor, 0.0))
            for foot, s, a, b in _skate_windows(gait, markers.shape[0]) if not s.partial]
     per.sort(key=lambda x: x[1])
     rest = np.full((2, 3), np.nan)

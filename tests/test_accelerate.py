@@ -61,7 +61,8 @@ def test_paper_figure3_row3(prepared):
 
 
 @pytest.mark.parametrize("kwargs, needle", [
-    (dict(to_factor=10.0, steps=1), "cannot change speed"),
+    (dict(to_factor=10.0, steps=1, unlimited=True), "cannot change speed"),  # the planner's own refusal
+    (dict(to_factor=10.0, steps=1), "beyond the human range"),  # issue 30: before any planning
     (dict(to_speed=0.0, steps=8), "must be > 0"),
     (dict(to_factor=-1.0, steps=8), "must be > 0"),
 ])

@@ -21,10 +21,9 @@ PRESETS = ("child", "troll", "giant", "small")
 #: Speed factors of acceptance 13.4.
 SPEEDS_134 = (0.5, 0.7, 1.5, 1.8, 2.0)
 #: x1.5 outputs (acceptance 13.3's fastest column) that miss a bar, measured at 120 Hz (the clips' rate):
-#: strict xfail, so that one that starts meeting the bars comes off the list.
+#: strict xfail, so that one that starts meeting the bars comes off the list (09_04 child met them with the
+#: human speed law: 1.5 x the speed at a 13 % higher cadence, steps 11 % shorter than with the step time kept).
 FAST_MISSES = {
-    ("09_04", "child"): "joint jump 20.05 deg (<= 1.5 x reference 13.11): a knee in the late swing, where the "
-                        "time-warped reference pose itself turns 9.2 deg per frame",
     ("09_04", "small"): "joint jump 20.88 deg (<= 1.5 x reference 13.11): a toe at the first touchdown",
 }
 
@@ -62,9 +61,10 @@ def test_bandai_speed_factors_met_or_refused_with_the_range(prepared, name):
 
 
 def test_an_unreachable_speed_is_refused_in_one_line_with_the_range(run_cli, tmp_path):
-    """x2 of a Bandai run as delivered: not written, one line that gives the range in x and m/s."""
+    """x1.8 of a Bandai run as delivered (a joint jump of 1.6 x the clip's; with the human speed law its x2.0
+    meets every bar): not written, one line that gives the range in x and m/s."""
     out = tmp_path / "fast.bvh"
-    code, _, err = run_cli("scale", clip("dataset-1_dash_feminine_001"), "--speed", "2.0", "-o", out)
+    code, _, err = run_cli("scale", clip("dataset-1_dash_feminine_001"), "--speed", "1.8", "-o", out)
     assert code in (1, 2) and not out.exists()
     lines = [ln for ln in err.strip().splitlines() if "x0." in ln or "x1." in ln]
     assert len(lines) == 1 and "m/s" in lines[0] and "steady speeds are x" in lines[0]

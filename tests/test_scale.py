@@ -55,8 +55,10 @@ def test_physics_bars_every_preset_and_speed(prepared, name, preset, s):
 
 @pytest.mark.parametrize("name", clip_params(["09_01", "09_05", "02_03"]))
 def test_dynamic_similarity(prepared, name):
-    """Acceptance 2: step frequency × L^-1/2 and U unchanged for a scaled character; speed × s and step
-    duration unchanged for a speed change."""
+    """Acceptance 2: step frequency × L^-1/2 and U unchanged for a scaled character; speed × s and the step
+    duration of the human speed law (issue 30: it replaced §5.2's step duration kept) for a speed change."""
+    from froude.machine.speed_law import cadence_ratio
+
     prep = prepared[name]
     same = pipeline.scale(prep, None, speed=1.0, strides=6).report
     for preset in ("child", "troll", "giant"):
@@ -67,7 +69,8 @@ def test_dynamic_similarity(prepared, name):
     for s in (0.7, 1.2):
         rep = pipeline.scale(prep, None, speed=s, strides=6).report
         assert rep.mean_speed_m_s == pytest.approx(s * same.mean_speed_m_s, rel=0.02)
-        assert 1.0 / rep.step_frequency_hz == pytest.approx(1.0 / same.step_frequency_hz, rel=0.02)
+        law = float(cadence_ratio(s, prep.law_cadence))
+        assert rep.step_frequency_hz == pytest.approx(law * same.step_frequency_hz, rel=0.02)
 
 
 def test_naive_baseline_floats(prepared):

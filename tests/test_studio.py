@@ -266,7 +266,7 @@ def test_a_change_is_not_held_up_by_the_speed_range_search(session, monkeypatch)
     tabs: list = []
     ready = threading.Event()
 
-    def speed_ok(prep, character, s, numbers):  # a stand-in for a 4-stride output and its bars
+    def speed_ok(prep, character, s, numbers, unlimited):  # a stand-in for a 4-stride output and its bars
         ready.wait(30)
         checked.append((character, s))
         if character is None and len(checked) == 3:
@@ -338,6 +338,12 @@ def test_bvh_export_options(session, tmp_path):
         cm, text = got[("centimetres", "30 Hz", "in place")]
         assert abs(cm.fps - 30.0) < 1e-3 and abs(cm.n_frames - res.duration * 30) <= 1
         assert np.ptp(cm.root_positions[:, [0, 2]], axis=0).max() < 0.3  # in place: no travel
+        # the same in-place motion as the CLI's (only the forward progression off the root: the sideways sway
+        # stays), at 30 Hz; the studio took the COM's whole horizontal motion off before
+        from froude.result import in_place_motion
+
+        cli = in_place_motion(tab.good.result).resample(30.0)
+        assert np.abs(cm.root_positions - cli.root_positions).max() < 1e-4
         assert cm.skeleton.standing_height() == pytest.approx(same.skeleton.standing_height(), rel=0.02)
 
         def offsets(t):
@@ -428,8 +434,8 @@ def _free_port() -> int:
 
 
 def test_unreachable_speed_says_so_in_metres_per_second(monkeypatch):
-    """A speed with no running cycle (a Bandai run at x2, the slider's end) is refused in m/s with the fix,
-    not in the cycle solver's terms."""
+    """A speed with no running cycle (a Bandai run at x1.5, inside its human range, x1.58) is refused in m/s
+    with the fix, not in the cycle solver's terms; past the human range the refusal says the human limit."""
     from froude.errors import FitError
     from froude.prepared import Prepared
 
@@ -441,6 +447,8 @@ def test_unreachable_speed_says_so_in_metres_per_second(monkeypatch):
     def no_cycle(self, speed):
         raise FitError("no running cycle found: the search left the feasible region (liftoff with downward velocity)")
 
-    monkeypatch.setattr(Prepared, "faster_machine", no_cycle)
-    with pytest.raises(FroudeError, match=r"^same cannot run at ×2 \(\d\.\d\d m/s\) on this clip: .* nearer ×1$"):
+    monkeypatch.setattr(Prepared, "machine_at_speed", no_cycle)
+    with pytest.raises(FroudeError, match=r"^same cannot run at ×1.5 \(\d\.\d\d m/s\) on this clip: .* nearer ×1$"):
+        s.solve(Params(speed=1.5))
+    with pytest.raises(FroudeError, match=r"beyond the human range .* the human limit is \d\.\d\d m/s \(x1\.58\)"):
         s.solve(Params(speed=2.0))

@@ -158,11 +158,13 @@ def test_speed_range_outputs_or_refusals(name):
 
 
 def test_speed_refusals_name_the_reachable_range(run_cli, tmp_path):
-    path = clip("09_01")
+    # 09_04: its range ends at a bar (x1.96, a joint jump at x2.0) below its human top (x2.90); a range that
+    # ends at the human top is refused with the human limit instead (tests/test_speed_law.py)
+    path = clip("09_04")
     prep = pipeline.prepare(load_bvh(path))
     rng = reachable_speed_range(prep)
-    # the first speed above the range that was tried and missed a bar (09_01: x2.8): refused, in one line
-    # with the range
+    assert rng.human_top is not None and rng.hi < rng.human_top
+    # the first speed above the range that was tried and missed a bar: refused, in one line with the range
     bad = next(s for s, met, _ in rng.probes if not met and s > rng.hi)
     code, out, err = run_cli("scale", path, "--speed", f"{bad}", "-o", tmp_path / "fast.bvh")
     assert code in (1, 2) and not (tmp_path / "fast.bvh").exists()  # 1: misses a bar; 2: no cycle
@@ -184,12 +186,15 @@ def test_acceleration_refusals_are_in_metres_per_second(run_cli, tmp_path):
     path = clip("09_01")
     prep = pipeline.prepare(load_bvh(path))
     rng = reachable_speed_range(prep)
-    for goal, words in (("3x", "the simple machine runs steadily only between"), ("2x", "too abrupt")):
+    for goal, words in (("3x", "beyond the human range"), ("2x", "too abrupt")):
         code, out, err = run_cli("accelerate", path, "--to-speed", goal, "-o", tmp_path / "a.bvh")
         line = [l for l in err.splitlines() if "error" in l]
         assert code == 2 and not (tmp_path / "a.bvh").exists(), err
         assert len(line) == 1 and words in line[0] and "U =" not in line[0] and "[" not in line[0], line
-        assert f"x{rng.lo:.2f}-{rng.hi:.2f} ({rng.lo_m_s:.2f}-{rng.hi_m_s:.2f} m/s" in line[0]
+        if goal == "3x":  # past the human top (x2.67): the human limit in m/s, before any planning
+            assert "the human limit is" in line[0] and "m/s" in line[0]
+        else:
+            assert f"x{rng.lo:.2f}-{rng.hi:.2f} ({rng.lo_m_s:.2f}-{rng.hi_m_s:.2f} m/s" in line[0]
 
 
 # ---- loops and in-place takes (issue 13 acceptance 2) ---------------------------------------------------

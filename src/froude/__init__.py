@@ -27,7 +27,8 @@ _LAZY = {
     "save": ".api", "scale": ".api",
     "BodyModel": ".body.model", "JointMapError": ".body.model", "find_roles": ".body.model",
     "load_joint_map": ".body.model", "OutputError": ".io.atomic",
-    "BvhError": ".errors", "CharacterError": ".errors", "FitError": ".errors", "FroudeError": ".errors",
+    "BeyondHumanRange": ".errors", "BvhError": ".errors", "CharacterError": ".errors", "FitError": ".errors",
+    "FroudeError": ".errors",
     "IkError": ".errors", "NotARunningMotion": ".errors",
     "NotAWalkingMotion": ".errors", "PlanError": ".errors",
     "Gait": ".body.gait", "GaitSummary": ".body.gait", "Stance": ".body.gait", "detect_gait": ".body.gait",
@@ -40,7 +41,8 @@ _LAZY = {
 
 #: The public names, written out so that tools see them (tests/test_lint.py checks it equals _LAZY's keys).
 __all__ = [
-    "BodyModel", "BvhError", "CharacterError", "FitError", "FroudeError", "Gait", "GaitSummary", "IkError",
+    "BeyondHumanRange", "BodyModel", "BvhError", "CharacterError", "FitError", "FroudeError", "Gait", "GaitSummary",
+    "IkError",
     "JointMapError", "Motion", "NotARunningMotion", "NotAWalkingMotion", "OutputError", "PlanError", "Result",
     "Skeleton", "Stance",
     "accelerate", "detect_gait", "find_roles", "fit", "ground_reaction_force", "load", "load_bvh",
@@ -68,6 +70,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from .core.motion import Motion
     from .core.skeleton import Skeleton
     from .errors import (
+        BeyondHumanRange,
         BvhError,
         CharacterError,
         FitError,

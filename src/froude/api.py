@@ -194,12 +194,14 @@ def _from_pipeline(res, prep) -> Result:
 # ---- the commands -------------------------------------------------------------------------------------------
 @_checked_keywords
 def fit(clip: str | os.PathLike | Motion, *, reference_mass: float = 70.0, length_scale: float | None = None) -> Result:
-    """Fit the simple machine to a running clip (paper §4) and measure it: ``froude fit`` as a function.
+    """Fit the simple machine to a clip (paper §4: the running machine for a run, the walking machine for a
+    walk) and measure it: ``froude fit`` as a function.
 
     clip: a BVH/GLB path or a Motion; reference_mass: the performer's mass [kg]; length_scale: metres per
     BVH file unit (default: detected). The result's ground_force is eq. 1 from the clip's COM; its
     ``machine`` the fitted SimpleMachine; pass it to ``scale``/``accelerate`` to reuse the fit.
-    Raises NotARunningMotion for a walk, FroudeError for a bad file.
+    Raises NotARunningMotion for a clip that neither runs nor walks (in place, too few stances),
+    FroudeError for a bad file.
     """
     from .metrics import physics_report
 
@@ -227,6 +229,7 @@ def scale(
     method: str = "physical",
     reference_mass: float = 70.0,
     length_scale: float | None = None,
+    unlimited: bool = False,
 ) -> Result:
     """The run on another character and/or at another speed (paper §5.1, §5.2, §6): ``froude scale``.
 
@@ -237,7 +240,8 @@ def scale(
     "3.5m/s", as on the command line); target_speed: an absolute speed [m/s] instead; strides (two steps each) or
     duration [s]; fps: output frame rate [Hz] (default: the clip's);
     method: "physical" or "naive" (angles copied, root × L); reference_mass: the performer's mass [kg];
-    length_scale: metres per BVH file unit of the clip (default: detected).
+    length_scale: metres per BVH file unit of the clip (default: detected); unlimited: allow a run faster
+    than the human range for the character's size (default: refused, BeyondHumanRange, with the limit in m/s).
     """
     from . import pipeline
 
@@ -249,8 +253,8 @@ def scale(
     prep = _prepared(clip, reference_mass, length_scale)
     res = pipeline.scale(prep, None if character is None else str(character), speed=speed,
                          target_speed=target_speed, strides=strides, duration=duration, fps=fps, method=method,
-                         height=height, mass=character_mass, leg_scale=leg_scale, arm_scale=arm_scale,
-                         head_scale=head_scale, trunk_scale=trunk_scale)
+                         unlimited=unlimited, height=height, mass=character_mass, leg_scale=leg_scale,
+                         arm_scale=arm_scale, head_scale=head_scale, trunk_scale=trunk_scale)
     return _from_pipeline(res, prep)
 
 
@@ -275,12 +279,13 @@ def accelerate(
     trunk_scale: float | None = None,
     reference_mass: float = 70.0,
     length_scale: float | None = None,
+    unlimited: bool = False,
 ) -> Result:
     """Speed up or slow down over some steps (paper §5.3, §6): ``froude accelerate``.
 
     Exactly one goal: to_speed [m/s] or to_factor (× the start speed); the change takes ``steps`` steps
     (default 8) or happens ``within`` seconds; lead_steps / hold_steps steady steps before / after; policy:
-    "ease" or "even". Character arguments as in ``scale``.
+    "ease" or "even". Character arguments and ``unlimited`` as in ``scale``.
     """
     from . import pipeline
 
@@ -289,8 +294,8 @@ def accelerate(
     prep = _prepared(clip, reference_mass, length_scale)
     res = pipeline.accelerate(prep, None if character is None else str(character), to_speed=to_speed,
                               to_factor=to_factor, steps=steps, within=within, lead_steps=lead_steps,
-                              hold_steps=hold_steps, fps=fps, policy=policy, height=height, mass=character_mass,
-                              leg_scale=leg_scale, arm_scale=arm_scale, head_scale=head_scale,
+                              hold_steps=hold_steps, fps=fps, policy=policy, unlimited=unlimited, height=height,
+                              mass=character_mass, leg_scale=leg_scale, arm_scale=arm_scale, head_scale=head_scale,
                               trunk_scale=trunk_scale)
     return _from_pipeline(res, prep)
 

@@ -58,3 +58,9 @@ class PlanError(FroudeError):
         self.U_one_step = U_one_step
         self.U_sustainable = U_sustainable
         self.steps_needed = steps_needed
+
+
+class BeyondHumanRange(FroudeError):
+    """A speed beyond what a human of the character's size runs (the human speed law's limits: step length,
+    step frequency, stance time); the message says the human limit in m/s. ``--unlimited`` (the API's
+    ``unlimited=True``) lifts it."""

@@ -110,10 +110,12 @@ def scale(prep: Prepared, character=None, *, report: bool = True, **options) -> 
     speed: factor s on the dynamically scaled speed; target_speed: absolute speed [m/s] (overrides speed);
     strides / duration [s]: output length; fps: output frame rate (default: the input's);
     method: "physical" (froude) or "naive" (engines: angles copied, root × L, timing unchanged).
-    speed_model: "stretch" (paper §5.2: horizontal stretch, timing kept), "resolve" (the machine's cycle
-        re-solved at the new speed with stance time / s and the step time kept, see machine.speed), or
-        "auto": stretch when slowing down, resolve when speeding up (a stretched stance would need the leg
-        to reach beyond its length at toe-off).
+    speed_model: "law" (default; "auto" is the same): the machine's cycle re-solved at the new speed with
+        the step and stance times of the human speed law (``machine.speed``, ``machine.speed_law``), faster
+        and slower alike; "stretch": the paper's §5.2 horizontal stretch, timing kept (steps s times longer).
+    unlimited: allow a run faster than the human range for the character's size (the law's step longer
+        than 1.4 × stature, a step frequency or stance time no human sprinter of that size reaches);
+        False (default) refuses it (BeyondHumanRange, saying the human limit in m/s) before any work.
     report: compute the physics report (False: result.report is None; for benchmarks of the synthesis).
     The other options are ``plan_scale``'s (this is ``plan_scale(...).finish(report)``).
     """
@@ -131,6 +133,7 @@ def plan_scale(
     fps: float | None = None,
     method: str = "physical",
     speed_model: str = "auto",
+    unlimited: bool = False,
     **character_numbers,
 ) -> ScalePlan:
     """The first half of ``scale`` (same arguments): character, machine, path. Cheap: no IK."""
@@ -145,7 +148,7 @@ def plan_scale(
     if not lo <= speed <= hi:
         notes.append(
             f"speed factor {speed:.2f} is outside {lo}-{hi}, the range a single reference clip supports well "
-            "(stance time does not change with speed in the vertical-force model, paper §5.2)"
+            "(the poses come from one clip at one speed)"
         )
     step_time = m_scaled.step_time * m_scaled.time_unit
     if duration is not None:
@@ -164,23 +167,56 @@ def plan_scale(
         return ScalePlan(prep, None, retarget, speed, tuple(notes), "naive", None, naive=res)
     if method != "physical":
         raise FroudeError(f"unknown method '{method}' (physical or naive)")
-    if speed_model not in ("auto", "stretch", "resolve"):
-        raise FroudeError(f"unknown speed model '{speed_model}' (auto, stretch or resolve)")
+    if speed_model not in ("auto", "law", "stretch"):
+        raise FroudeError(f"unknown speed model '{speed_model}' (law or stretch)")
     if is_walking(prep.machine):  # a motion's kind chooses its machine
         from .synthesis.walking import walk_scale_path
 
         path, method = walk_scale_path(prep, retarget, speed, n_steps=n_steps, fps=fps)
         return ScalePlan(prep, path, retarget, speed, tuple(notes), method, None)
-    if speed_model == "resolve" or (speed_model == "auto" and speed > 1.0 + 1e-9):
-        machine = prep.faster_machine(speed)
+    if not unlimited:
+        check_human_speed(prep, retarget, speed, m_scaled.mean_speed * m_scaled.speed_unit)
+    if speed_model != "stretch" and abs(speed - 1.0) > 1e-9:
+        machine = prep.machine_at_speed(speed)
         stretch = 1.0
-        method = "physical (cycle re-solved at the new speed)"
+        method = "physical (cycle re-solved at the new speed, human speed law)"
     else:
         machine, stretch = prep.machine, speed
         method = "physical"
     path = machine_path(prep.cycle, machine.scaled(retarget.L, retarget.M), retarget.L, prep.origin,
                         stretch=stretch, n_steps=n_steps, fps=fps)
     return ScalePlan(prep, path, retarget, speed, tuple(notes), method, (machine, stretch, fps))
+
+
+def check_human_speed(prep: Prepared, retarget: Retarget, factor: float, base_m_s: float) -> None:
+    """Refuse (BeyondHumanRange) a run's speed factor past the human range for the character's size
+    (``Prepared.human_top``), saying the human limit in m/s. base_m_s: the character's speed at x1 [m/s]."""
+    from .errors import BeyondHumanRange
+    from .machine.speed_law import HUMAN_TOP_TOL
+
+    top = prep.human_top(retarget)
+    if factor > top.factor + HUMAN_TOP_TOL:
+        raise BeyondHumanRange(
+            f"{factor * base_m_s:.2f} m/s (x{factor:.2f}) is beyond the human range for this character "
+            f"({retarget.body.stature:.2f} m tall): the human limit is {top.sentence(base_m_s, retarget.body.stature)}"
+            "; --unlimited (unlimited=True) lifts it")
+
+
+def check_step_lengths(path: MachinePath, stature_m: float, start_m_s: float, goal_m_s: float) -> None:
+    """Refuse (BeyondHumanRange) a speed change whose machine path has a step longer than a human's
+    (``machine.speed_law.STEP_MAX_PER_STATURE`` × the character's stature ``stature_m`` [m]): the planner
+    keeps the fitted control's stance, so its steps grow with the speed where a runner's cadence would."""
+    from .errors import BeyondHumanRange
+    from .machine.speed_law import STEP_MAX_PER_STATURE
+
+    steps_m = np.linalg.norm(np.diff(path.contacts, axis=0), axis=1)
+    if steps_m.size and steps_m.max() > STEP_MAX_PER_STATURE * stature_m:
+        k = int(np.argmax(steps_m))
+        raise BeyondHumanRange(
+            f"the change from {start_m_s:.2f} to {goal_m_s:.2f} m/s (x{goal_m_s / start_m_s:.2f}) takes a step of "
+            f"{steps_m[k]:.2f} m (step {k + 1}), {steps_m[k] / stature_m:.2f} x stature: longer than the "
+            f"{STEP_MAX_PER_STATURE:g} x stature a human sprinter takes (the planned steps keep the clip's "
+            "stance); choose a goal nearer x1, or --unlimited (unlimited=True)")
 
 
 def accelerate(
@@ -197,6 +233,7 @@ def accelerate(
     energy: str = "auto",
     policy: str = "ease",
     report: bool = True,
+    unlimited: bool = False,
     **character_numbers,
 ) -> Result:
     """§5.3 + §6: speed up or slow down to ``to_speed`` [m/s] or ``to_factor`` × the start speed.
@@ -204,6 +241,7 @@ def accelerate(
     steps: the change takes this many steps (a step = one stance and the flight after it), or
     within: ... this many seconds; lead_steps / hold_steps: steady steps before / after the change.
     The plan is dimensionless, so it is the same for every dynamically similar character.
+    unlimited: allow a goal past the human range for the character's size (see ``plan_scale``).
     """
     from .machine.planner import plan_speed_change
     from .speed_range import plan_refusal, plan_report
@@ -220,6 +258,8 @@ def accelerate(
     v_unit = m.speed_unit
     start_speed = m.U * v_unit  # apex speed of the cycle [m/s]
     target = accelerate_goal(to_speed, to_factor, start_speed, steps, within)
+    if not unlimited:
+        check_human_speed(prep, retarget, target / start_speed, start_speed)
     try:
         plan = plan_speed_change(
             m, target / v_unit, n_steps=None if within is not None else steps,
@@ -231,6 +271,8 @@ def accelerate(
     fps = prep.motion.fps if fps is None else float(fps)
     path = machine_path(prep.cycle, m, retarget.L, prep.origin, n_steps=plan.n_steps, fps=fps,
                         theta0=plan.theta0, controls=plan.controls, start_state=(float(plan.U[0]), float(plan.H[0])))
+    if not unlimited:
+        check_step_lengths(path, retarget.body.stature, start_speed, target)
     notes = list(prep.notes) + list(plan.notes)
     extras = {"plan": plan_report(plan, m, start_speed, target)}
     return finish(prep, path, retarget, 1.0, notes, "physical", plan=plan, report=report, extras=extras)

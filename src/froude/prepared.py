@@ -26,7 +26,8 @@ class Memo:
 
     retargets: (preset name or None, character numbers) -> Retarget (built-in presets and the reference's
     own body only; files and Character objects are built each time); faster_machines: speed factor ->
-    the machine re-solved for it; speed_ranges: character key -> speed_range.SpeedRange; speed_probes:
+    the machine re-solved for it (slower or faster); speed_ranges: character key -> speed_range.SpeedRange;
+    speed_probes:
     character key -> {speed factor: (meets the bars, why not)}, the outputs a range search checked (kept
     when the search is stopped, so that its next run repeats none).
     """
@@ -68,11 +69,21 @@ class Prepared:
         """Provenance every output motion of this clip carries (source file, the input's length scale)."""
         return {"source": self.source, "length_scale": float(self.motion.meta.get("length_scale", 1.0))}
 
-    def faster_machine(self, speed: float):
-        """``machine.speed.faster_machine(self.machine, speed)`` (a walk: the walking cycle re-solved,
-        ``machine.walk_speed``), remembered per speed factor."""
+    @property
+    def law_cadence(self) -> float:
+        """Where a run sits on the human speed law: the fitted cycle's step frequency in Froude terms of the
+        runner's stature, f √(S/g) [-] (``machine.speed_law``)."""
+        from .machine.speed_law import froude_cadence
+
+        m = self.machine
+        return float(froude_cadence(1.0 / (m.step_time * m.time_unit), self.body.stature))
+
+    def machine_at_speed(self, speed: float):
+        """The machine re-solved at ``speed`` × the clip's speed: a run by the human speed law
+        (``machine.speed.machine_at_speed``), a walk by its walking cycle (``machine.walk_speed``);
+        remembered per speed factor."""
         from .machine import is_walking
-        from .machine.speed import faster_machine
+        from .machine.speed import machine_at_speed
         from .machine.walk_speed import walking_machines_at_speeds
 
         key = float(speed)
@@ -81,8 +92,21 @@ class Prepared:
             if is_walking(self.machine):
                 walk: Any = self.machine  # a WalkingMachine (the fit of a walk)
                 return walking_machines_at_speeds(walk, [key], self.memo.faster_machines)[key]
-            hit = self.memo.faster_machines[key] = faster_machine(self.machine, key)
+            hit = self.memo.faster_machines[key] = machine_at_speed(self.machine, key, self.law_cadence)
         return hit
+
+    def human_top(self, retarget: Retarget):
+        """``machine.speed_law.human_top_factor`` of a run for one character: the fastest speed factor whose
+        steady step stays inside the human limits for the character's stature (the clip's cycle scaled to
+        it by dynamic similarity, the law placed by the clip's own cadence)."""
+        from .constants import GRAVITY
+        from .machine.speed_law import human_top_factor
+
+        m = self.machine.scaled(retarget.L, retarget.M)
+        stature = retarget.body.stature
+        t_unit = m.time_unit / float(np.sqrt(stature / GRAVITY))  # the machine's time unit in √(S/g)
+        return human_top_factor(self.law_cadence, m.step_time * t_unit, m.t_stance * t_unit, m.t_flight * t_unit,
+                                m.step_length * m.l0 / stature)
 
     def retarget(self, character=None, **character_numbers) -> Retarget:
         """``apply_character(resolve_character(character, **numbers), self.body)``, remembered for the

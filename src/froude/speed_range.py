@@ -17,7 +17,9 @@ class SpeedRange:
 
     lo, hi: speed factors on the character's dynamically scaled speed [-]; lo_m_s, hi_m_s: the same in
     m/s; base_m_s: the character's speed at factor 1 [m/s] (the clip's mean speed for its own body).
-    probes: ((factor, met: bool, reason), ...) every output tried, in order.
+    probes: ((factor, met: bool, reason), ...) every output tried, in order. human_top: the fastest factor
+    inside the human range for the character's size (``Prepared.human_top``; None: not limited, a walk or
+    ``unlimited``), the end of the search when it is below SPEED_SEARCH_RANGE's.
     """
 
     lo: float
@@ -27,6 +29,7 @@ class SpeedRange:
     base_m_s: float
     probes: tuple = ()
     empty: bool = False  # True when not even x1 meets every bar
+    human_top: float | None = None
 
     def describe(self) -> str:
         if self.empty:
@@ -37,7 +40,8 @@ class SpeedRange:
     def sentence(self) -> str:
         """The range as refusals and bar misses say it (scale and accelerate alike)."""
         # "steady": the range is probed with ``scale`` outputs; walks and runs alike
-        return f"with every physics bar met this character's steady speeds are {self.describe()}"
+        human = "" if self.human_top is None else " and inside the human range for its size"
+        return f"with every physics bar met{human} this character's steady speeds are {self.describe()}"
 
 
 class SearchStopped(Exception):
@@ -50,14 +54,15 @@ SPEED_SEARCH_RANGE = (0.3, 3.0)
 SPEED_SEARCH_TOL = 0.03
 
 
-def _speed_ok(prep: Prepared, character, s: float, numbers: dict) -> tuple[bool, str]:
-    """Whether a 4-stride output (scale's default) at speed factor s meets every physics bar, and why not."""
-    from .errors import FitError
+def _speed_ok(prep: Prepared, character, s: float, numbers: dict, unlimited: bool) -> tuple[bool, str]:
+    """Whether a 4-stride output (scale's default) at speed factor s meets every physics bar (and is inside
+    the human range unless ``unlimited``), and why not."""
+    from .errors import BeyondHumanRange, FitError
     from .pipeline import plan_scale
 
     try:
-        rep = plan_scale(prep, character, speed=s, strides=4, **numbers).finish().report
-    except FitError as e:
+        rep = plan_scale(prep, character, speed=s, strides=4, unlimited=unlimited, **numbers).finish().report
+    except (FitError, BeyondHumanRange) as e:
         return False, str(e)
     assert rep is not None  # finish() computes the report by default
     fails = rep.check_bars()
@@ -94,8 +99,10 @@ def _bisect(ok, good: float, bad: float) -> float:
     return good
 
 
-def reachable_speed_range(prep: Prepared, character=None, *, stop=None, **character_numbers) -> SpeedRange:
-    """The range of ``scale`` speed factors whose outputs meet every physics bar, for one character.
+def reachable_speed_range(prep: Prepared, character=None, *, stop=None, unlimited: bool = False,
+                          **character_numbers) -> SpeedRange:
+    """The range of ``scale`` speed factors whose outputs meet every physics bar, for one character, inside
+    the human range for its size (a run: ``Prepared.human_top`` ends the search; ``unlimited`` lifts it).
 
     Bisection on real outputs (4 strides each, the same synthesis and IK as ``scale``) between 1 and the
     ends of SPEED_SEARCH_RANGE, to SPEED_SEARCH_TOL; the ends returned were themselves produced and
@@ -110,13 +117,18 @@ def reachable_speed_range(prep: Prepared, character=None, *, stop=None, **charac
     resumes where this one stopped (the probes are the same: the search is deterministic).
     """
     key = ("speed_range", character if isinstance(character, (str, type(None))) else id(character),
-           tuple(sorted((k, v) for k, v in character_numbers.items() if v is not None)))
+           tuple(sorted((k, v) for k, v in character_numbers.items() if v is not None)), bool(unlimited))
     hit = prep.memo.speed_ranges.get(key)
     if hit is not None:
         return hit
+    from .machine import is_walking
+
     rt = prep.retarget(character, **character_numbers)
     m = prep.machine.scaled(rt.L, rt.M)
     base = m.mean_speed * m.speed_unit
+    human_top = None if unlimited or is_walking(prep.machine) else prep.human_top(rt).factor
+    search = (SPEED_SEARCH_RANGE[0],
+              SPEED_SEARCH_RANGE[1] if human_top is None else max(1.0, min(SPEED_SEARCH_RANGE[1], human_top)))
     probes = []
     seen = prep.memo.speed_probes.setdefault(key, {})
 
@@ -125,7 +137,7 @@ def reachable_speed_range(prep: Prepared, character=None, *, stop=None, **charac
         if s not in seen:
             if stop is not None and stop():
                 raise SearchStopped(f"speed range search for {character!r} stopped after {len(seen)} outputs")
-            seen[s] = _speed_ok(prep, character, s, character_numbers)
+            seen[s] = _speed_ok(prep, character, s, character_numbers, unlimited)
         good, why = seen[s]
         probes.append((s, good, why))
         return good
@@ -134,11 +146,11 @@ def reachable_speed_range(prep: Prepared, character=None, *, stop=None, **charac
         lo = hi = 1.0  # not even the clip's own speed meets the bars: nothing is reachable (empty range)
     else:
         ends = []
-        for far in SPEED_SEARCH_RANGE:
+        for far in search:
             ends.append(far if ok(far) else _bisect(ok, 1.0, far))
         lo, hi = (_walk_in(ok, far, end) for far, end in zip((-1.0, 1.0), ends))
     out = SpeedRange(lo=lo, hi=hi, lo_m_s=lo * base, hi_m_s=hi * base, base_m_s=base, probes=tuple(probes),
-                     empty=not probes[0][1])
+                     empty=not probes[0][1], human_top=human_top)
     prep.memo.speed_ranges[key] = out
     prep.memo.speed_probes.pop(key, None)  # the range itself is remembered now
     return out

@@ -117,7 +117,7 @@ def _expected_and_naive_cadence(prep, res, f_clip: float, L: float, s: float) ->
         t = np.asarray(plan["step_time_s"], float)
         factors = np.asarray(plan["apex_speed_m_s"], float) / float(plan["start_speed_m_s"])
         return 1.0 / float(np.mean(t)), f_clip * float(np.sum(factors * t) / np.sum(t))
-    law = prep.machine.t_step / prep.faster_machine(s).t_step if s > 1.0 else 1.0
+    law = prep.machine.t_step / prep.machine_at_speed(s).t_step if s > 1.0 else 1.0
     return f_clip * L ** -0.5 * law, f_clip * s
 
 

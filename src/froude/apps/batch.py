@@ -47,7 +47,7 @@ if TYPE_CHECKING:
 #: short tags used in variation ids.
 CHARACTER_NUMBERS = {"height": "h", "mass": "m", "leg_scale": "legs", "arm_scale": "arms",
                      "head_scale": "head", "trunk_scale": "trunk"}
-PLAN_KEYS = ("characters", "speeds", "strides", "accelerations", "fps", "reference")
+PLAN_KEYS = ("characters", "speeds", "strides", "accelerations", "fps", "reference", "unlimited")
 ACCELERATION_KEYS = ("to_factor", "to_speed", "steps", "within", "lead_steps", "hold_steps")
 REFERENCE_KEYS = ("mass", "sex", "length_scale")
 #: Environment of every local worker process: one thread for every numerical library.
@@ -78,6 +78,7 @@ accelerations:                    # speed changes (each character x each entry)
   - {to_factor: 1.3, steps: 30}
   - {to_speed: 2.5, steps: 20, lead_steps: 2, hold_steps: 4}
 fps: null                         # output frame rate (default: the clip's)
+unlimited: false                  # true: allow runs past the human range for each character's size
 reference: {mass: 70, sex: male, length_scale: null}   # the performer in the clips
 """
 
@@ -193,6 +194,11 @@ def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
         bad("speeds", "the plan has no variations: give speeds and/or accelerations")
 
     fps_arg = () if fps is None else (("fps", fps),)
+    unlimited = data.get("unlimited", False)
+    if not isinstance(unlimited, bool):
+        bad("unlimited", f"true or false, got {unlimited!r}")
+    # keyword arguments of every variation (scale's and accelerate's alike)
+    common = fps_arg + ((("unlimited", True),) if unlimited else ())
     n_var = len(characters) * (len(speed_args) * len(strides) + len(acc_args))
     if n_var > MAX_VARIATIONS:
         bad("characters", f"the plan expands to {n_var:,} variations; at most {MAX_VARIATIONS:,}")
@@ -200,9 +206,9 @@ def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
     for label, spec, numbers in characters:
         for (sid, sarg), n in itertools.product(speed_args, strides):
             variations.append(Variation(f"{label}_{sid}_{n}str", "scale", label, spec, numbers,
-                                        sarg + (("strides", n),) + fps_arg))
+                                        sarg + (("strides", n),) + common))
         for aid, aarg in acc_args:
-            variations.append(Variation(f"{label}_{aid}", "accelerate", label, spec, numbers, aarg + fps_arg))
+            variations.append(Variation(f"{label}_{aid}", "accelerate", label, spec, numbers, aarg + common))
     seen: dict[str, tuple[str, dict]] = {}
     for v in variations:
         key = v.id.lower()  # ids name files: on a case-insensitive filesystem "Tall" and "tall" are one

@@ -165,7 +165,7 @@ def walk_scale_path(prep, retarget, speed: float, *, n_steps: int, fps: float):
     walk = prep.machine  # a WalkingMachine (prepare chose it for the walk)
     check_walking_speed(walk.scaled(retarget.L, retarget.M), speed)
     if speed > 1.0 + 1e-9:  # longer and quicker steps
-        machine, stretch = prep.faster_machine(speed), 1.0
+        machine, stretch = prep.machine_at_speed(speed), 1.0
         method = "physical (walking cycle re-solved at the new speed)"
     else:
         machine, stretch, method = walk, speed, "physical"

@@ -16,6 +16,7 @@ from .common import (
     add_quiet,
     add_range_option,
     add_root_option,
+    add_unlimited,
     bound_work,
     character_input,
     character_kwargs,
@@ -85,6 +86,7 @@ def register(sub) -> None:
     add_output_options(p)
     add_range_option(p)
     add_keep(p)
+    add_unlimited(p)
     add_root_option(p)
     p.set_defaults(func=run)
 
@@ -119,7 +121,7 @@ def run(args) -> int:
         res = pipeline.accelerate(
             prep, args.character, to_speed=goal.m_s, to_factor=goal.factor, steps=None if args.within else steps,
             within=args.within, lead_steps=args.lead_steps, hold_steps=args.hold_steps, fps=args.fps,
-            policy=args.policy, **character_kwargs(args),
+            policy=args.policy, unlimited=args.unlimited, **character_kwargs(args),
         )
     except PlanError as e:
         raise PlanError(f"{e}; {_steady_range(prep, args)}") from None
@@ -163,7 +165,7 @@ def _steady_range(prep, args) -> str:
     """The steady speeds whose outputs meet every bar for this character (a goal outside them will not)."""
     from ...speed_range import reachable_speed_range
 
-    return reachable_speed_range(prep, args.character, **character_kwargs(args)).sentence()
+    return reachable_speed_range(prep, args.character, unlimited=args.unlimited, **character_kwargs(args)).sentence()
 
 
 def _plot_files(plot):

@@ -101,6 +101,13 @@ def add_keep(p) -> None:
                    "bars missed and the reachable speeds are said, and the exit status is 1)")
 
 
+def add_unlimited(p) -> None:
+    p.add_argument("--unlimited", action="store_true",
+                   help="allow a run faster than the human range for the character's size (a step longer "
+                   "than 1.4 x stature, a step frequency or stance time no human sprinter of that size "
+                   "reaches); otherwise such a speed is refused with the human limit in m/s")
+
+
 def add_root_option(p) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--in-place", dest="in_place", action="store_const", const=True, default=None,

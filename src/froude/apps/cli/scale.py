@@ -18,6 +18,7 @@ from .common import (
     add_quiet,
     add_range_option,
     add_root_option,
+    add_unlimited,
     bound_work,
     character_input,
     character_kwargs,
@@ -47,8 +48,9 @@ def register(sub) -> None:
     p = sub.add_parser(
         "scale", help=HELP,
         description="Fit the simple machine to the clip, scale it to the character by dynamic similarity "
-        "(times x sqrt(L), speeds x sqrt(L)), change its speed (slower: horizontal stretching, paper 5.2; "
-        "faster: the machine's cycle re-solved with a shorter stance), synthesise any number of strides and "
+        "(times x sqrt(L), speeds x sqrt(L)), change its speed (the machine's cycle re-solved with the step "
+        "length and step frequency runners use at that speed, within the human range for the character's size "
+        "unless --unlimited), synthesise any number of strides and "
         "correct the whole body with IK. Writes OUT.bvh or OUT.glb/.gltf (same joint names and "
         "channel orders as the input, the target's bone lengths) and OUT.report.json (the physics report), "
         "both or neither. Every option is checked before the work starts; an output that would replace an "
@@ -80,6 +82,7 @@ def register(sub) -> None:
     add_output_options(p)
     add_range_option(p)
     add_keep(p)
+    add_unlimited(p)
     add_root_option(p)
     p.set_defaults(func=run)
 
@@ -111,7 +114,8 @@ def run(args) -> int:
     try:
         res = pipeline.scale(prep, args.character, speed=goal.factor if goal and goal.factor else 1.0,
                              target_speed=goal.m_s if goal else None, strides=args.strides,
-                             duration=args.duration, fps=args.fps, method=args.method, **character_kwargs(args))
+                             duration=args.duration, fps=args.fps, method=args.method, unlimited=args.unlimited,
+                             **character_kwargs(args))
     except FitError as e:
         if args.method != "physical":
             raise
@@ -163,7 +167,7 @@ def _speed_range(prep, args):
     never needs it)."""
     from ...speed_range import reachable_speed_range
 
-    return reachable_speed_range(prep, args.character, **character_kwargs(args))
+    return reachable_speed_range(prep, args.character, unlimited=args.unlimited, **character_kwargs(args))
 
 
 def _bound(prep, args) -> bool:

@@ -749,21 +749,19 @@ class Tab:
 
     def _on_download_bvh(self, event) -> None:
         """The result as BVH: in the clip's units or metres/centimetres, at the clip's rate or another, with
-        its root motion or in place (the horizontal travel of the COM taken off the root)."""
+        its root motion or in place (the CLI's ``in_place_motion``: only the forward progression between
+        touchdowns comes off the root, so the sway and the surge within each step stay)."""
         from ...io.bvh import bvh_text
+        from ...result import in_place_motion
 
         units, rate, root = str(self.gui_bvh_units.value), str(self.gui_bvh_fps.value), str(self.gui_bvh_root.value)
         if units not in BVH_UNITS or rate not in BVH_RATES or root not in BVH_ROOT:  # crafted values
             self._show_error("BVH export options must be chosen from their lists")
             return
-        motion = self._good_result.motion
+        # in place before resampling: the machine path's touchdowns are on the result's own frames
+        motion = in_place_motion(self._good_result) if root == "in place" else self._good_result.motion
         if rate != BVH_RATES[0]:
             motion = motion.resample(float(rate.split()[0]))
-        if root == "in place":
-            com = self._good_result.retarget.body.com(motion)
-            travel = com - com[:1]
-            travel[:, UP_AXIS] = 0.0
-            motion = motion.with_(root_positions=motion.root_positions - travel)
         scale = {"metres": 1.0, "centimetres": 0.01}.get(units)
         self._send(event, self._file_stem() + ".bvh", bvh_text(motion, scale).encode())
 

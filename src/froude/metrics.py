@@ -16,6 +16,7 @@ from .constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
 from .core import quat
 from .core.motion import Motion
 from .io.jsonable import dumps, jsonable
+from .machine.speed_law import STEP_MAX_PER_STATURE
 
 #: The project's physics bars (docs/architecture.md, "Quality bars").
 BARS = {
@@ -27,7 +28,7 @@ BARS = {
     "penetration_mm": 5.0,
     "joint_jump_ratio": 1.5,
     "rest_height_L": 0.003,
-    "step_length_stature": 1.4,
+    "step_length_stature": STEP_MAX_PER_STATURE,
 }
 
 
@@ -157,7 +158,8 @@ class Report:
         if np.isfinite(self.max_step_length_m) and np.isfinite(self.stature_m):
             lim = BARS["step_length_stature"] * self.stature_m
             if not self.max_step_length_m <= lim:
-                fails.append(f"step of {self.max_step_length_m:.2f} m, longer than 1.4 x stature ({lim:.2f} m)"
+                fails.append(f"step of {self.max_step_length_m:.2f} m, longer than "
+                             f"{BARS['step_length_stature']:g} x stature ({lim:.2f} m)"
                              + _where(self.longest_step))
         if not np.isnan(self.reference_max_joint_jump_deg):
             lim = BARS["joint_jump_ratio"] * self.reference_max_joint_jump_deg

@@ -156,11 +156,9 @@ def _rest_on_floor(markers: np.ndarray, path: MachinePath, rest: np.ndarray) -> 
     """markers (T, 2, 3, 3) [m] with each foot's markers resting at ``rest`` (2, 3) [m] (the clip's, × L, above
     the ground at 0) in every contact: each marker's lowest target about the contact (REST_MARGIN_S either
     side, not past the middle of the swings) moved there, the whole contact by as much, the change fading
-    out (min-jerk) from the margin to the middle of the swings. A contact whose margins the output's edges
-    cut is left as it is: its lowest point may lie beyond them (a walk's last contact, pulled down by a
-    swinging foot's height, dragged the foot along the floor), and the last one of a run, ending 0.07 s before
-    the output's end, had its heel and tip targets 15-28 mm above the other contacts' (09_06 as a giant):
-    lowered to the rest heights, its tip slid 6.5 mm.
+    out (min-jerk) from the margin to the middle of the swings. A contact cut by the output's edges is left
+    as it is (its lowest point may lie beyond them: a walk's last contact, pulled down by a swinging foot's
+    height, dragged the foot along the floor).
 
     The reference cycle averages the clip's stances at each phase (a low point reached at different phases
     is raised: the mean of dips stays above them), its de-skating tilts a steep toe bone about its held end
@@ -179,9 +177,9 @@ def _rest_on_floor(markers: np.ndarray, path: MachinePath, rest: np.ndarray) -> 
         for i in range(len(on)):
             lo = 0.5 * (off[i - 1] + on[i]) if i > 0 else on[i] - (off[i] - on[i])
             hi = 0.5 * (off[i] + on[i + 1]) if i + 1 < len(on) else off[i] + (off[i] - on[i])
+            if on[i] < t[0] or off[i] > t[-1]:
+                continue  # cut by the output's edge (or a virtual contact beyond it): its lowest point unseen
             a, b = max(lo, on[i] - REST_MARGIN_S), min(hi, off[i] + REST_MARGIN_S)
-            if a < t[0] or b > t[-1]:
-                continue  # cut by the output's edges (or a virtual contact beyond them)
             inside = (t >= a) & (t <= b)
             change = rest[foot] - markers[inside, foot, :, UP_AXIS].min(axis=0)  # (3,)
             w = np.where(t < a, min_jerk((t - lo) / max(a - lo, 1e-9)),

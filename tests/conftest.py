@@ -222,3 +222,22 @@ def run_cli(capsys):
         return code, out, err
 
     return run
+
+
+def bpy_python() -> str:
+    """A Python that imports ``bpy`` (Blender as a module): $FROUDE_BPY_PYTHON, the one scripts/test installs
+    (.tools/bpy-venv: bpy 5.0 needs NumPy < 2, so it has its own venv), or this one. Skips the test saying so
+    when there is none, except in CI (scripts/test installs it), where that is a failure."""
+    import subprocess
+    import sys
+
+    for py in (os.environ.get("FROUDE_BPY_PYTHON"), str(REPO / ".tools" / "bpy-venv" / "bin" / "python"),
+               sys.executable):
+        if py and Path(py).exists() and subprocess.run([py, "-c", "import bpy"], capture_output=True,
+                                                       timeout=120).returncode == 0:
+            return py
+    msg = ("bpy (Blender as a Python module) is not installed: scripts/test installs it into .tools/bpy-venv, "
+           "or set FROUDE_BPY_PYTHON to a Python that has it")
+    if os.environ.get("CI"):
+        pytest.fail(msg)
+    pytest.skip(msg)

@@ -2,8 +2,8 @@
 ``froude.fit/scale/accelerate`` and the example script, on real CMU and Bandai clips.
 
 The validator is the npm package gltf-validator, installed by scripts/test into .tools/ (or found through
-$FROUDE_GLTF_VALIDATOR); Blender is the ``bpy`` wheel, imported by $FROUDE_BPY_PYTHON or this Python (it
-is ~370 MB, so CI does not install it and that test skips saying so).
+$FROUDE_GLTF_VALIDATOR); Blender is the ``bpy`` wheel (``conftest.bpy_python``: scripts/test installs it into
+.tools/bpy-venv; in CI its absence is a failure).
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ import froude
 from froude.core.kinematics import fk
 from froude.io.framedata import peak_vertical_force_bw, read_frame_data
 
-from conftest import clip
+from conftest import bpy_python, clip
 
 pytest.importorskip("pygltflib")
 
@@ -92,19 +92,9 @@ def test_gltf_round_trip_keeps_the_pose(outputs, tmp_path, suffix):
         assert err < 1e-5, f"{name}: joint positions differ by {err * 1000:.4f} mm"  # float32 in the file
 
 
-def _bpy_python() -> str | None:
-    for py in (os.environ.get("FROUDE_BPY_PYTHON"), sys.executable):
-        if py and subprocess.run([py, "-c", "import bpy"], capture_output=True, timeout=120).returncode == 0:
-            return py
-    return None
-
-
 def test_blender_imports_the_glb_with_froude_joint_positions(outputs, tmp_path):
     """Blender's own glTF importer (bpy wheel): every joint of every frame within 1 mm of froude's FK."""
-    py = _bpy_python()
-    if py is None:
-        pytest.skip("bpy (Blender as a Python module, ~370 MB wheel for Python 3.11) is not installed here; "
-                    "set FROUDE_BPY_PYTHON to a Python that has it")
+    py = bpy_python()
     for name, res in outputs.items():
         glb = res.save(tmp_path / f"{name}.glb", report=False)[0]
         out = tmp_path / f"{name}.json"

@@ -23,7 +23,8 @@ __version__ = "0.1.0"
 
 #: Public name -> the module that defines it (one line per name: add new public names here).
 _LAZY = {
-    "Result": ".api", "accelerate": ".api", "fit": ".api", "ground_reaction_force": ".api", "load": ".api",
+    "Result": ".api", "accelerate": ".api", "fit": ".api", "ground_reaction_force": ".api", "info": ".api",
+    "load": ".api",
     "save": ".api", "scale": ".api",
     "BodyModel": ".body.model", "JointMapError": ".body.model", "find_roles": ".body.model",
     "load_joint_map": ".body.model", "OutputError": ".io.atomic",
@@ -45,7 +46,7 @@ __all__ = [
     "IkError",
     "JointMapError", "Motion", "NotARunningMotion", "NotAWalkingMotion", "OutputError", "PlanError", "Result",
     "Skeleton", "Stance",
-    "accelerate", "detect_gait", "find_roles", "fit", "ground_reaction_force", "load", "load_bvh",
+    "accelerate", "detect_gait", "find_roles", "fit", "ground_reaction_force", "info", "load", "load_bvh",
     "load_joint_map", "sample_path", "save", "save_bvh", "scale", "summarize",
 ]
 
@@ -64,7 +65,7 @@ def __dir__():
 
 
 if TYPE_CHECKING:  # static analysers and IDEs see the real imports
-    from .api import Result, accelerate, fit, ground_reaction_force, load, save, scale
+    from .api import Result, accelerate, fit, ground_reaction_force, info, load, save, scale
     from .body.gait import Gait, GaitSummary, Stance, detect_gait, summarize
     from .body.model import BodyModel, JointMapError, find_roles, load_joint_map
     from .core.motion import Motion

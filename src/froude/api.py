@@ -9,6 +9,7 @@
     child.save("child.glb")                               # .bvh / .glb / .gltf (+ child.report.json)
     child.save_data("child.csv")                          # per frame: .csv / .parquet / .npz
     faster = froude.accelerate(fitted, to_factor=1.3, steps=8)
+    froude.info(run)["froude_U"]                           # what ``froude info --json`` says
     f = froude.ground_reaction_force(run)                 # (F, 3) [N] from the COM, eq. 1
 
 Every function calls the same pipeline as the CLI (``froude.pipeline``). A misspelt keyword argument is a
@@ -30,7 +31,7 @@ import numpy as np
 from .core.motion import Motion
 from .errors import FroudeError
 
-__all__ = ["Result", "accelerate", "fit", "ground_reaction_force", "load", "save", "scale"]
+__all__ = ["Result", "accelerate", "fit", "ground_reaction_force", "info", "load", "save", "scale"]
 
 #: Suffixes froude reads and writes motions as.
 MOTION_SUFFIXES = (".bvh", ".glb", ".gltf")
@@ -61,15 +62,15 @@ def load(path: str | os.PathLike, *, length_scale: float | None = None, clean: b
          fps: float | None = None) -> Motion:
     """A motion from a ``.bvh`` or ``.glb``/``.gltf`` file, in SI units (+Y up).
 
-    length_scale: metres per BVH file unit (default: detected from the skeleton's height);
-    clean: drop a synthetic T-pose frame and invalid edge rows (BVH); fps: sampling rate [Hz] for glTF
-    (default: the file's own for froude files, else 30).
+    length_scale: metres per file unit (BVH default: detected from the motion; glTF: 1, its metres);
+    clean: drop a synthetic T-pose frame (and a BVH's invalid edge rows); fps: sampling rate [Hz] for glTF
+    (default: the file's own for froude files, else the animation's key spacing when even, else 30).
     """
     suffix = Path(path).suffix.lower()
     if suffix in (".glb", ".gltf"):
         from .io.gltf import load_gltf
 
-        return load_gltf(path, fps=fps)
+        return load_gltf(path, fps=fps, clean=clean, length_scale=length_scale)
     from .io.bvh import load_bvh
 
     return load_bvh(path, length_scale=length_scale, clean=clean)
@@ -192,6 +193,21 @@ def _from_pipeline(res, prep) -> Result:
 
 
 # ---- the commands -------------------------------------------------------------------------------------------
+@_checked_keywords
+def info(clip: str | os.PathLike | Motion, *, mass: float = 70.0, length_scale: float | None = None) -> dict:
+    """What is in a clip: ``froude info --json`` as a function (the same dict, schema ``froude.info/1``).
+
+    clip: a BVH/GLB path or a Motion; mass: the performer's mass [kg] for the COM model; length_scale:
+    metres per BVH file unit (default: detected). Keys include kind, mean_speed_m_s, froude_U,
+    step_frequency_hz, contacts (per stance: foot, start_s, stop_s), skeleton (height_m, units ...).
+    """
+    from .body.model import BodyModel
+    from .clipinfo import clip_info
+
+    motion = clip if isinstance(clip, Motion) else load(clip, length_scale=length_scale)
+    return clip_info(motion, BodyModel.from_skeleton(motion.skeleton, mass=mass))[0]
+
+
 @_checked_keywords
 def fit(clip: str | os.PathLike | Motion, *, reference_mass: float = 70.0, length_scale: float | None = None) -> Result:
     """Fit the simple machine to a clip (paper §4: the running machine for a run, the walking machine for a

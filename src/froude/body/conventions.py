@@ -53,6 +53,43 @@ MAX_FRAMES = 2400
 Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
 
+#: Name endings of the leaf bones exporters add to mark where a chain ends (Blender's FBX exporter: "_end",
+#: Mixamo's "_End"; Blender's glTF exporter: "_leaf"): end sites, not joints.
+END_BONE_SUFFIXES = ("_end", "_leaf")
+#: An end point that repeats its parent bone within these (length ratio, angle) or is shorter than this
+#: fraction of the skeleton's extent is a placeholder, not a marked end point (``placeholder_end``).
+PLACEHOLDER_LENGTH_RATIO = 0.01
+PLACEHOLDER_ANGLE_DEG = 3.0
+PLACEHOLDER_STUB = 0.005
+
+
+def is_end_bone(name: str) -> bool:
+    """Whether a leaf bone's name marks it as an exporter's chain end (END_BONE_SUFFIXES, any case)."""
+    return name.lower().endswith(END_BONE_SUFFIXES)
+
+
+def placeholder_end(end: np.ndarray, parent_bone: np.ndarray, size: float) -> bool:
+    """Whether an end point (3,) is a placeholder rather than a marked end point; all vectors in one frame.
+
+    end: from the leaf joint to its end point; parent_bone: the bone before it (from the leaf's parent joint
+    to the leaf joint); size: the skeleton's extent, same unit. Blender's BVH importer cannot make a bone of
+    zero length: for an ``End Site`` written as ``0 0 0`` (the Bandai rig's five) it repeats the parent
+    bone's vector, nudged by a tenth of the import scale, or leaves a stub of that nudge, and its exporters
+    then write that tail as the chain's end. froude reads a zero End Site as marking nothing (the body
+    model estimates the head top, the toe tip); reading the invented tail instead would give the body other
+    feet and head. A real end point (a head top, a toe or finger tip) is neither that short nor a copy of
+    the bone before it.
+    """
+    length = float(np.linalg.norm(end))
+    if length < PLACEHOLDER_STUB * size:
+        return True
+    ref = float(np.linalg.norm(parent_bone))
+    if ref <= 0 or abs(length / ref - 1.0) > PLACEHOLDER_LENGTH_RATIO:
+        return False
+    cos = float(end @ parent_bone) / (length * ref)
+    return bool(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))) <= PLACEHOLDER_ANGLE_DEG)
+
+
 def unit_scale(name: str) -> tuple[float, str]:
     """(metres per unit, unit name) of a unit name or abbreviation (m, cm, mm, in, cmu)."""
     full = UNIT_ALIASES.get(name.strip().lower(), name.strip())

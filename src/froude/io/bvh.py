@@ -297,6 +297,18 @@ def _pose_jump_deg(rot: np.ndarray) -> np.ndarray:
     return np.degrees(np.median(jumps[:, moving] if moving.any() else jumps, axis=1))
 
 
+def synthetic_pose_frame(rotations: np.ndarray) -> str | None:
+    """Why the first frame of (F, J, 4) local rotations is a synthetic pose (the CMU conversions add a
+    T-pose as frame 0), or None: it shows up as a jump in joint rotations far larger than any other
+    frame-to-frame change. Needs F > 2."""
+    jumps = _pose_jump_deg(rotations)
+    typical = np.percentile(jumps[1:], 99)
+    if jumps[0] > 5.0 and jumps[0] > 3.0 * typical:
+        return (f"synthetic pose frame (T-pose), its joints turn by {jumps[0]:.0f} deg (median) to the next "
+                f"frame (99th percentile elsewhere {typical:.1f} deg)")
+    return None
+
+
 def load_bvh(path: str | os.PathLike, *, length_scale: float | None = None, clean: bool = True,
              joint_map=None, up: str | None = None) -> Motion:
     """Read a BVH file into a ``Motion`` in SI units (+Y up).
@@ -402,15 +414,9 @@ def _clean(path, skeleton, values, linenos, finite, channel_names, length_scale)
         notes.append(_describe_rows(linenos[:start], values[:start], "leading"))
     first_valid = 0  # index into vidx of the motion's first frame
     if len(vidx) > 2:
-        # A synthetic pose frame (the CMU conversions add a T-pose as frame 0) shows up as a jump in joint
-        # rotations far larger than any other frame-to-frame change.
-        jumps = _pose_jump_deg(rot)
-        typical = np.percentile(jumps[1:], 99)
-        if jumps[0] > 5.0 and jumps[0] > 3.0 * typical:
-            notes.append(
-                f"dropped frame {start} (line {linenos[start]}): synthetic pose frame (T-pose), its joints turn "
-                f"by {jumps[0]:.0f} deg (median) to the next frame (99th percentile elsewhere {typical:.1f} deg)"
-            )
+        why = synthetic_pose_frame(rot)
+        if why:
+            notes.append(f"dropped frame {start} (line {linenos[start]}): {why}")
             first_valid = 1
             gap = slice(start + 1, int(vidx[1]))
             if gap.stop > gap.start:

@@ -230,15 +230,92 @@ def _accessor_array(gl, index: int) -> np.ndarray:
     return np.ascontiguousarray(rows).view(dtype).reshape(acc.count, n).astype(float)
 
 
+#: Node and animated scales within this of 1 are rounding (Blender writes 0.99999994); others are refused.
+SCALE_TOLERANCE = 1e-4
+
+
+def _node_matrix(node) -> np.ndarray:
+    """(4, 4) a glTF node's local transform T · R · S (or its matrix)."""
+    if node.matrix:
+        return np.array(node.matrix, float).reshape(4, 4).T  # column-major in the file
+    from ..core import quat
+
+    m = np.eye(4)
+    x, y, z, w = node.rotation or [0.0, 0.0, 0.0, 1.0]
+    m[:3, :3] = quat.to_matrix(quat.normalize(np.array([w, x, y, z], float))) * np.array(node.scale or [1, 1, 1])
+    m[:3, 3] = node.translation or [0.0, 0.0, 0.0]
+    return m
+
+
+def _above_root(gl, root_node: int) -> np.ndarray:
+    """(4, 4) the world transform of the nodes above the skeleton's root (an exporter's armature node)."""
+    parent = {c: i for i, n in enumerate(gl.nodes) for c in (n.children or [])}
+    m = np.eye(4)
+    k = parent.get(root_node)
+    while k is not None:
+        m = _node_matrix(gl.nodes[k]) @ m
+        k = parent.get(k)
+    return m
+
+
+def _frame_time(tracks: dict, extras: dict, fps: float | None) -> tuple[float, str]:
+    """(seconds per frame, how it was chosen): the caller's fps, a froude file's own, else the animation's
+    key spacing when every track is sampled at the same even times (exporters bake every frame), else 30 Hz."""
+    if fps:
+        return 1.0 / fps, "given"
+    if "frame_time_s" in extras:
+        return float(extras["frame_time_s"]), "the file's"
+    times = [t for t, _, _ in tracks.values() if len(t) > 2]
+    if times:
+        t = max(times, key=len)
+        step = np.diff(t)
+        if step.min() > 0 and np.abs(step - np.median(step)).max() <= 1e-3 * np.median(step):
+            return float(np.median(step)), "the animation's key spacing"
+    return 1.0 / 30.0, "30 Hz (default: the keys are not evenly spaced)"
+
+
+def _end_node_sites(motion: Motion, gl, joints: list, end_nodes: set, parents: np.ndarray, new: dict,
+                    scale: float) -> tuple[tuple[int, np.ndarray], ...]:
+    """End sites (joint index, offset [m] in its frame) from an exporter's chain-end nodes, leaving out the
+    placeholders an importer invented (``body.conventions.placeholder_end``).
+    scale: the uniform scale of the nodes above the skeleton."""
+    from ..body.conventions import placeholder_end
+    from ..core import quat
+    from ..core.kinematics import fk
+
+    # judged in the rest pose (the nodes' own rotations), where an importer's copy lies along its parent bone
+    kept = sorted(new, key=lambda k: new[k])
+    rest_rot = np.array([gl.nodes[joints[k]].rotation or [0.0, 0.0, 0.0, 1.0] for k in kept])
+    rest = motion[:1].with_(rotations=quat.normalize(np.roll(rest_rot, 1, axis=-1))[None], translations=None)
+    p, R = fk(rest)
+    size = float(np.ptp(p[0], axis=0).max())
+    out = {}
+    for k in sorted(end_nodes, key=lambda k: new[parents[k]]):
+        j = new[parents[k]]
+        off = scale * np.array(gl.nodes[joints[k]].translation or [0.0, 0.0, 0.0], float)
+        pj = motion.skeleton.parents[j]
+        bone = p[0, j] - p[0, pj] if pj >= 0 else np.zeros(3)
+        if j not in out and not placeholder_end(R[0, j] @ off, bone, size):
+            out[j] = off
+    return tuple(out.items())
+
+
 # Long because a foreign glTF is checked step by step (skin, joints, animation, samplers), each check
 # with its own one-line error naming what is missing.
-def load_gltf(path: str | os.PathLike, *, fps: float | None = None) -> Motion:
-    """Read the first skin's skeleton and the first animation of a .glb/.gltf file as a Motion.
+def load_gltf(path: str | os.PathLike, *, fps: float | None = None, clean: bool = True, joint_map=None,
+              length_scale: float | None = None, up: str | None = None) -> Motion:
+    """Read the first skin's skeleton and the first animation of a .glb/.gltf file as a Motion, read as
+    ``froude.load`` reads a BVH file (SI units, +Y up, the conventions of ``body.conventions.understand``).
 
     The skeleton's offsets are the joints' rest translations [m] (glTF's units); animated rotations (and the
-    root's translation) become the motion. fps: sampling rate (default: the file's own for froude files,
-    else 30 Hz); channel orders come from froude's extras or default to ZYX rotations. Transforms of
-    nodes above the skeleton's root (an exporter's armature node) are not applied.
+    root's translation) become the motion; the transform of the nodes above the skeleton's root (an
+    exporter's armature node: Blender's, with its object's rotation and scale) is applied to the root.
+    fps: sampling rate (default: the file's own for froude files, else the animation's key spacing when it
+    is even, else 30 Hz); channel orders come from froude's extras or default to ZYX rotations. A
+    synthetic pose first frame is dropped as ``load_bvh`` does unless clean=False. Joints' rest rotations
+    (bind orientations) are kept: the body is then measured in a standing frame of the motion. joint_map,
+    length_scale (metres per file unit; default 1: glTF is in metres) and up (default "Y", glTF's) as for
+    ``load_bvh``.
     Raises FroudeError (one line) for files froude cannot read as a skeletal animation.
     """
     pyg = _require_pygltflib()
@@ -261,6 +338,13 @@ def load_gltf(path: str | os.PathLike, *, fps: float | None = None) -> Motion:
         for c in gl.nodes[node].children or []:
             if c in index:
                 parents[index[c]] = k
+    # an exporter's chain-end leaves (Blender's "_leaf", "_end") are end sites, not joints
+    from ..body.conventions import is_end_bone
+
+    has_child = np.zeros(len(joints), bool)
+    has_child[parents[parents >= 0]] = True
+    end_nodes = {k for k in range(len(joints))
+                 if parents[k] >= 0 and not has_child[k] and is_end_bone(gl.nodes[joints[k]].name or "")}
     # depth-first order with parents first (froude's Skeleton needs parents[j] < j)
     roots = [k for k in range(len(joints)) if parents[k] < 0]
     if len(roots) != 1:
@@ -270,7 +354,7 @@ def load_gltf(path: str | os.PathLike, *, fps: float | None = None) -> Motion:
     def visit(k):
         order.append(k)
         for c in gl.nodes[joints[k]].children or []:
-            if c in index:
+            if c in index and index[c] not in end_nodes:
                 visit(index[c])
 
     visit(roots[0])
@@ -280,7 +364,8 @@ def load_gltf(path: str | os.PathLike, *, fps: float | None = None) -> Motion:
     par = np.array([-1 if parents[k] < 0 else new[parents[k]] for k in order])
     offsets = np.array([n.translation or [0.0, 0.0, 0.0] for n in nodes], float)
     rest_rot = np.array([n.rotation or [0.0, 0.0, 0.0, 1.0] for n in nodes], float)
-    if any(n.scale not in (None, [1.0, 1.0, 1.0], [1, 1, 1]) for n in nodes) or any(n.matrix for n in nodes):
+    if any(n.matrix for n in nodes) or any(
+            n.scale and np.abs(np.array(n.scale, float) - 1.0).max() > SCALE_TOLERANCE for n in nodes):
         raise FroudeError(f"{path}: joints with scale or matrix transforms are not supported")
     extras = (gl.scenes[gl.scene or 0].extras or {}).get(EXTRAS_KEY, {}) if gl.scenes else {}
     saved_channels = extras.get("channels")
@@ -288,25 +373,29 @@ def load_gltf(path: str | os.PathLike, *, fps: float | None = None) -> Motion:
         raise FroudeError(f"{path}: no animation in this glTF file")
     anim = gl.animations[0]
     tracks = {}
-    t_end = 0.0
+    t_end, t_start = 0.0, np.inf
     for ch in anim.channels:
         node = ch.target.node
         if node not in index:
             continue
-        if ch.target.path == "scale":
-            raise FroudeError(f"{path}: animated joint scale is not supported (node '{gl.nodes[node].name}')")
-        if ch.target.path not in ("rotation", "translation"):
+        if ch.target.path not in ("rotation", "translation", "scale"):
             continue
         s = anim.samplers[ch.sampler]
         t = _accessor_array(gl, s.input)[:, 0]
         v = _accessor_array(gl, s.output)
         if s.interpolation == "CUBICSPLINE":
             v = v.reshape(len(t), 3, -1)[:, 1]
+        if ch.target.path == "scale":
+            if np.abs(v - 1.0).max() > SCALE_TOLERANCE:
+                raise FroudeError(f"{path}: animated joint scale is not supported (node '{gl.nodes[node].name}')")
+            continue
         tracks[(new[index[node]], ch.target.path)] = (t, v, s.interpolation or "LINEAR")
-        t_end = max(t_end, float(t[-1]))
-    frame_time = 1.0 / fps if fps else float(extras.get("frame_time_s", 1.0 / 30.0))
-    n = int(round(t_end / frame_time)) + 1
-    times = np.arange(n) * frame_time
+        t_end, t_start = max(t_end, float(t[-1])), min(t_start, float(t[0]))
+    frame_time, rate_how = _frame_time(tracks, extras, fps)
+    # from the first key (Blender's exporter puts scene frame 1 at 1/fps), not from zero
+    t_start = min(t_start, t_end)
+    n = int(round((t_end - t_start) / frame_time)) + 1
+    times = t_start + np.arange(n) * frame_time
 
     def sample(key, default):
         if key not in tracks:
@@ -329,6 +418,21 @@ def load_gltf(path: str | os.PathLike, *, fps: float | None = None) -> Motion:
         translations = np.broadcast_to(offsets, (n, J, 3)).copy()
         for j in moving:
             translations[:, j] = sample((j, "translation"), offsets[j])
+    above = _above_root(gl, joints[order[0]])
+    above_scale = 1.0
+    if not np.allclose(above, np.eye(4), atol=1e-9):
+        lin = above[:3, :3]
+        scale = float(np.cbrt(np.linalg.det(lin)))
+        R = lin / scale
+        if scale <= 0 or np.abs(R @ R.T - np.eye(3)).max() > SCALE_TOLERANCE:
+            raise FroudeError(f"{path}: the skeleton's parent node is sheared or scaled unevenly")
+        root = root @ lin.T + above[:3, 3]
+        rot[:, 0] = quat.mul(quat.from_matrix(R), rot[:, 0])
+        offsets = offsets * scale
+        offsets[0] = root[0]
+        above_scale = scale
+        if translations is not None:
+            translations = translations * scale
     if saved_channels and len(saved_channels) == J:
         channels = tuple(tuple(c) for c in saved_channels)
     else:
@@ -338,5 +442,25 @@ def load_gltf(path: str | os.PathLike, *, fps: float | None = None) -> Motion:
     ends = tuple((int(j), np.asarray(off, float)) for j, off in extras.get("end_sites", ())) if saved_channels else ()
     names = tuple(n.name or f"joint{k}" for k, n in enumerate(nodes))
     skel = Skeleton(names, par, offsets, channels, ends)
-    meta = {"source": str(path), "units": "metres (glTF)", "length_scale": 1.0}
-    return Motion(skel, root, rot, frame_time, translations, meta)
+    raw = Motion(skel, root, rot, frame_time, translations)
+    if end_nodes and not ends:
+        raw = raw.with_(skeleton=skel.with_(end_sites=_end_node_sites(raw, gl, joints, end_nodes, parents, new,
+                                                                     above_scale)))
+    from ..body.conventions import understand
+    from .bvh import synthetic_pose_frame
+
+    cleaning = []
+    why = synthetic_pose_frame(raw.rotations) if clean and raw.n_frames > 2 else None
+    if why:
+        raw = raw.cut(1)
+        cleaning.append(f"dropped frame 0: {why}")
+    try:
+        motion, conv = understand(raw, joint_map=joint_map, length_scale=1.0 if length_scale is None else length_scale,
+                                  up=up or "Y")
+    except ValueError as e:
+        raise FroudeError(f"{path}: {e}") from None
+    units = "metres (glTF)" if length_scale is None else conv["units"]
+    meta = {"source": str(path), "units": units, "length_scale": conv["length_scale"], "up_axis": conv["up_axis"],
+            "conventions": conv["notes"] + (f"frame rate {1 / frame_time:.6g} Hz ({rate_how})",),
+            "cleaning": tuple(cleaning)}
+    return motion.with_(meta=meta)

@@ -18,7 +18,7 @@ import sys
 from ...errors import FroudeError
 
 #: Subcommand modules, in the order ``froude --help`` lists them.
-SUBCOMMANDS = ("info", "fit", "scale", "accelerate", "convert", "view", "render", "demo", "batch")
+SUBCOMMANDS = ("info", "fit", "scale", "accelerate", "convert", "view", "render", "demo", "batch", "blender")
 
 
 class Terminated(KeyboardInterrupt):

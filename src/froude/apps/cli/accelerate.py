@@ -56,7 +56,7 @@ def register(sub) -> None:
         epilog="Examples: froude accelerate run.bvh --to-speed 0.5x --steps 8 -o slow.bvh ; "
         "froude accelerate run.bvh --to-speed 4.5m/s --within 2.0 --character troll -o troll_fast.bvh",
     )
-    p.add_argument("clip", help="reference running clip (BVH)")
+    p.add_argument("clip", help="reference running clip (BVH, or glTF/GLB with a skinned animation)")
     p.add_argument("-o", "--output", required=True, metavar="OUT.bvh|.glb|.gltf",
                    help="output motion: BVH, or glTF/GLB (skin, joints, animation, a mannequin mesh); "
                    "OUT.report.json is written beside it; its folder must exist")

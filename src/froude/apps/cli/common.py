@@ -225,14 +225,21 @@ def check_inputs(*paths) -> None:
 
 def load_clip(path: str, length_scale: float | None = None, keep_all: bool = False, quiet: bool = False,
               joint_map: str | None = None, up: str | None = None):
-    """Load a BVH clip and say which units and conventions were read and what cleaning did.
+    """Load a clip (BVH, or glTF/GLB by suffix) and say which units and conventions were read and what
+    cleaning did.
 
     joint_map: a YAML file 'role: JointName' (``body.load_joint_map``); up: "Y"/"Z" (None: detected)."""
     from ...body.model import load_joint_map
-    from ...io.bvh import load_bvh
 
     jm = load_joint_map(joint_map) if joint_map else None
-    motion = load_bvh(path, length_scale=length_scale, clean=not keep_all, joint_map=jm, up=up)
+    if Path(path).suffix.lower() in (".glb", ".gltf"):
+        from ...io.gltf import load_gltf
+
+        motion = load_gltf(path, length_scale=length_scale, clean=not keep_all, joint_map=jm, up=up)
+    else:
+        from ...io.bvh import load_bvh
+
+        motion = load_bvh(path, length_scale=length_scale, clean=not keep_all, joint_map=jm, up=up)
     say_loaded(motion, path, quiet)
     return motion
 

@@ -31,7 +31,8 @@ def register(sub) -> None:
     p.add_argument("output", metavar="OUT", help="the output: .bvh, .glb or .gltf (its folder must exist)")
     p.add_argument("--no-mesh", action="store_true", help="glTF/GLB output: skeleton and animation only")
     p.add_argument("--fps", type=number(1, 1000, "Hz"), default=None,
-                   help="glTF input: sampling rate [Hz] (default: the file's own for froude files, else 30)")
+                   help="glTF input: sampling rate [Hz] (default: the file's own for froude files, else the "
+                   "animation's key spacing when even, else 30)")
     add_data_option(p)
     add_quiet(p)
     add_load_options(p)

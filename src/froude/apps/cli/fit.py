@@ -30,7 +30,7 @@ def register(sub) -> None:
         "double-support time and speed, fitted to the clip's vertical force and COM height. Prints a table; "
         "writes the machine as JSON.",
     )
-    p.add_argument("clip", help="BVH file of a running or walking motion")
+    p.add_argument("clip", help="BVH (or glTF/GLB) file of a running or walking motion")
     p.add_argument("-o", "--output", required=True, metavar="OUT.json",
                    help="machine JSON to write (schema froude.machine/1, froude.walking/1 for a walk); "
                    "its folder must exist")

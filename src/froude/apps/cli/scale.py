@@ -58,7 +58,7 @@ def register(sub) -> None:
         epilog=f"Presets: {', '.join(list_presets())}. Example: froude scale run.bvh --character child --speed 0.7x "
         "-o child.bvh",
     )
-    p.add_argument("clip", help="reference running clip (BVH)")
+    p.add_argument("clip", help="reference running clip (BVH, or glTF/GLB with a skinned animation)")
     p.add_argument("-o", "--output", required=True, metavar="OUT.bvh|.glb|.gltf",
                    help="output motion: BVH, or glTF/GLB (skin, joints, animation, a mannequin mesh); "
                    "OUT.report.json is written beside it; its folder must exist")

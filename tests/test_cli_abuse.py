@@ -187,8 +187,8 @@ def test_bare_number_is_a_factor_in_scale_and_accelerate(work, run_cli):
     for cmd, opt, values in (("scale", "--speed", ("0.9", "0.9x")), ("accelerate", "--to-speed", ("0.8", "0.8x"))):
         for v in values:
             out = work / f"{cmd}_{v}.bvh"
-            code, stdout, err = run_cli(cmd, "in.bvh", opt, v, "--strides" if cmd == "scale" else "--steps", "2",
-                                        "-o", out, "-q")
+            length = ("--strides", "2") if cmd == "scale" else ("--steps", "4")  # the law's change: 4 at x0.8
+            code, stdout, err = run_cli(cmd, "in.bvh", opt, v, *length, "-o", out, "-q")
             assert code == 0, err
             assert err == "", "-q prints nothing on stderr"
             results[(cmd, v)] = out.read_text()

@@ -60,7 +60,7 @@ def outputs():
     return {
         "cmu_child": froude.scale(cmu, "child", strides=2),
         "bandai": froude.scale(clip("dataset-1_dash_feminine_001"), height=1.5, strides=2),
-        "accelerate": froude.accelerate(cmu, to_factor=1.2, steps=4),
+        "accelerate": froude.accelerate(cmu, to_factor=1.2, steps=8),
     }
 
 
@@ -232,7 +232,7 @@ def test_cli_glb_and_data_outputs(tmp_path, run_cli):
     mcom = np.stack([d[f"machine_com_{a}_m"] for a in "xyz"], axis=1)
     assert 1000 * np.linalg.norm(com - mcom, axis=1).max() == pytest.approx(rep["com_tracking_max_mm"], abs=0.01)
     assert peak_vertical_force_bw(d, rep["mass_kg"]) == pytest.approx(rep["peak_vertical_force_bw"], rel=1e-6)
-    code, _, err = run_cli("accelerate", clip("09_01"), "--to-speed", "1.2x", "--steps", 4, "-o",
+    code, _, err = run_cli("accelerate", clip("09_01"), "--to-speed", "1.2x", "--steps", 8, "-o",
                            tmp_path / "fast.gltf", "--data", tmp_path / "fast.parquet", "-q")
     assert code == 0, err
     assert {p.name for p in tmp_path.iterdir()} == {"child.glb", "child.report.json", "child.csv", "fast.gltf",

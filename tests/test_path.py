@@ -199,13 +199,14 @@ def test_a_straight_take_that_veers_is_met_and_said(prepared):
 
 
 def test_the_turning_run_is_a_run(run_cli, tmp_path):
-    """CMU 16_51 (a run turning 82 deg) read "unknown: no flight phase": its turn's flights last 3 frames at
-    120 Hz, 0.0249999 s with the file's 7-digit frame time, under the 0.025 s a flight must last. It runs.
+    """CMU 16_51 (a run turning 82 deg) read "unknown: no flight phase": its turn's feet gaps last 3 frames at
+    120 Hz, shorter than a flight must last, and the COM's force stays above 0.2 BW in most of them (the gait
+    decision closes those, body.gait). It runs: flights where the COM says so.
     (Scaling it is refused in one line: the straightened take's stance no longer fits a spring, docs/path.md.)"""
     code, out, _ = run_cli("info", clip("cmu-turns/16_51"), "--json")
     d = json.loads(out)
     assert code == 0 and d["kind"] == "running", d["verdict"]
-    assert sum(abs(t - 0.025) < 1e-4 for t in d["flight_times_s"]) >= 3
+    assert len(d["flight_times_s"]) >= 2
     out = tmp_path / "child.bvh"
     code, _, err = run_cli("scale", clip("cmu-turns/16_51"), "--character", "child", "-o", out, "-q")
     assert code in (1, 2) and err.count("\n") == 1 and "Traceback" not in err and not out.exists()

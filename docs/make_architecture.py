@@ -31,7 +31,8 @@ LAYERS = [
 TOP_LEVEL = {
     "constants": "core", "errors": "core", "samples": "io", "speed_goal": "machine", "metrics": "report",
     "viz": "report", "pipeline": "pipeline", "prepared": "pipeline", "result": "pipeline", "naive": "pipeline",
-    "speed_range": "pipeline", "api": "pipeline", "__init__": "pipeline", "__main__": "apps",
+    "speed_range": "pipeline", "speed_change": "pipeline", "clipinfo": "pipeline", "path_report": "report",
+    "api": "pipeline", "__init__": "pipeline", "__main__": "apps",
     "characters": "body", "conventions": "body", "gait": "body", "presets": "body", "quat": "core",
     "skeleton": "core", "motion": "core", "kinematics": "core", "synthesis": "synthesis", "ik": "ik",
     "batch": "apps", "demo": "apps", "cli": "apps", "studio": "apps", "body": "body",

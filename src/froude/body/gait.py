@@ -376,16 +376,17 @@ RUNNING_FLIGHT_SHARE = 0.5
 MIN_FLIGHT_S = 0.025
 
 
+def n_flights(gait: Gait) -> int:
+    """How many of a gait's flights (between consecutive contacts) last at least MIN_FLIGHT_S."""
+    # a frame time written to 7 digits (.0083333 s) makes a 3-frame flight at 120 Hz 0.0249999 s: 1e-3 frame
+    # of slack, as ``take.select_range`` (CMU 16_51's turn has 3-frame flights)
+    return int((gait.flight_times() >= MIN_FLIGHT_S - 1e-3 * gait.frame_time).sum())
+
+
 def flight_share(gait: Gait) -> float:
     """Share of the steps (consecutive contacts) of a gait that have a flight ≥ MIN_FLIGHT_S [0-1]."""
     steps = len(gait.stances) - 1
-    if steps < 1:
-        return 0.0
-    # a frame time written to 7 digits (.0083333 s) makes a 3-frame flight at 120 Hz 0.0249999 s: 1e-3 frame
-    # of slack, as ``take.select_range`` (CMU 16_51's turn has 3-frame flights; without it 3 of its 7 steps
-    # counted and the run read "unknown: no flight phase")
-    min_s = MIN_FLIGHT_S - 1e-3 * gait.frame_time
-    return min(1.0, float((gait.flight_times() >= min_s).sum()) / steps)
+    return min(1.0, n_flights(gait) / steps) if steps >= 1 else 0.0
 
 
 def summarize(motion: Motion, body: BodyModel, com: np.ndarray | None = None, gait: Gait | None = None) -> GaitSummary:
@@ -529,10 +530,10 @@ def classify(gait: Gait, speed: float, distance: float, leg_length: float, has_f
     ds = gait.double_support_fraction
     if has_flight:
         return "running", f"flight phases between contacts, {speed:.2f} m/s"
-    n_flights = int((gait.flight_times() >= MIN_FLIGHT_S).sum())
+    flights = n_flights(gait)
     n_double = len(_runs(np.asarray(gait.contact.all(axis=1), bool)))
-    if n_flights and n_flights >= n_double:
-        return "running", (f"short flight phases between {n_flights} of the contacts, more often than both feet "
+    if flights and flights >= n_double:
+        return "running", (f"short flight phases between {flights} of the contacts, more often than both feet "
                            f"are down ({n_double}), {speed:.2f} m/s")
     if ds > DOUBLE_SUPPORT_MIN:
         both = f"both feet on the ground {100 * ds:.0f}% of the time"

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import HORIZONTAL_AXES, UP, UP_AXIS
+from ..core import quat
 from ..core.motion import Motion
 from .gait import Gait, step_period
 from .model import BodyModel
@@ -294,8 +295,6 @@ def turn_note(path: TakePath) -> str:
 
 def yaw_quat(angle_rad: np.ndarray) -> np.ndarray:
     """(..., 4) rotations (w, x, y, z) by angle_rad (...,) about the up axis (+ = to the left)."""
-    from ..core import quat
-
     a = np.asarray(angle_rad, float)
     return quat.from_axis_angle(np.broadcast_to(UP, a.shape + (3,)), a)
 
@@ -313,8 +312,6 @@ def straighten(motion: Motion, path: TakePath) -> Motion:
     ``synthesis.bend``. Returns a new Motion (meta "straightened": the heading change undone [rad]).
     """
     from dataclasses import replace
-
-    from ..core import quat
 
     dpsi = path.heading_rad - path.heading_rad[0]  # (F,)
     q = yaw_quat(-dpsi)  # (F, 4)

@@ -123,7 +123,7 @@ SPHERE = _unit_sphere()
 
 def _shades(track: Track, color) -> np.ndarray:
     """(B+1, 3) uint8 capsule colours: the left side darker, the right lighter (render's convention)."""
-    from ...viz.render import LEFT, RIGHT
+    from ...viz.rig import LEFT, RIGHT
 
     base = np.asarray(color, float)
     side = np.append(np.asarray(track.rig.bone_side), -1)

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..core.kinematics import _quat_rows, joint_depths
+from ..core.kinematics import _depth_batches, _quat_rows, joint_depths
 
 if TYPE_CHECKING:  # the plan module builds its FK levels here: the type only, no import circle
     from .plan import _Plan
@@ -19,16 +19,10 @@ def _depth_levels(parents: np.ndarray, offsets: np.ndarray, lrow: np.ndarray) ->
     be numbered depth by depth, their parents, their rows in the local rotation store (``lrow``), both as
     slices where consecutive, their offsets (m, 3) [m]). All joints of one depth are one batch of array
     operations (their parents are done): ~7 batches instead of ~20 joints' worth of small ones."""
-    parents = np.asarray(parents)
-    depth = joint_depths(parents)
-    if np.any(np.diff(depth) < 0):
+    if np.any(np.diff(joint_depths(np.asarray(parents))) < 0):
         raise ValueError("joints must be numbered depth by depth")
-    levels = []
-    for d in range(1, int(depth.max(initial=0)) + 1):
-        js = np.flatnonzero(depth == d)
-        levels.append((_as_slice(js), _as_slice(parents[js]), _as_slice(np.asarray(lrow)[js]),
-                       np.ascontiguousarray(np.asarray(offsets, float)[js])))
-    return tuple(levels)
+    return tuple((_as_slice(js), _as_slice(ps), _as_slice(np.asarray(lrow)[js]),
+                  np.ascontiguousarray(np.asarray(offsets, float)[js])) for js, ps in _depth_batches(parents))
 
 
 def _as_slice(idx: np.ndarray):

@@ -138,15 +138,7 @@ class IkResult:
 
 def max_joint_step(motion: Motion, joints: Sequence[int] | None = None) -> float:
     """Largest frame-to-frame rotation angle [rad] of any joint's local rotation (root orientation included)."""
-    rot = motion.rotations if joints is None else motion.rotations[:, list(joints)]
-    if motion.n_frames < 2:
-        return 0.0
-    out = 0.0
-    step = 4096  # bounded temporaries on long motions
-    for a in range(0, motion.n_frames - 1, step):
-        b = min(a + step + 1, motion.n_frames)
-        out = max(out, float(np.max(quat.angle_between(rot[a:b - 1], rot[a + 1:b]))))
-    return out
+    return quat.max_step_angle(motion.rotations if joints is None else motion.rotations[:, list(joints)])
 
 
 

@@ -115,6 +115,30 @@ def clip_params(names=None):
     return names
 
 
+# ---- test tiers --------------------------------------------------------------------------------------
+#: A test measured slower than this [s] (tests/durations.tsv: one process, file by file, written by
+#: scripts/test_durations.py) is marked ``slow``: ``./scripts/test -m "not slow"`` is the fast tier run
+#: before every commit; CI (.ci/run) runs every test. A test not in the file (a new one) counts as fast:
+#: measure it with the script when it is not cheap.
+SLOW_S = 1.5
+DURATIONS = Path(__file__).with_name("durations.tsv")
+
+
+def _measured_slow() -> set[str]:
+    """Node ids ("tests/test_x.py::name[param]") measured over SLOW_S."""
+    if not DURATIONS.is_file():
+        return set()
+    rows = (line.split("\t", 1) for line in DURATIONS.read_text().splitlines() if line and line[0] != "#")
+    return {node for sec, node in rows if float(sec) > SLOW_S}
+
+
+def pytest_collection_modifyitems(config, items):
+    slow = _measured_slow()
+    for item in items:
+        if item.nodeid in slow:
+            item.add_marker(pytest.mark.slow)
+
+
 # ---- an independent BVH reader and FK (the oracle) -----------------------------------------------
 @dataclass
 class OracleBvh:

@@ -6,6 +6,7 @@ Euler angles (intrinsic, file order) and for composing joint transforms.
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -100,6 +101,58 @@ class _Prepared(dict):
 def prepared():
     """Each clip's ``pipeline.prepare`` once per test module: ``prepared["09_01"]``."""
     return _Prepared()
+
+
+@dataclass(frozen=True)
+class MatrixOutput:
+    """What the tests keep of one output of the scale / accelerate matrix (tests/golden/make_golden.cases):
+    the golden summary (root and sparse joint world positions, frame count), the physics report, and
+    whether the motion is finite everywhere. Small, so the whole matrix stays in memory."""
+
+    summary: dict
+    report: object
+    finite: bool
+
+
+class _MatrixOutputs(dict):
+    """Outputs of the matrix by make_golden key ("scale/09_01/child/0.7", "accelerate/09_01/1.3"), each
+    computed once per test process and shared by test_golden, test_scale and test_accelerate (their cases
+    of one clip share an xdist group, so under scripts/test's ``--dist loadgroup`` they meet in one worker).
+    The clips are prepared once each (the last two kept)."""
+
+    def __init__(self):
+        super().__init__()
+        self._prepared: dict = {}
+
+    def __missing__(self, key: str) -> MatrixOutput:
+        import make_golden
+
+        from froude import pipeline
+
+        row = next((r for r in make_golden.cases() if r[0] == key), None)
+        assert row is not None, f"{key}: not a case of tests/golden/make_golden.py"
+        _, name, kind, kw = row
+        if name not in self._prepared:
+            if len(self._prepared) >= 2:
+                self._prepared.pop(next(iter(self._prepared)))
+            self._prepared[name] = pipeline.prepare(clip(name))
+        res = make_golden.run_case(self._prepared[name], kind, kw)
+        m = res.motion
+        self[key] = MatrixOutput(make_golden.summarise(m), res.report,
+                                 bool(np.all(np.isfinite(m.rotations)) and np.all(np.isfinite(m.root_positions))))
+        return self[key]
+
+
+@pytest.fixture(scope="session")
+def matrix_outputs():
+    """The scale / accelerate matrix's outputs, each computed once per test process: ``matrix_outputs[key]``."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent / "golden"))
+    return _MatrixOutputs()
+
+
+def matrix_group(name: str):
+    """The xdist group of one clip's matrix outputs (its golden, scale and accelerate cases)."""
+    return pytest.mark.xdist_group(f"matrix-{name}")
 
 
 def clip_params(names=None):

@@ -311,7 +311,21 @@ def snapshot_times(duration: float, interval: float) -> np.ndarray:
     return np.arange(n) * interval
 
 
-# Long because the rows share one scale, spacing and figure layout computed across all motions first.
+def _snapshots(actor: _Actor, interval: float) -> tuple[np.ndarray, np.ndarray]:
+    """A filmstrip row's snapshot times (n,) [s] and drawn points (n, P, 3) [m], every ``interval`` s."""
+    t = snapshot_times(actor.motion.duration, interval)
+    p, R = actor.body.world(actor.motion.sample(t))
+    return t, actor.rig.points(p, R)
+
+
+def _row_label(ax, actor: _Actor, title: float) -> None:
+    """A filmstrip row's label and speed at its top left (title: font size [pt])."""
+    ax.annotate(actor.label, (0, 1), xycoords="axes fraction", xytext=(0.4 * title, -0.4 * title),
+                textcoords="offset points", ha="left", va="top", fontsize=title, color=_TEXT, weight="bold")
+    ax.annotate(f"{actor.speed:.2f} m/s", (0, 1), xycoords="axes fraction", xytext=(0.4 * title, -1.75 * title),
+                textcoords="offset points", ha="left", va="top", fontsize=0.8 * title, color="#555555")
+
+
 def filmstrip_image(
     motions: Sequence[Motion],
     labels: Sequence[str] | None = None,
@@ -328,13 +342,7 @@ def filmstrip_image(
     0.4 x the tallest stature apart. width: image width [px]. Rows are labelled "label  u m/s".
     """
     actors = _actors(motions, labels, camera)
-    rows = []
-    for act in actors:
-        t = snapshot_times(act.motion.duration, interval)
-        snap = act.motion.sample(t)
-        p, R = act.body.world(snap)
-        pts = act.rig.points(p, R)  # (n, P, 3)
-        rows.append((act, t, pts))
+    rows = [(act, *_snapshots(act, interval)) for act in actors]
     tallest = max(a.rig.stature for a in actors)
     if spacing is None:
         step = min(a.speed * interval for a in actors)
@@ -373,10 +381,7 @@ def filmstrip_image(
         for k in range(len(t)):
             # later snapshots on top, each figure above the previous one's shadow
             _FigureArtists(ax, act, px_per_m, z0=10 + 2 * k).set(xy[k], shadow[k])
-        ax.annotate(act.label, (0, 1), xycoords="axes fraction", xytext=(0.4 * title, -0.4 * title),
-                    textcoords="offset points", ha="left", va="top", fontsize=title, color=_TEXT, weight="bold")
-        ax.annotate(f"{act.speed:.2f} m/s", (0, 1), xycoords="axes fraction", xytext=(0.4 * title, -1.75 * title),
-                    textcoords="offset points", ha="left", va="top", fontsize=0.8 * title, color="#555555")
+        _row_label(ax, act, title)
         axes.append(ax)
     image = _rgb(canvas)
     # geometry in pixel rows (top = 0), through the same transforms that drew the picture

@@ -103,8 +103,6 @@ def load_plan(path) -> Plan:
     return parse_plan(data, source=str(path), base_dir=path.parent)
 
 
-# Long because a plan's keys are checked in one pass, each with the one-line message that names it, before any
-# clip is read (a batch must refuse a bad plan before hours of work).
 def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
     """A Plan from the parsed YAML mapping; every problem is one BatchError line naming the key."""
     from ...body.characters import list_presets, resolve_character
@@ -177,6 +175,12 @@ def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
                                         sarg + (("strides", n),) + common))
         for aid, aarg in acc_args:
             variations.append(Variation(f"{label}_{aid}", "accelerate", label, spec, numbers, aarg + common))
+    _check_unique_ids(variations, bad)
+    return Plan(tuple(variations), mass, sex, length_scale, source)
+
+
+def _check_unique_ids(variations: list[Variation], bad) -> None:
+    """Every variation id names its own files: a repeated one, or two differing only in case, is refused."""
     seen: dict[str, tuple[str, dict]] = {}
     for v in variations:
         key = v.id.lower()  # ids name files: on a case-insensitive filesystem "Tall" and "tall" are one
@@ -187,7 +191,6 @@ def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
                 + (f" / '{v.id}' (ids are compared ignoring case)" if seen[key][0] != v.id else "")
                 + ": give the characters distinct names")
         seen[key] = (v.id, v.params())
-    return Plan(tuple(variations), mass, sex, length_scale, source)
 
 
 def _positive(v, where, bad) -> float:

@@ -148,6 +148,27 @@ class Tab(_Layout, _Playback, _Export):
 
 
 
+    def _wire_gui(self) -> None:
+        """Each control's handler (called by ``_build_gui`` once the controls exist)."""
+        self.gui_play.on_click(self._on_play)
+        self.gui_prev.on_click(lambda e: self._step(-1))
+        self.gui_next.on_click(lambda e: self._step(+1))
+        self.gui_time.on_update(self._on_time)
+        self.gui_rate.on_update(self._on_rate)
+        for g in (self.gui_overlay, self.gui_show_ref, self.gui_machine, self.gui_onion, self.gui_camera):
+            g.on_update(self._on_view)
+        self.gui_frame.on_click(self._on_view)
+        self.gui_show_naive.on_update(self._on_naive)
+        self.gui_char.on_update(self._on_character)
+        for g in (self.gui_mode, self.gui_height, self.gui_mass, self.gui_legs, self.gui_speed, self.gui_strides,
+                  self.gui_to, self.gui_steps):
+            g.on_update(self._on_change)
+        self.gui_open.on_upload(self._on_upload)
+        self.gui_dl_bvh.on_click(self._on_download_bvh)
+        self.gui_dl_report.on_click(self._on_download_report)
+        self.gui_dl_csv.on_click(self._on_download_csv)
+        self.gui_dl_mp4.on_click(self._on_download_mp4)
+
     def params_from_gui(self) -> Params:
         """The parameters the controls show, checked against the controls' own options and limits (values
         can be crafted); numbers equal to the character's own are not overrides."""

@@ -83,7 +83,7 @@ class _Layout(_TabPart):
     """The layout part of :class:`~froude.apps.studio.app.Tab` (a mixin: the tab's state lives in Tab)."""
 
     # ---- GUI
-    # Long because it is a flat list of the page's controls, one statement per widget, in page order.
+    # The page's controls, one statement per widget, in page order; their handlers: Tab._wire_gui.
     def _build_gui(self) -> None:
         gui = self.target.gui
         gui.configure_theme(control_width="large", show_logo=False)
@@ -162,24 +162,7 @@ class _Layout(_TabPart):
         with gui.add_folder("Details", order=8, expand_by_default=False):
             self.gui_state = gui.add_markdown(self._state_md())
 
-        self.gui_play.on_click(self._on_play)
-        self.gui_prev.on_click(lambda e: self._step(-1))
-        self.gui_next.on_click(lambda e: self._step(+1))
-        self.gui_time.on_update(self._on_time)
-        self.gui_rate.on_update(self._on_rate)
-        for g in (self.gui_overlay, self.gui_show_ref, self.gui_machine, self.gui_onion, self.gui_camera):
-            g.on_update(self._on_view)
-        self.gui_frame.on_click(self._on_view)
-        self.gui_show_naive.on_update(self._on_naive)
-        self.gui_char.on_update(self._on_character)
-        for g in (self.gui_mode, self.gui_height, self.gui_mass, self.gui_legs, self.gui_speed, self.gui_strides,
-                  self.gui_to, self.gui_steps):
-            g.on_update(self._on_change)
-        self.gui_open.on_upload(self._on_upload)
-        self.gui_dl_bvh.on_click(self._on_download_bvh)
-        self.gui_dl_report.on_click(self._on_download_report)
-        self.gui_dl_csv.on_click(self._on_download_csv)
-        self.gui_dl_mp4.on_click(self._on_download_mp4)
+        self._wire_gui()  # the session wiring: the handlers (Tab, studio.app)
         self._sync_mode_controls()
 
     def _title(self) -> str:

@@ -4,6 +4,8 @@ slower than its ``SLOW_S`` as ``slow`` (the fast tier, ``./scripts/test -m "not 
     python scripts/test_durations.py                 # every tests/test_*.py, one file at a time, one process
     python scripts/test_durations.py tests/test_ik.py tests/test_bvh.py   # re-measure some files (merged in)
     python scripts/test_durations.py --from-junit DIR   # rebuild from junit XML files already written
+    python scripts/test_durations.py --merge-run OUT    # add the --durations lines of a pytest run's output
+                                                        # (e.g. of the fast tier), keeping each test's larger time
 
 One file at a time, in one process each (``-n 0``, under ``nice``): the whole suite in one run with
 ``--durations=0`` takes 12+ minutes and a crash there loses every number. A test's time is its setup, call and
@@ -52,6 +54,21 @@ def measure(files: list[Path], python: str) -> dict[str, float]:
     return out
 
 
+def durations_lines(text: str) -> dict[str, float]:
+    """{node id: seconds} from pytest's ``--durations`` lines ("12.34s call     tests/test_x.py::name"),
+    setup, call and teardown summed."""
+    out: dict[str, float] = {}
+    for line in text.splitlines():
+        parts = line.split(None, 2)
+        if len(parts) == 3 and parts[0].endswith("s") and parts[1] in ("setup", "call", "teardown"):
+            try:
+                sec = float(parts[0][:-1])
+            except ValueError:
+                continue
+            out[parts[2].strip()] = out.get(parts[2].strip(), 0.0) + sec
+    return out
+
+
 def read(path: Path = OUT) -> dict[str, float]:
     """{node id: seconds} of tests/durations.tsv ({} when absent)."""
     if not path.is_file():
@@ -71,8 +88,19 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("files", nargs="*", type=Path, help="test files to (re)measure (default: all)")
     ap.add_argument("--from-junit", type=Path, help="a folder of junit XML files to read instead of running")
+    ap.add_argument("--merge-run", type=Path, help="a pytest output with --durations lines to merge in (max)")
     ap.add_argument("--python", default=sys.executable)
     args = ap.parse_args()
+    if args.merge_run:
+        # a test that shares a module fixture or a cache with slow ones pays for it when they are left out
+        # (the fast tier): such a run's times count too, the larger one kept
+        old = read()
+        new = durations_lines(args.merge_run.read_text())
+        times = {**old, **{n: max(s, old.get(n, 0.0)) for n, s in new.items()}}
+        head = OUT.read_text().splitlines()[1] if OUT.is_file() else ""
+        write(times, head.split("). ", 1)[-1] + f" Merged: {len(new)} times of {args.merge_run.name}.")
+        print(f"{len(new)} times merged -> {OUT.relative_to(REPO)}", file=sys.stderr)
+        return 0
     if args.from_junit:
         times = {}
         for xml in sorted(args.from_junit.glob("*.xml")):

@@ -185,11 +185,17 @@ def _measured_slow() -> set[str]:
     return {node for sec, node in rows if float(sec) > SLOW_S}
 
 
+#: Module fixtures whose first user pays for a fit (tens of seconds here): every test using one is slow, or
+#: leaving the measured slow ones out would only move the fit onto the next test of the module.
+SLOW_FIXTURES = {"tests/test_walk_scale.py": "walks"}
+
+
 def pytest_collection_modifyitems(config, items):
     slow = _measured_slow()
     for item in items:
+        heavy_fixture = SLOW_FIXTURES.get(item.nodeid.split("::")[0]) in getattr(item, "fixturenames", ())
         # a browser test starts Chromium and a studio: minutes on this machine, measured or not
-        if item.nodeid in slow or item.get_closest_marker("browser") is not None:
+        if item.nodeid in slow or heavy_fixture or item.get_closest_marker("browser") is not None:
             item.add_marker(pytest.mark.slow)
 
 

@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -261,3 +263,53 @@ def test_the_turning_run_is_a_run(run_cli, tmp_path):
     out = tmp_path / "child.bvh"
     code, _, err = run_cli("scale", clip("cmu-turns/16_51"), "--character", "child", "-o", out, "-q")
     assert code in (1, 2) and err.count("\n") == 1 and "Traceback" not in err and not out.exists()
+
+
+# ---- every verb on a turn (issue 28 acceptance 5) ------------------------------------------------------
+@pytest.mark.browser
+@pytest.mark.timeout(600)
+def test_studio_takes_a_turn(tmp_path):
+    """The studio opens a turning walk: its facts say the turn, the child comes out along the path (the
+    downloaded BVH turns, by the tests' own reader), and a screenshot of the scene is kept."""
+    from test_studio_browser import (
+        CHROMIUM,
+        CHROMIUM_ARGS,
+        VIEWPORT,
+        _close_toasts,
+        _download,
+        _pick,
+        _wait_state,
+        running_studio,
+    )
+
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium; scripts/test installs it)")
+    pw = pytest.importorskip("playwright.sync_api")
+    pytest.importorskip("viser")
+    turn = clip(TURN)
+    shots = Path(os.environ.get("FROUDE_STUDIO_SHOTS", tmp_path / "shots"))
+    shots.mkdir(parents=True, exist_ok=True)
+    with running_studio([str(turn)], timeout_s=240) as (proc, url):  # the walking fit comes first
+        with pw.sync_playwright() as p:
+            ctx = p.chromium.launch_persistent_context(
+                str(tmp_path / "chromium-profile"), executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True,
+                viewport=VIEWPORT, accept_downloads=True)
+            try:
+                page = ctx.new_page()
+                page.goto(url)
+                s0 = _wait_state(page, status="ok", timeout=180)
+                assert s0["clip"] == turn.name
+                facts = page.get_by_text("frames/s").first.inner_text()
+                assert "turns +95° over" in facts, facts
+                _pick(page, "Character", "child")
+                _wait_state(page, status="ok", character="child", timeout=180)
+                _close_toasts(page)
+                page.wait_for_timeout(2500)
+                page.screenshot(path=str(shots / "turn_child.png"))
+                bvh = _download(page, "Download BVH", tmp_path)
+            finally:
+                ctx.close()
+        print(f"studio screenshots: {shots}")
+    # the studio's own strides: the output turns in proportion to its steps, at most as the clip
+    got = _oracle_heading_deg(bvh, 1.0)
+    assert 45.0 <= got <= 94.5 + 3.0, got

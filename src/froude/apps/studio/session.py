@@ -161,7 +161,7 @@ class Session:
         plan = pipeline.plan_scale(self.prep, spec, speed=params.speed, strides=int(params.strides), **nums)
         retarget, path = plan.retarget, plan.path
         assert path is not None  # the physical method (the studio has no naive preview)
-        targets = pipeline.targets_of(self.prep, path, retarget)
+        targets, path = pipeline.targets_on_path(self.prep, path, retarget)  # a turn: along its path
         _require_finite(targets.initial)
         track = machine_track(targets.initial, retarget.body, path)
         return Solved(params, track, None, True, time.perf_counter() - t0, motion_hash(targets.initial),

@@ -5,6 +5,7 @@ with the figure in the clip's SOURCES.md. The figures are read from those files 
 """
 from __future__ import annotations
 
+import csv
 import json
 import math
 import os
@@ -313,3 +314,23 @@ def test_studio_takes_a_turn(tmp_path):
     # the studio's own strides: the output turns in proportion to its steps, at most as the clip
     got = _oracle_heading_deg(bvh, 1.0)
     assert 45.0 <= got <= 94.5 + 3.0, got
+
+
+@pytest.mark.slow
+def test_a_batch_of_a_turn_and_a_straight_run(run_cli, tmp_path):
+    """A batch of a turning walk and a straight run (one Dask worker): both done with every bar met, and the
+    turn's output turns (the tests' own reader on the written file), the straight run's does not."""
+    pytest.importorskip("dask")
+    turn, straight = clip(TURN), clip("09_01")
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("characters: [child]\nspeeds: [1.0]\nstrides: 4\n")
+    out = tmp_path / "out"
+    code, _, err = run_cli("batch", turn, straight, "--plan", plan, "-o", out, "--workers", "1", "-q")
+    assert code == 0, err
+    # clip ids are the paths below the inputs' common folder
+    rows = {Path(r["clip"]).name: r for r in csv.DictReader((out / "index.csv").open())}
+    assert set(rows) == {turn.stem, "09_01"} and all(r["status"] == "ok" and r["bars_met"] == "yes"
+                                                      for r in rows.values()), rows
+    stride_s = 2.0 / float(rows[turn.stem]["step_frequency_hz"])
+    assert _oracle_heading_deg(out / rows[turn.stem]["output"], stride_s) > 45.0  # 4 strides of the child
+    assert abs(_oracle_heading_deg(out / rows["09_01"]["output"], 0.6)) < 5.0

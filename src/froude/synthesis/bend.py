@@ -85,8 +85,6 @@ def _clip_step_figures(clip: TakePath) -> tuple[np.ndarray, ...]:
     return foot, s_td, lean, np.nan_to_num(fr)
 
 
-#: The largest sideways move of a step for its lean [leg lengths] (see ``lean_shift``).
-LEAN_SHIFT_MAX_L = 0.09
 #: The share of a swing at each end during which a foot keeps the sideways shift of the stance it leaves
 #: or reaches (its toes are near the floor there).
 SWING_HOLD = 0.25
@@ -112,8 +110,10 @@ def lean_shift(com: np.ndarray, markers: np.ndarray, path: MachinePath, clip: Ta
     the machine's stride as it is), and a speed change turns it by arctan(v'^2 / (g r')) - arctan(v^2 / (g r)) with the
     output's speed along its straight travel and the clip's radius scaled by L. A planted foot is moved by
     one amount for its whole stance (no skate); a swing goes from one amount to the next smoothly. The COM
-    (the path) stays: the feet go out of the curve, as the clip's do. A step moves by at most
-    LEAN_SHIFT_MAX_L leg lengths (l0 of the machine).
+    (the path) stays: the feet go out of the curve, as the clip's do. The move is not
+    bounded: the turns of the shared walks ask up to 0.11 leg lengths under pure scaling, a faster walk or an
+    erratic step (the exhausted walks) up to 0.19; a bound of 0.05-0.09 (tried) cost the lean of steady turns
+    more than it saved in skating.
     com: (T, 3), markers: (T, 2, 3, 3) the straight output's COM and foot marker targets [m]; origin, fwd0: (3,)
     its start and travel direction.
     """
@@ -163,11 +163,6 @@ def lean_shift(com: np.ndarray, markers: np.ndarray, path: MachinePath, clip: Ta
             want += float(np.arctan(fr * ratio) - np.arctan(fr))
         # the foot goes right (against left0) to put the COM further left of it
         shift_step[k] = -h * (np.tan(want) - np.tan(pred))
-    # at most LEAN_SHIFT_MAX_L leg lengths: the turns of the shared walks ask up to 0.11 under pure scaling
-    # (0.08 the steady ones), a faster walk or an erratic step up to 0.19, and those outputs' planted feet
-    # slide (the IK pulls the legs toward the reference stride's pose)
-    cap = LEAN_SHIFT_MAX_L * path.l0
-    shift_step = np.clip(shift_step, -cap, cap)
     for f in (0, 1):
         ks = np.flatnonzero(path.foot_of_step == f)
         if ks.size == 0:

@@ -138,7 +138,7 @@ def force_per_stride(path: TakePath) -> list[dict]:
         T = b.t1_s - a.t0_s
         u0, u1 = np.asarray(a.com_velocity_t0_m_s), np.asarray(b.com_velocity_t1_m_s)
         mid = 0.5 * (a.t0_s + b.t1_s) / path.frame_time
-        left = direction_of(float(np.interp(mid, frames, path.heading_rad)) + 0.5 * math.pi)
+        left = direction_of(np.interp(mid, frames, path.heading_rad) + 0.5 * math.pi)
         got = float((u1 - u0) @ left) / T
         dpsi_com = float(wrap_angle(yaw_of(u1) - yaw_of(u0)))
         v = 0.5 * (float(np.linalg.norm(u0)) + float(np.linalg.norm(u1)))

@@ -31,13 +31,13 @@ from .prepared import Prepared
 from .result import Result, report_path, write_result
 from .speed_change import check_human_speed, output_steps, plan_run_speed_change, speed_range_notes
 from .speed_goal import scale_factor
+from .synthesis.bend import bend
 from .synthesis.cycle import extract_cycle, fit_events
 from .synthesis.targets import build_targets, stance_only
 from .synthesis.timewarp import MachinePath, machine_path
 
 __all__ = ["PERIODIC_MIN_STRIDES", "Prepared", "Result", "ScalePlan", "accelerate", "add_report", "finish",
-           "naive_clip", "plan_scale", "prepare", "report_path", "scale", "targets_of", "targets_on_path",
-           "write_result"]
+           "naive_clip", "plan_scale", "prepare", "report_path", "scale", "targets_of", "write_result"]
 
 
 def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, length_scale=None,
@@ -95,7 +95,7 @@ class ScalePlan:
     """The first half of ``scale``: the character applied, the machine chosen and its path simulated.
 
     ``plan.finish()`` completes it (targets, IK, report); the studio shows ``path`` and the targets'
-    initial motion (``targets_on_path(prep, plan.path, plan.retarget)[0].initial``) as an instant preview.
+    initial motion (``bend(targets_of(prep, plan.path, plan.retarget), ...)``) as an instant preview.
     """
 
     prep: Prepared
@@ -242,17 +242,6 @@ def targets_of(prep: Prepared, path: MachinePath, retarget: Retarget):
     return build_targets(prep.cycle, path, retarget, prep.body.leg_length, prep.output_meta)
 
 
-def targets_on_path(prep: Prepared, path: MachinePath, retarget: Retarget):
-    """(targets, machine path): ``targets_of``, and for a turning take both rolled back onto the clip's path
-    scaled (``synthesis.bend``; the studio's preview and ``finish`` alike)."""
-    targets = targets_of(prep, path, retarget)
-    if prep.turn is None:
-        return targets, path
-    from .synthesis.bend import bend
-
-    return bend(targets, path, prep.turn, retarget.L, prep.origin)
-
-
 def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, notes, method: str, plan=None,
            periodic=None, report: bool = True, extras: dict | None = None) -> Result:
     """Targets → IK → report: the common tail of scale and accelerate.
@@ -263,7 +252,7 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
     """
     from .ik.correct import WALK_REPAIR_ROUNDS, correct, tile_stride
 
-    targets, path = targets_on_path(prep, path, retarget)  # a turning take's rolled back onto its path
+    targets, path = bend(targets_of(prep, path, retarget), path, prep.turn, retarget.L, prep.origin)  # a turn
     n_strides = len(path.foot_of_step) / 2
     if periodic is not None and n_strides > PERIODIC_MIN_STRIDES and prep.turn is None:
         machine, stretch, fps = periodic

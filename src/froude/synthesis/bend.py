@@ -163,12 +163,20 @@ def lean_shift(com: np.ndarray, markers: np.ndarray, path: MachinePath, clip: Ta
             want += float(np.arctan(fr * ratio) - np.arctan(fr))
         # the foot goes right (against left0) to put the COM further left of it
         shift_step[k] = -h * (np.tan(want) - np.tan(pred))
+    return _per_frame(path, shift_step), shift_step
+
+
+def _per_frame(path: MachinePath, shift_step: np.ndarray) -> np.ndarray:
+    """(T, 2) each foot's sideways move [m] per frame from its steps' (n,): one amount over a stance, a
+    smooth change over the middle of the swing to the next stance of that foot."""
+    t = path.times
+    out = np.zeros((len(t), 2))
     for f in (0, 1):
         ks = np.flatnonzero(path.foot_of_step == f)
         if ks.size == 0:
             continue
         on, off, dx = path.contact_on[ks], path.contact_off[ks], shift_step[ks]
-        col = np.full(T, dx[0])
+        col = np.full(len(t), dx[0])
         for j in range(ks.size):
             col[t >= on[j]] = dx[j]
             if j + 1 < ks.size:  # the swing to the next stance of this foot
@@ -179,17 +187,20 @@ def lean_shift(com: np.ndarray, markers: np.ndarray, path: MachinePath, clip: Ta
                 u = (t[sw] - off[j] - SWING_HOLD * span) / max((1.0 - 2.0 * SWING_HOLD) * span, 1e-9)
                 col[sw] = dx[j] + (dx[j + 1] - dx[j]) * _smooth_blend(u)
         out[:, f] = col
-    return out, shift_step
+    return out
 
 
-def bend(targets: Targets, path: MachinePath, clip: TakePath, L: float,
+def bend(targets: Targets, path: MachinePath, clip: TakePath | None, L: float,
          origin: np.ndarray) -> tuple[Targets, MachinePath]:
-    """The straight output's IK targets and machine path rolled onto the clip's path scaled by L.
+    """The straight output's IK targets and machine path rolled onto the clip's path scaled by L (as they are
+    when clip is None: a straight take, modelled as it is).
 
     COM, foot markers, the machine's COM and contact points are moved point by point; the initial motion's
     pose (the IK's start and the pose it is pulled toward) is moved rigidly with its COM target, turned
     by the heading gained there. origin: (3,) [m] where the straight output starts (``Prepared.origin``).
     """
+    if clip is None:
+        return targets, path
     fwd0 = path.frame[0]
     line = Centreline.of(clip, L, origin, fwd0)
     shift, shift_step = lean_shift(targets.com, targets.markers, path, clip, L, origin, fwd0)

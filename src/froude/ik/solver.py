@@ -58,7 +58,7 @@ from ..core.motion import Motion
 from ..errors import IkError
 from .fk import _FK, _fk_levels
 from .kernels import _CYC, _block_inverses, _cho_solve_soa, _cholesky_soa, _exp_soa, _log_err_soa, _qmul_soa, _soa_quats
-from .plan import _cached_plan, _Plan, _resolve_frozen, default_frozen_joints, dof_weights
+from .plan import UNUSED_JOINT_TOL, _cached_plan, _Plan, _resolve_frozen, default_frozen_joints, dof_weights
 from .tasks import (
     ComTask,
     MarkerTask,
@@ -69,7 +69,7 @@ from .tasks import (
 
 __all__ = [
     "ComTask", "MarkerTask", "PostureTask", "RootTask", "IkResult", "solve_ik",
-    "default_frozen_joints", "max_joint_step", "dof_weights",
+    "default_frozen_joints", "max_joint_step", "dof_weights", "UNUSED_JOINT_TOL",
 ]
 
 # Defaults of the solver, tuned on the real clips (the task weights' are in ik.tasks).

@@ -10,6 +10,7 @@ import numpy as np
 
 from ..body.gait import detect_gait, summarize
 from ..body.model import BodyModel
+from ..body.path import is_straight, straighten, take_path
 from ..constants import UP, UP_AXIS
 from ..core.motion import Motion
 from ..errors import FroudeError
@@ -110,6 +111,11 @@ def _actors(motions: Sequence[Motion], labels: Sequence[str] | None, camera: str
         body = BodyModel.from_skeleton(m.skeleton)
         com, markers = body.com_and_markers(m)
         gait = detect_gait(m, body, markers)
+        path = take_path(m, body, com, gait)
+        if not is_straight(path):  # the camera follows a turn: the take is drawn unrolled along its path
+            m = straighten(m, path)
+            com, markers = body.com_and_markers(m)
+            gait = detect_gait(m, body, markers)
         summary = summarize(m, body, com, gait)
         speed = float(summary.mean_speed) if np.isfinite(summary.mean_speed) else 0.0
         heading = np.asarray(summary.heading, dtype=float)

@@ -4,7 +4,9 @@ A figure is drawn as thick round-capped lines along the skeleton's bones ("capsu
 head, a soft shadow on the ground and a ground line (side camera) or ground grid (three-quarter, front).
 Limbs are shaded by side: the side away from the camera darker, the near side lighter, so left and
 right read at a glance. Projection is orthographic: a point p [m] appears at (p·right, p·up) on screen,
-with the camera basis built from the runner's mean heading, so every runner travels left to right.
+with the camera basis built from the runner's mean heading, so every runner travels left to right. A take
+that turns (``body.path``) is drawn unrolled along its path (``body.path.straighten``): the camera follows
+the curve, and the speed shown is the speed along the path.
 
 Everything is drawn at one common scale [px/m] across rows and panels, so a child looks small next to
 a giant. matplotlib (and imageio + imageio-ffmpeg for GIF/MP4) are optional extras imported lazily;

@@ -45,8 +45,6 @@ DEBOUNCE_S = 0.08
 YIELD_S = 0.003
 
 
-
-
 @dataclass
 class Timing:
     """Latency of the last change [s]: compute and scene push of the preview and of the result."""
@@ -58,24 +56,6 @@ class Timing:
     report_compute: float = float("nan")
     started_at: float = float("nan")  # perf_counter when the worker took the change up [s]
     result_flushed_at: float = float("nan")  # perf_counter when the result was handed to the server [s]
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
 
 
 # ---- one browser tab ---------------------------------------------------------------------------------
@@ -137,15 +117,6 @@ class Tab(_Layout, _Playback, _Export):
 
     def _atomic(self):
         return self.client.atomic() if self.client is not None else self.studio.server.atomic()
-
-
-
-
-
-
-
-
-
 
 
     def _wire_gui(self) -> None:
@@ -241,10 +212,6 @@ class Tab(_Layout, _Playback, _Export):
         self._flush()
 
 
-
-
-
-
     def _on_naive(self, event) -> None:
         if event.client is None:
             return
@@ -315,12 +282,6 @@ class Tab(_Layout, _Playback, _Export):
                              f"{MAX_CLIP_BYTES >> 20} MB limit; trim the clip or use the command line")
             return
         self._post(("clip", name, bytes(data)))
-
-
-
-
-
-
 
 
     # ---- recompute
@@ -552,14 +513,6 @@ class Tab(_Layout, _Playback, _Export):
         if self.client is not None:
             self.client.add_notification("Change not applied", msg, color="red", auto_close_seconds=10.0)
         self._flush()
-
-
-
-
-
-
-
-
 
 
 # ---- the server --------------------------------------------------------------------------------------

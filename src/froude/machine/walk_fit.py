@@ -24,20 +24,20 @@ real clips it explains little of the force (r² ≈ 0: the leg-length change of 
 geometry, not compression), so it is only a start; a plain spring leg (Geyer et al.'s) is the other.
 
 Cycle search: z = (u, v, d, s, θ0, K, a, b, c, l_td, e) (T_c held at the measured mean stance time; the
-control's two pulses, six more entries of z, held) must make the step map periodic (4 equations) and
-reproduce the measured step time, double-support time and mean speed (3): seven equations in eleven
-unknowns, solved by minimum-norm Newton from the priors in coordinates scaled by ``CYCLE_SCALES`` (the
-periodic machine nearest them). Then the *shape fit*: least
-squares of the machine's total vertical force over a stance (measured through the clip's filter) and its
-COM height over a step against the clip's, with periodicity and the three targets as heavily weighted
-residuals, the force weighted up around the clip's two peaks and trough (``LANDMARK_WEIGHT``: the
-acceptance is on those landmarks, and a plain least-squares fit of the CMU clips' W-shaped single
-support flattens them), the landing leg kept ``MIN_CLEARANCE`` above the ground where the COM dips in
-single support (at a graze the step map jumps, and the exact cycle's existence would hang on the last
-bits); the exact cycle is then found again from its result. Each of the two starts is
-fitted without the control's pulses and with them (``PULSE_START``: a push-off pulse just past the other
-foot's touchdown, a weight-acceptance pulse at the clip's first peak, their amplitudes fitted by the
-shape fit); of the four the best shape wins.
+control's two pulses, six more entries of z, held) must make the step map periodic (4 equations) and reproduce
+the measured step time, double-support time and mean speed (3): seven equations in eleven unknowns, solved by
+minimum-norm Newton from the priors in coordinates scaled by ``CYCLE_SCALES`` (the periodic machine nearest
+them). Then the *shape fit*: least squares of the machine's total vertical force over a stance (measured
+through the clip's filter) and its COM height over a step against the clip's on the periodic cycles
+(periodicity and the three targets as exact constraints, a constrained Gauss-Newton run until its step is
+below a tolerance, so that its end point is the minimum and not where a budget ran out: issue 26), the force
+weighted up around the clip's two peaks and trough (``LANDMARK_WEIGHT``: the acceptance is on those landmarks,
+and a plain least-squares fit of the CMU clips' W-shaped single support flattens them), the landing leg kept
+``MIN_CLEARANCE`` above the ground where the COM dips in single support (at a graze the step map jumps, and
+the exact cycle's existence would hang on the last bits); the exact cycle is then found again from its result.
+Each of the two starts is fitted without the control's pulses and with them (``PULSE_START``: a push-off pulse
+just past the other foot's touchdown, a weight-acceptance pulse at the clip's first peak, their amplitudes
+fitted by the shape fit); of the four the best shape wins.
 """
 from __future__ import annotations
 

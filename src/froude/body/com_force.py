@@ -17,7 +17,8 @@ from ..constants import G_WORLD, GRAVITY, UP_AXIS
 from ..errors import FitError
 
 __all__ = ["CUTOFF_HZ", "FILTER_ORDER", "EDGE_PAD_S", "EDGE_FIT_S", "butter_lowpass", "filtfilt", "smooth_com",
-           "ground_force", "vertical_force_bw"]
+           "ground_force", "vertical_force_bw",
+           "acceleration_response"]
 
 #: Low-pass cutoff of the COM filter [Hz] (−6 dB point of the forward-backward filter).
 CUTOFF_HZ = 8.0
@@ -112,6 +113,22 @@ def smooth_com(p_world_com: np.ndarray, frame_time: float, cutoff_hz: float = CU
     a = np.gradient(v, frame_time, axis=0)
     sl = slice(n_pad, n_pad + F)
     return ps[sl], v[sl], a[sl]
+
+
+def acceleration_response(freq_hz: np.ndarray, frame_time: float, cutoff_hz: float = CUTOFF_HZ) -> np.ndarray:
+    """Steady-state gain [1/s²] of :func:`smooth_com`'s acceleration for a sinusoid of the COM position at
+    freq_hz (N,) [Hz], sampled every frame_time [s]: the forward-backward filter's |H|² times the two
+    central differences' −sin²(ω dt)/dt² (real: the chain has zero phase). Away from the clip's edges, the
+    acceleration ``smooth_com`` measures of a periodic motion is its harmonics times this gain (aliases of
+    harmonics above the Nyquist frequency aside), so a model's motion can be seen through the same
+    instrument without sampling it (:func:`froude.machine.walk_fit.stance_force_profile`)."""
+    w_dt = 2.0 * math.pi * np.asarray(freq_hz, float) * frame_time
+    z1 = np.exp(-1j * w_dt)
+    gain = np.ones(w_dt.shape)
+    for (b0, b1, b2), (_, a1, a2) in butter_lowpass(FILTER_ORDER, cutoff_hz, 1.0 / frame_time):
+        h = (b0 + z1 * (b1 + z1 * b2)) / (1.0 + z1 * (a1 + z1 * a2))
+        gain = gain * np.abs(h) ** 2
+    return -gain * np.sin(w_dt) ** 2 / frame_time ** 2
 
 
 def ground_force(a_world_com: np.ndarray, mass: float) -> np.ndarray:

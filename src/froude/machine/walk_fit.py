@@ -24,20 +24,20 @@ real clips it explains little of the force (r² ≈ 0: the leg-length change of 
 geometry, not compression), so it is only a start; a plain spring leg (Geyer et al.'s) is the other.
 
 Cycle search: z = (u, v, d, s, θ0, K, a, b, c, l_td, e) (T_c held at the measured mean stance time; the
-control's two pulses, six more entries of z, held) must make the step map periodic (4 equations) and
-reproduce the measured step time, double-support time and mean speed (3): seven equations in eleven
-unknowns, solved by minimum-norm Newton from the priors in coordinates scaled by ``CYCLE_SCALES`` (the
-periodic machine nearest them). Then the *shape fit*: least
-squares of the machine's total vertical force over a stance (measured through the clip's filter) and its
-COM height over a step against the clip's, with periodicity and the three targets as heavily weighted
-residuals, the force weighted up around the clip's two peaks and trough (``LANDMARK_WEIGHT``: the
-acceptance is on those landmarks, and a plain least-squares fit of the CMU clips' W-shaped single
-support flattens them), the landing leg kept ``MIN_CLEARANCE`` above the ground where the COM dips in
-single support (at a graze the step map jumps, and the exact cycle's existence would hang on the last
-bits); the exact cycle is then found again from its result. Each of the two starts is
-fitted without the control's pulses and with them (``PULSE_START``: a push-off pulse just past the other
-foot's touchdown, a weight-acceptance pulse at the clip's first peak, their amplitudes fitted by the
-shape fit); of the four the best shape wins.
+control's two pulses, six more entries of z, held) must make the step map periodic (4 equations) and reproduce
+the measured step time, double-support time and mean speed (3): seven equations in eleven unknowns, solved by
+minimum-norm Newton from the priors in coordinates scaled by ``CYCLE_SCALES`` (the periodic machine nearest
+them). Then the *shape fit*: least squares of the machine's total vertical force over a stance (measured
+through the clip's filter) and its COM height over a step against the clip's on the periodic cycles
+(periodicity and the three targets as exact constraints, a constrained Gauss-Newton run until its step is
+below a tolerance, so that its end point is the minimum and not where a budget ran out: issue 26), the force
+weighted up around the clip's two peaks and trough (``LANDMARK_WEIGHT``: the acceptance is on those landmarks,
+and a plain least-squares fit of the CMU clips' W-shaped single support flattens them), the landing leg kept
+``MIN_CLEARANCE`` above the ground where the COM dips in single support (at a graze the step map jumps, and
+the exact cycle's existence would hang on the last bits); the exact cycle is then found again from its result.
+Each of the two starts is fitted without the control's pulses and with them (``PULSE_START``: a push-off pulse
+just past the other foot's touchdown, a weight-acceptance pulse at the clip's first peak, their amplitudes
+fitted by the shape fit); of the four the best shape wins.
 """
 from __future__ import annotations
 
@@ -46,6 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..body.com_force import acceleration_response
 from ..body.gait import detect_gait, summarize, walks
 from ..body.model import BodyModel
 from ..constants import GRAVITY, UP_AXIS, heading_frame
@@ -271,23 +272,30 @@ def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40 *
                          (w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
                          (w.step_length / w.t_step - tgt[2]) / tgt[2]]), w
 
-    _, w0 = evaluate(z0, n_per_stance)
-    for slower in START_SPEED_FACTORS:
-        if w0.valid:
-            break
-        # A brisk walk's measured touchdown state can vault the machine off its stance leg (the clip's
-        # own force nearly unloads in single support): start slower; the search restores the speed.
-        z_try = z0.copy()
-        z_try[0] *= slower
-        _, w_try = evaluate(z_try, n_per_stance)
-        if w_try.valid:
-            z0, w0 = z_try, w_try
-    if not w0.valid:
-        raise FitError(f"the walking machine has no valid step at the clip's measured step: {REASONS[w0.reason]}")
+    z0 = _valid_start(z0, T_c, roll, n_per_stance)
     z, rows, calls, R = solve_orbit(rowwise(evaluate, 7), z0, s, h, tol=tol, max_iter=max_iter,
                                     resolutions=(n_per_stance, n_per_stance), chord=False, batched=False,
                                     max_halvings=30, what="walking cycle", reasons=REASONS)
     return z, rows.items[0], calls, float(np.max(np.abs(R)))
+
+
+def _valid_start(z0, T_c, roll, n_per_stance):
+    """z0 (17,), or z0 at a slower touchdown speed (``START_SPEED_FACTORS``), where the machine takes a valid
+    step; FitError with the first reason when none does."""
+    def step(z):
+        return walk_step(WalkState(*z[:4]), z[4], _control(z, T_c), roll=roll, l_td=z[9], n_per_stance=n_per_stance)
+
+    w0 = step(z0)
+    if w0.valid:
+        return z0
+    for slower in START_SPEED_FACTORS:
+        # A brisk walk's measured touchdown state can vault the machine off its stance leg (the clip's
+        # own force nearly unloads in single support): start slower; the fit restores the speed.
+        z_try = z0.copy()
+        z_try[0] *= slower
+        if step(z_try).valid:
+            return z_try
+    raise FitError(f"the walking machine has no valid step at the clip's measured step: {REASONS[w0.reason]}")
 
 
 def stance_force_profile(rec, tau, *, frame_time=None, cutoff_hz=CUTOFF_HZ, time_unit=1.0):
@@ -296,27 +304,32 @@ def stance_force_profile(rec, tau, *, frame_time=None, cutoff_hz=CUTOFF_HZ, time
     rec: the RecordedStep (:func:`froude.machine.walking.record_step`) of the periodic cycle. The leg
     lands at the start of a step and lifts off t_stance later; the total force of both legs repeats every
     step, so the stance profile is the step's force at (τ t_stance) mod t_step. With ``frame_time`` [s]
-    (and ``time_unit`` √(l0/g) [s]) the force is *measured like the clip's*: the machine's COM is sampled
-    at the clip's frame rate over several steps and goes through the same zero-lag filter and double
-    differentiation (eq. 1, :func:`froude.machine.forces.smooth_com`), so both forces are seen through the
-    same instrument.
+    (and ``time_unit`` √(l0/g) [s]) the force is *measured like the clip's*: the machine's COM height, a
+    periodic signal, goes through the clip's zero-lag filter and double differentiation (eq. 1,
+    :func:`froude.machine.forces.smooth_com`) as their frequency response
+    (:func:`froude.body.com_force.acceleration_response`) on its harmonics up to the clip's Nyquist
+    frequency, so both forces are seen through the same instrument. In the frequency domain the result is
+    smooth in the machine's parameters; sampling it at the frame rate and interpolating (as before) put
+    kinks into the shape fit's residual wherever a sample crossed a phase, and its minimum sat on them.
     """
     w = rec.step
     t_m = (np.asarray(tau, float) * w.t_stance) % w.t_step
     if frame_time is None:
         return rec.sample(t_m).total_force[:, 1]
-    dt = frame_time / time_unit
-    n_steps = 8
-    t = np.arange(int(n_steps * w.t_step / dt)) * dt
-    k, ph = np.divmod(t, w.t_step)
-    tr = rec.sample(ph)
-    pos = np.zeros((t.size, 3))
-    pos[:, 2] = tr.pos[:, 0] + k * w.step_length
-    pos[:, UP_AXIS] = tr.pos[:, 1]
-    _, _, acc = smooth_com(pos * GRAVITY * time_unit ** 2, frame_time, cutoff_hz)  # [m]: l0 = g T²
-    fy = acc[:, UP_AXIS] / GRAVITY + 1.0
-    mid = k == n_steps // 2  # one step far from the edges
-    return np.interp(t_m, ph[mid], fy[mid], period=w.t_step)
+    n_fft = PROFILE_FFT_SAMPLES
+    y = rec.sample(np.arange(n_fft) * (w.t_step / n_fft)).pos[:, 1]  # COM height over one step [l0]
+    coef = np.fft.rfft(y) / n_fft
+    harmonic = np.arange(coef.size)
+    freq_hz = harmonic / (w.t_step * time_unit)
+    gain = np.where(freq_hz < 0.5 / frame_time, acceleration_response(freq_hz, frame_time, cutoff_hz), 0.0)
+    gain[1:] *= 2.0  # the negative frequencies' half (no harmonic at the Nyquist index survives: see above)
+    acc = np.real(np.exp(2j * np.pi * np.outer(t_m / w.t_step, harmonic)) @ (gain * coef))  # [l0 / s²]
+    return 1.0 + acc * time_unit ** 2  # l0 = g T²: the acceleration in g
+
+
+#: Samples of one machine step for the harmonics of its COM height (``stance_force_profile``): harmonics up
+#: to 64 of the step frequency (about 120 Hz), above every clip's Nyquist frequency up to 240 Hz frames.
+PROFILE_FFT_SAMPLES = 256
 
 
 #: Weights of the shape fit: periodicity and measured times are (nearly) hard, the force profile soft.
@@ -337,9 +350,16 @@ LANDMARK_WIDTH = 0.06
 #: moves between kernels.
 MIN_CLEARANCE = 0.01
 CLEARANCE_WEIGHT = 100.0
-#: Simulator resolution and evaluation budget of the shape fit (the exact cycle is found after it).
+#: Simulator resolution of the shape fit (the exact cycle is found after it at N_PER_STANCE).
 SHAPE_N_PER_STANCE = 120
-SHAPE_MAX_EVALUATIONS = 120
+#: The shape fit's convergence test: the largest component of a full Gauss-Newton step [CYCLE_SCALES units],
+#: its iteration limit, its finite-difference step [CYCLE_SCALES units] and the merit's weight of the
+#: constraints' violation (``_constrained_gauss_newton``).
+SHAPE_STEP_TOL = 1e-4
+SHAPE_LOCAL_STEP = 0.05
+SHAPE_MAX_ITERATIONS = 50
+SHAPE_FD_STEP = 1e-4
+MERIT_PENALTY = 1e3
 #: Samples of the step-phase COM height profile (double support, then single support).
 COM_SAMPLES = (8, 24)
 
@@ -391,51 +411,129 @@ def _control(z, T_c) -> WalkControl:
 
 def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_unit, tau_landmarks, free=(),
                n_per_stance=SHAPE_N_PER_STANCE):
-    """Least squares of the machine's stance force profile against the clip's, near-periodic.
+    """Least squares of the machine's stance force profile against the clip's, on the periodic cycles.
 
-    Residuals: the vertical force over a stance at tau [BW], weighted up around the clip's landmarks at
-    phases tau_landmarks (``LANDMARK_WEIGHT``); the COM height over a step; the periodicity and the
-    relative errors of stance time, double-support time and speed, weighted up (``SHAPE_WEIGHTS``); a weak
-    pull to the periodic start z1 in CYCLE_SCALES units; the landing leg's clearance kept above
-    MIN_CLEARANCE (``_clearance_shortfall``, so that the exact cycle found after it is not at a graze).
-    Returns z (11,); the exact cycle is found from it after.
+    Minimises ½‖r‖² + ½ w²‖y‖² subject to c = 0, y = (z − z1)/s the free variables in CYCLE_SCALES units:
+    r the vertical force over a stance at tau [BW], weighted up around the clip's landmarks at phases
+    tau_landmarks (``LANDMARK_WEIGHT``), the COM height over a step and the landing leg's clearance
+    shortfall (``_clearance_shortfall``, so that the exact cycle found after it is not at a graze); c the
+    periodicity and the relative errors of step time, double-support time and speed (7 equations, exact);
+    w = SHAPE_WEIGHTS["prior"] the pull to the periodic start z1. Solved by constrained Gauss-Newton
+    (``_constrained_gauss_newton``) to a step below ``SHAPE_STEP_TOL``: the end point is the minimum, not
+    where a budget ran out, so it does not follow the last bits of the clip (issue 26).
+    Returns (z (17,), cost ½‖r‖² + ½ w²‖y‖²); the exact cycle is found from it after at full resolution.
     """
-    from scipy.optimize import least_squares
-
     s_all = _scales(z1, free)
     fr = s_all > 0
     s = s_all[fr]
     tgt = np.asarray(targets, float)
-    wp, wt, wr = SHAPE_WEIGHTS["periodic"], SHAPE_WEIGHTS["targets"], SHAPE_WEIGHTS["prior"]
-    n_res = tau.size + h_ref.size + 7 + int(fr.sum())
     wc = SHAPE_WEIGHTS["com"]
     wf = 1.0 + LANDMARK_WEIGHT * sum(np.exp(-0.5 * ((tau - tk) / LANDMARK_WIDTH) ** 2) for tk in tau_landmarks)
 
-    def resid(x):
+    def evaluate(y):
         z = z1.copy()
-        z[fr] = x
+        z[fr] = z1[fr] + s * y
         rec = record_step(WalkState(*z[:4]), z[4], _control(z, T_c), roll=roll, l_td=z[9], n_per_stance=n_per_stance)
         w = rec.step
         if not w.valid:
-            return np.full(n_res, 10.0)
+            return None
         prof = stance_force_profile(rec, tau, frame_time=frame_time, time_unit=time_unit)
         h = rec.sample(step_phase_times(w.t_double, w.t_step)).pos[:, 1]
         nx = w.next
-        per = np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3]]) * wp
-        tg = np.array([(w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
-                       (w.step_length / w.t_step - tgt[2]) / tgt[2]]) * wt
-        # The clearance shortfall shares the step-time residual r: copysign(√(r² + g²), r) adds g² to the
-        # cost as a residual of its own would, and is r to the last bit where the clearance is kept (g = 0),
-        # so a fit the margin does not touch runs the same arithmetic as without it (a residual more, even
-        # a zero one, changes the solver's rounding, and the walks' shape fits follow rounding: issue 26).
+        c = np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3], (w.t_step - tgt[0]) / tgt[0],
+                      (w.t_double - tgt[1]) / tgt[1], (w.step_length / w.t_step - tgt[2]) / tgt[2]])
         graze = CLEARANCE_WEIGHT * _clearance_shortfall(rec, z[4], z[9])
-        tg[0] = math.copysign(math.sqrt(tg[0] * tg[0] + graze * graze), tg[0])
-        return np.concatenate([wf * (prof - prof_ref), wc * (h - h_ref), per, tg, wr * (x - z1[fr]) / s])
+        return np.concatenate([wf * (prof - prof_ref), wc * (h - h_ref), [graze]]), c
 
-    sol = least_squares(resid, z1[fr], x_scale=s, diff_step=1e-6, max_nfev=SHAPE_MAX_EVALUATIONS, method="trf")
+    y, cost = _constrained_gauss_newton(evaluate, s.size, SHAPE_WEIGHTS["prior"])
     z = z1.copy()
-    z[fr] = sol.x
-    return z, float(sol.cost)
+    z[fr] = z1[fr] + s * y
+    return z, cost
+
+
+def _constrained_gauss_newton(evaluate, n, w_prior, *, step_tol=None, max_iter=None, fd_step=None):
+    """min ½‖r(y)‖² + ½ w_prior²‖y‖² subject to c(y) = 0 from y = 0, by Gauss-Newton (the shape fit).
+
+    evaluate(y (n,)) → (r (R,), c (C,)), or None where the model is invalid. Each iteration linearises r and
+    c by forward differences of fd_step (in y's units, the scaled variables, so one step fits all), takes
+    the constraints' Newton step of least norm and, in their null space, the Gauss-Newton step of the
+    cost. Far from the minimum a step must lower the merit ½‖r‖² + ½ w²‖y‖² + MERIT_PENALTY ‖c‖₁, first as
+    it is, then with a second-order correction onto the constraints (which curve: a long step violates
+    them by O(step²), the Maratos effect), else it is halved (up to 12 times). A step shorter than
+    SHAPE_LOCAL_STEP is taken whole: there Gauss-Newton contracts, and a merit test would compare costs
+    that differ in their last bits (where the old trust-region fit stopped). Converged when the full
+    step's largest component is below step_tol: the end point is then the constrained minimum to that
+    tolerance, whatever path led there.
+    Returns (y (n,), cost ½‖r‖² + ½ w²‖y‖² at y). Raises FitError when no valid descent is found or it does
+    not converge in max_iter iterations.
+    """
+    step_tol = SHAPE_STEP_TOL if step_tol is None else step_tol
+    max_iter = SHAPE_MAX_ITERATIONS if max_iter is None else max_iter
+    fd_step = SHAPE_FD_STEP if fd_step is None else fd_step
+    y = np.zeros(n)
+    out = evaluate(y)
+    if out is None:
+        raise FitError("the walking shape fit starts from an invalid machine step")
+    r, c = out
+
+    def merit(y, r, c):
+        return 0.5 * float(r @ r) + 0.5 * w_prior ** 2 * float(y @ y) + MERIT_PENALTY * float(np.abs(c).sum())
+
+    full = math.inf
+    for _ in range(max_iter):
+        Jr, Jc = _forward_differences(evaluate, y, r, c, fd_step)
+        U, S, Vt = np.linalg.svd(Jc)
+        rank = int(np.sum(S > S[0] * 1e-10))
+        pinv_c = Vt[:rank].T @ (U[:, :rank].T / S[:rank, None])  # (n, C): least-norm solve of Jc dy = c
+        dy_c = -pinv_c @ c
+        N = Vt[rank:].T  # the constraints' null space
+        A = np.vstack([Jr @ N, w_prior * N])
+        b = -np.concatenate([r + Jr @ dy_c, w_prior * (y + dy_c)])
+        dy = dy_c + N @ np.linalg.lstsq(A, b, rcond=None)[0]
+        full = float(np.max(np.abs(dy)))
+        step = _descent_step(evaluate, merit, y, dy, merit(y, r, c), pinv_c, whole=full < SHAPE_LOCAL_STEP)
+        if step is None:
+            raise FitError("the walking shape fit found no valid descent from its current point")
+        y, (r, c) = step
+        if full < step_tol:
+            return y, 0.5 * float(r @ r) + 0.5 * w_prior ** 2 * float(y @ y)
+    raise FitError(f"the walking shape fit did not converge in {max_iter} iterations (last step {full:.2g} in "
+                   "CYCLE_SCALES units)")
+
+
+def _forward_differences(evaluate, y, r, c, h):
+    """(∂r/∂y (R, n), ∂c/∂y (C, n)) at y by forward differences of h (backward where y + h is invalid)."""
+    Jr = np.empty((r.size, y.size))
+    Jc = np.empty((c.size, y.size))
+    for j in range(y.size):
+        for sign in (1.0, -1.0):
+            yj = y.copy()
+            yj[j] += sign * h
+            out = evaluate(yj)
+            if out is not None:
+                Jr[:, j] = sign * (out[0] - r) / h
+                Jc[:, j] = sign * (out[1] - c) / h
+                break
+        else:
+            raise FitError("the walking shape fit reached the edge of the machine's valid steps")
+    return Jr, Jc
+
+
+def _descent_step(evaluate, merit, y, dy, phi, pinv_c, whole):
+    """(y, evaluate(y)) of the step from y along dy that ``_constrained_gauss_newton`` takes, or None."""
+    lam = 1.0
+    for _ in range(13):
+        y_new = y + lam * dy
+        out = evaluate(y_new)
+        if out is not None and (whole or merit(y_new, *out) <= phi):
+            return y_new, out
+        if out is not None:  # second-order correction: one chord step back onto the constraints
+            y_soc = y_new - pinv_c @ out[1]
+            out = evaluate(y_soc)
+            if out is not None and merit(y_soc, *out) <= phi:
+                return y_soc, out
+        lam *= 0.5
+    return None
 
 
 # Long because, like fit.fit_machine_detailed, the walking fit is one sequential pass whose intermediates

@@ -266,7 +266,7 @@ def test_constrained_gauss_newton_ends_at_the_minimum_whatever_the_last_bits():
     """The shape fit's solver (issue 26) ends at the constrained minimum, not where a budget ran out: on a
     problem whose minimum is known (a nonlinear residual, a curved constraint, a weak prior), perturbing
     the residual by 1e-12 moves the end point by far less than the step tolerance."""
-    from froude.machine.walk_fit import _constrained_gauss_newton
+    from froude.machine.gauss_newton import constrained_gauss_newton
 
     target = np.array([0.8, -0.3, 0.5])
 
@@ -276,7 +276,7 @@ def test_constrained_gauss_newton_ends_at_the_minimum_whatever_the_last_bits():
         c = np.array([y[0] ** 2 + y[1] - 0.5])  # a curved constraint
         return r, c
 
-    ends = [_constrained_gauss_newton(lambda y, e=e: evaluate(y, e), 3, 0.05, step_tol=1e-9)[0]
+    ends = [constrained_gauss_newton(lambda y, e=e: evaluate(y, e), 3, 0.05, step_tol=1e-9)[0]
             for e in (0.0, 1e-12, -1e-12)]
     y = ends[0]
     assert abs(y[0] ** 2 + y[1] - 0.5) < 1e-10  # on the constraint

@@ -18,7 +18,7 @@ from ..errors import FitError
 
 __all__ = ["CUTOFF_HZ", "FILTER_ORDER", "EDGE_PAD_S", "EDGE_FIT_S", "butter_lowpass", "filtfilt", "smooth_com",
            "ground_force", "vertical_force_bw",
-           "acceleration_response"]
+           "acceleration_response", "force_landmarks"]
 
 #: Low-pass cutoff of the COM filter [Hz] (−6 dB point of the forward-backward filter).
 CUTOFF_HZ = 8.0
@@ -136,10 +136,51 @@ def ground_force(a_world_com: np.ndarray, mass: float) -> np.ndarray:
     return mass * (np.asarray(a_world_com, float) - G_WORLD)
 
 
-
-
 def vertical_force_bw(p_world_com: np.ndarray, frame_time: float, cutoff_hz: float = CUTOFF_HZ) -> np.ndarray:
     """(F,) vertical ground force of eq. 1 [body weights] from the COM path p_world_com (F, 3) [m]
     (``smooth_com``; 1 for a body at rest, 0 in flight)."""
     _, _, a = smooth_com(p_world_com, frame_time, cutoff_hz)
     return 1.0 + a[:, UP_AXIS] / GRAVITY
+
+
+def force_landmarks(tau: np.ndarray, fy_bw: np.ndarray, tau_double: float) -> dict:
+    """The two peaks and the trough of the vertical force over one stance.
+
+    tau: (N,) stance phase 0 … 1; fy_bw: (N,) total vertical ground force [BW]; tau_double: the phase
+    length of one double support. The weight-acceptance peak is the largest local maximum of the force
+    in the first 2·tau_double of the stance, the push-off peak the largest in the last 2·tau_double (each
+    double support and as long again into single support: where the gait literature places them, around
+    the other foot's liftoff and touchdown; the window's largest value if it holds no local maximum);
+    the trough is the smallest force between them. Extrema are refined to the parabola's vertex.
+    Returns {peak1, trough, peak2 [BW], tau_peak1, tau_trough, tau_peak2 [-]}.
+    """
+    w = min(max(2.0 * tau_double, 0.15), 0.45)
+    # A peak is a local maximum: the force at the stance's very start or end is the tail of the other
+    # foot's peak (the profile of a periodic walk wraps around), not this stance's.
+    interior = np.zeros(tau.size, bool)
+    interior[1:-1] = (fy_bw[1:-1] >= fy_bw[:-2]) & (fy_bw[1:-1] >= fy_bw[2:])
+    first = tau <= w
+    last = tau >= 1.0 - w
+    first = first & interior if (first & interior).any() else first
+    last = last & interior if (last & interior).any() else last
+    i1 = np.flatnonzero(first)[np.argmax(fy_bw[first])]
+    i2 = np.flatnonzero(last)[np.argmax(fy_bw[last])]
+    mid = np.arange(i1, i2 + 1)
+    it = mid[np.argmin(fy_bw[mid])]
+    out = {}
+    for key, i in (("peak1", i1), ("trough", it), ("peak2", i2)):
+        out[key], out["tau_" + key] = _vertex(tau, fy_bw, int(i))
+    return out
+
+
+def _vertex(x, y, i):
+    """(y, x) at the vertex of the parabola through samples i − 1, i, i + 1 of an extremum (evenly spaced
+    x), so a landmark is not quantised to the sample grid; the sample itself at an end or when the vertex
+    would leave the three samples."""
+    if 0 < i < len(y) - 1:
+        den = y[i - 1] - 2.0 * y[i] + y[i + 1]
+        if den != 0.0:
+            d = 0.5 * (y[i - 1] - y[i + 1]) / den
+            if abs(d) <= 1.0:
+                return float(y[i] - 0.25 * (y[i - 1] - y[i + 1]) * d), float(x[i] + d * (x[i + 1] - x[i]))
+    return float(y[i]), float(x[i])

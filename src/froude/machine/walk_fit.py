@@ -35,9 +35,11 @@ weighted up around the clip's two peaks and trough (``LANDMARK_WEIGHT``: the acc
 and a plain least-squares fit of the CMU clips' W-shaped single support flattens them), the landing leg kept
 ``MIN_CLEARANCE`` above the ground where the COM dips in single support (at a graze the step map jumps, and
 the exact cycle's existence would hang on the last bits); the exact cycle is then found again from its result.
-Each of the two starts is fitted without the control's pulses and with them (``PULSE_START``: a push-off pulse
+Each of the two starts is tried without the control's pulses and with them (``PULSE_START``: a push-off pulse
 just past the other foot's touchdown, a weight-acceptance pulse at the clip's first peak, their amplitudes
-fitted by the shape fit); of the four the best shape wins.
+fitted by the shape fit); of the four periodic starts the shape fit runs from the one whose shape residual is
+the smallest (``_shape_fit_nearest``), the others only if it fails. The solver is
+:mod:`froude.machine.gauss_newton`.
 """
 from __future__ import annotations
 
@@ -46,13 +48,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..body.com_force import acceleration_response
+from ..body.com_force import acceleration_response, force_landmarks
 from ..body.gait import detect_gait, summarize, walks
 from ..body.model import BodyModel
 from ..constants import GRAVITY, UP_AXIS, heading_frame
 from ..core.motion import Motion
 from ..errors import FitError, NotAWalkingMotion
 from .forces import CUTOFF_HZ, ground_force, smooth_com
+from .gauss_newton import constrained_gauss_newton
 from .orbit import rowwise, solve_orbit
 from .walk_model import WalkingMachine
 from .walking import (
@@ -173,49 +176,6 @@ def fit_two_leg_control(ls: LegSamples, f_sag_bw: np.ndarray, w_horizontal: floa
     return float(K), float(KA / K), float(KB / K), float(KC / K), r2, float(np.sqrt(np.mean((fy - pred) ** 2)))
 
 
-def force_landmarks(tau: np.ndarray, fy_bw: np.ndarray, tau_double: float) -> dict:
-    """The two peaks and the trough of the vertical force over one stance.
-
-    tau: (N,) stance phase 0 … 1; fy_bw: (N,) total vertical ground force [BW]; tau_double: the phase
-    length of one double support. The weight-acceptance peak is the largest local maximum of the force
-    in the first 2·tau_double of the stance, the push-off peak the largest in the last 2·tau_double (each
-    double support and as long again into single support: where the gait literature places them, around
-    the other foot's liftoff and touchdown; the window's largest value if it holds no local maximum);
-    the trough is the smallest force between them. Extrema are refined to the parabola's vertex.
-    Returns {peak1, trough, peak2 [BW], tau_peak1, tau_trough, tau_peak2 [-]}.
-    """
-    w = min(max(2.0 * tau_double, 0.15), 0.45)
-    # A peak is a local maximum: the force at the stance's very start or end is the tail of the other
-    # foot's peak (the profile of a periodic walk wraps around), not this stance's.
-    interior = np.zeros(tau.size, bool)
-    interior[1:-1] = (fy_bw[1:-1] >= fy_bw[:-2]) & (fy_bw[1:-1] >= fy_bw[2:])
-    first = tau <= w
-    last = tau >= 1.0 - w
-    first = first & interior if (first & interior).any() else first
-    last = last & interior if (last & interior).any() else last
-    i1 = np.flatnonzero(first)[np.argmax(fy_bw[first])]
-    i2 = np.flatnonzero(last)[np.argmax(fy_bw[last])]
-    mid = np.arange(i1, i2 + 1)
-    it = mid[np.argmin(fy_bw[mid])]
-    out = {}
-    for key, i in (("peak1", i1), ("trough", it), ("peak2", i2)):
-        out[key], out["tau_" + key] = _vertex(tau, fy_bw, int(i))
-    return out
-
-
-def _vertex(x, y, i):
-    """(y, x) at the vertex of the parabola through samples i − 1, i, i + 1 of an extremum (evenly spaced
-    x), so a landmark is not quantised to the sample grid; the sample itself at an end or when the vertex
-    would leave the three samples."""
-    if 0 < i < len(y) - 1:
-        den = y[i - 1] - 2.0 * y[i] + y[i + 1]
-        if den != 0.0:
-            d = 0.5 * (y[i - 1] - y[i + 1]) / den
-            if abs(d) <= 1.0:
-                return float(y[i] - 0.25 * (y[i - 1] - y[i + 1]) * d), float(x[i] + d * (x[i + 1] - x[i]))
-    return float(y[i]), float(x[i])
-
-
 @dataclass(frozen=True)
 class WalkFitResult:
     """Everything the walking fit computed, for reports and plots (SI unless stated).
@@ -323,7 +283,10 @@ def stance_force_profile(rec, tau, *, frame_time=None, cutoff_hz=CUTOFF_HZ, time
     freq_hz = harmonic / (w.t_step * time_unit)
     gain = np.where(freq_hz < 0.5 / frame_time, acceleration_response(freq_hz, frame_time, cutoff_hz), 0.0)
     gain[1:] *= 2.0  # the negative frequencies' half (no harmonic at the Nyquist index survives: see above)
-    acc = np.real(np.exp(2j * np.pi * np.outer(t_m / w.t_step, harmonic)) @ (gain * coef))  # [l0 / s²]
+    # The sum over harmonics is elementwise on purpose: as a (N, H) complex matrix product it went to a
+    # multithreaded BLAS, whose start-up cost 20 times the sum itself on a loaded machine.
+    phase = np.exp(2j * np.pi * np.outer(t_m / w.t_step, harmonic))
+    acc = np.einsum("ij,j->i", phase, gain * coef).real  # [l0 / s²]
     return 1.0 + acc * time_unit ** 2  # l0 = g T²: the acceleration in g
 
 
@@ -352,14 +315,6 @@ MIN_CLEARANCE = 0.01
 CLEARANCE_WEIGHT = 100.0
 #: Simulator resolution of the shape fit (the exact cycle is found after it at N_PER_STANCE).
 SHAPE_N_PER_STANCE = 120
-#: The shape fit's convergence test: the largest component of a full Gauss-Newton step [CYCLE_SCALES units],
-#: its iteration limit, its finite-difference step [CYCLE_SCALES units] and the merit's weight of the
-#: constraints' violation (``_constrained_gauss_newton``).
-SHAPE_STEP_TOL = 1e-4
-SHAPE_LOCAL_STEP = 0.05
-SHAPE_MAX_ITERATIONS = 50
-SHAPE_FD_STEP = 1e-4
-MERIT_PENALTY = 1e3
 #: Samples of the step-phase COM height profile (double support, then single support).
 COM_SAMPLES = (8, 24)
 
@@ -409,9 +364,13 @@ def _control(z, T_c) -> WalkControl:
     return WalkControl(T_c=T_c, **{k: float(v) for k, v in zip(_VARS, z) if k in WalkControl.NAMES})
 
 
-def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_unit, tau_landmarks, free=(),
-               n_per_stance=SHAPE_N_PER_STANCE):
-    """Least squares of the machine's stance force profile against the clip's, on the periodic cycles.
+def _shape_problem(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_unit, tau_landmarks, free=(),
+                   n_per_stance=SHAPE_N_PER_STANCE):
+    """The shape fit's problem from the periodic cycle z1 (17,): (evaluate, to_z, n) for
+    ``gauss_newton.constrained_gauss_newton``: to_z(y) the cycle variables (17,) of the n scaled free ones y.
+
+    The fit is the least squares of the machine's stance force profile against the clip's, on the periodic
+    cycles.
 
     Minimises ½‖r‖² + ½ w²‖y‖² subject to c = 0, y = (z − z1)/s the free variables in CYCLE_SCALES units:
     r the vertical force over a stance at tau [BW], weighted up around the clip's landmarks at phases
@@ -419,9 +378,9 @@ def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_un
     shortfall (``_clearance_shortfall``, so that the exact cycle found after it is not at a graze); c the
     periodicity and the relative errors of step time, double-support time and speed (7 equations, exact);
     w = SHAPE_WEIGHTS["prior"] the pull to the periodic start z1. Solved by constrained Gauss-Newton
-    (``_constrained_gauss_newton``) to a step below ``SHAPE_STEP_TOL``: the end point is the minimum, not
-    where a budget ran out, so it does not follow the last bits of the clip (issue 26).
-    Returns (z (17,), cost ½‖r‖² + ½ w²‖y‖²); the exact cycle is found from it after at full resolution.
+    (:func:`froude.machine.gauss_newton.constrained_gauss_newton`) to a step below its ``STEP_TOL``: the end
+    point is the minimum, not where a budget ran out, so it does not follow the last bits of the clip
+    (issue 26); the exact cycle is found from it after at full resolution.
     """
     s_all = _scales(z1, free)
     fr = s_all > 0
@@ -431,8 +390,7 @@ def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_un
     wf = 1.0 + LANDMARK_WEIGHT * sum(np.exp(-0.5 * ((tau - tk) / LANDMARK_WIDTH) ** 2) for tk in tau_landmarks)
 
     def evaluate(y):
-        z = z1.copy()
-        z[fr] = z1[fr] + s * y
+        z = to_z(y)
         rec = record_step(WalkState(*z[:4]), z[4], _control(z, T_c), roll=roll, l_td=z[9], n_per_stance=n_per_stance)
         w = rec.step
         if not w.valid:
@@ -445,94 +403,42 @@ def _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_un
         graze = CLEARANCE_WEIGHT * _clearance_shortfall(rec, z[4], z[9])
         return np.concatenate([wf * (prof - prof_ref), wc * (h - h_ref), [graze]]), c
 
-    y, cost = _constrained_gauss_newton(evaluate, s.size, SHAPE_WEIGHTS["prior"])
-    z = z1.copy()
-    z[fr] = z1[fr] + s * y
-    return z, cost
+    def to_z(y):
+        z = z1.copy()
+        z[fr] = z1[fr] + s * y
+        return z
+
+    return evaluate, to_z, s.size
 
 
-def _constrained_gauss_newton(evaluate, n, w_prior, *, step_tol=None, max_iter=None, fd_step=None):
-    """min ½‖r(y)‖² + ½ w_prior²‖y‖² subject to c(y) = 0 from y = 0, by Gauss-Newton (the shape fit).
+def _shape_fit_nearest(candidates, T_c, roll, targets, n_per_stance, errors):
+    """The shape fit from the candidate start nearest the clip, then the exact periodic cycle from its end.
 
-    evaluate(y (n,)) → (r (R,), c (C,)), or None where the model is invalid. Each iteration linearises r and
-    c by forward differences of fd_step (in y's units, the scaled variables, so one step fits all), takes
-    the constraints' Newton step of least norm and, in their null space, the Gauss-Newton step of the
-    cost. Far from the minimum a step must lower the merit ½‖r‖² + ½ w²‖y‖² + MERIT_PENALTY ‖c‖₁, first as
-    it is, then with a second-order correction onto the constraints (which curve: a long step violates
-    them by O(step²), the Maratos effect), else it is halved (up to 12 times). A step shorter than
-    SHAPE_LOCAL_STEP is taken whole: there Gauss-Newton contracts, and a merit test would compare costs
-    that differ in their last bits (where the old trust-region fit stopped). Converged when the full
-    step's largest component is below step_tol: the end point is then the constrained minimum to that
-    tolerance, whatever path led there.
-    Returns (y (n,), cost ½‖r‖² + ½ w²‖y‖² at y). Raises FitError when no valid descent is found or it does
-    not converge in max_iter iterations.
+    candidates: [((evaluate, to_z, n) of ``_shape_problem``, cycle-search evaluations, prior z0 (17,))], one per
+    start. Gauss-Newton goes downhill from where it starts, and every start is a periodic cycle meeting the
+    same targets, so the start whose shape residual ½‖r‖² is the smallest is the one nearest the clip's
+    shape: its fit runs first, and a next one only if it fails (the fit or the exact cycle after it; the
+    reasons are appended to ``errors``). One evaluation per start instead of one fit per start: before,
+    all four starts were fitted and the lowest end cost won; on the development clips (07_01, the Bandai
+    walk) the smallest start residual picked that same winner (27 Nov). Returns (z (17,), shape cost,
+    WalkStep, evaluations, z0) or None.
     """
-    step_tol = SHAPE_STEP_TOL if step_tol is None else step_tol
-    max_iter = SHAPE_MAX_ITERATIONS if max_iter is None else max_iter
-    fd_step = SHAPE_FD_STEP if fd_step is None else fd_step
-    y = np.zeros(n)
-    out = evaluate(y)
-    if out is None:
-        raise FitError("the walking shape fit starts from an invalid machine step")
-    r, c = out
-
-    def merit(y, r, c):
-        return 0.5 * float(r @ r) + 0.5 * w_prior ** 2 * float(y @ y) + MERIT_PENALTY * float(np.abs(c).sum())
-
-    full = math.inf
-    for _ in range(max_iter):
-        Jr, Jc = _forward_differences(evaluate, y, r, c, fd_step)
-        U, S, Vt = np.linalg.svd(Jc)
-        rank = int(np.sum(S > S[0] * 1e-10))
-        pinv_c = Vt[:rank].T @ (U[:, :rank].T / S[:rank, None])  # (n, C): least-norm solve of Jc dy = c
-        dy_c = -pinv_c @ c
-        N = Vt[rank:].T  # the constraints' null space
-        A = np.vstack([Jr @ N, w_prior * N])
-        b = -np.concatenate([r + Jr @ dy_c, w_prior * (y + dy_c)])
-        dy = dy_c + N @ np.linalg.lstsq(A, b, rcond=None)[0]
-        full = float(np.max(np.abs(dy)))
-        step = _descent_step(evaluate, merit, y, dy, merit(y, r, c), pinv_c, whole=full < SHAPE_LOCAL_STEP)
-        if step is None:
-            raise FitError("the walking shape fit found no valid descent from its current point")
-        y, (r, c) = step
-        if full < step_tol:
-            return y, 0.5 * float(r @ r) + 0.5 * w_prior ** 2 * float(y @ y)
-    raise FitError(f"the walking shape fit did not converge in {max_iter} iterations (last step {full:.2g} in "
-                   "CYCLE_SCALES units)")
-
-
-def _forward_differences(evaluate, y, r, c, h):
-    """(∂r/∂y (R, n), ∂c/∂y (C, n)) at y by forward differences of h (backward where y + h is invalid)."""
-    Jr = np.empty((r.size, y.size))
-    Jc = np.empty((c.size, y.size))
-    for j in range(y.size):
-        for sign in (1.0, -1.0):
-            yj = y.copy()
-            yj[j] += sign * h
-            out = evaluate(yj)
-            if out is not None:
-                Jr[:, j] = sign * (out[0] - r) / h
-                Jc[:, j] = sign * (out[1] - c) / h
-                break
-        else:
-            raise FitError("the walking shape fit reached the edge of the machine's valid steps")
-    return Jr, Jc
-
-
-def _descent_step(evaluate, merit, y, dy, phi, pinv_c, whole):
-    """(y, evaluate(y)) of the step from y along dy that ``_constrained_gauss_newton`` takes, or None."""
-    lam = 1.0
-    for _ in range(13):
-        y_new = y + lam * dy
-        out = evaluate(y_new)
-        if out is not None and (whole or merit(y_new, *out) <= phi):
-            return y_new, out
-        if out is not None:  # second-order correction: one chord step back onto the constraints
-            y_soc = y_new - pinv_c @ out[1]
-            out = evaluate(y_soc)
-            if out is not None and merit(y_soc, *out) <= phi:
-                return y_soc, out
-        lam *= 0.5
+    ranked = []
+    for (evaluate, to_z, n), it1, z0 in candidates:
+        start = evaluate(np.zeros(n))
+        if start is None:
+            errors.append("the walking shape fit starts from an invalid machine step")
+            continue
+        ranked.append((0.5 * float(start[0] @ start[0]), len(ranked), evaluate, to_z, n, start, it1, z0))
+    for _, _, evaluate, to_z, n, start, it1, z0 in sorted(ranked, key=lambda c: c[:2]):
+        try:
+            y, cost = constrained_gauss_newton(evaluate, n, SHAPE_WEIGHTS["prior"], start=start,
+                                               what="the walking shape fit")
+            z, w, it2, _ = _cycle_search(to_z(y), T_c, roll, targets, n_per_stance)
+        except FitError as e:
+            errors.append(str(e))
+            continue
+        return z, cost, w, it1 + it2, z0
     return None
 
 
@@ -641,34 +547,25 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
 
     # Two starts: the least-squares control, and a plain spring leg (Geyer's K ≈ 20, l_d = l0) in case
     # the force of the clip does not determine the control well; each without and with the two control
-    # pulses (push-off just past the other foot's touchdown, weight acceptance at the clip's first peak);
-    # the best shape fit wins.
+    # pulses (push-off just past the other foot's touchdown, weight acceptance at the clip's first peak).
+    # Each start's periodic cycle is found (cheap), and the shape fit (the expensive part) runs from the
+    # one whose shape residual there is the smallest (``_shape_fit_nearest``).
     pulses_on = (PULSE_START["p"], step_time / stance_time + PULSE_START["dtau_p"], PULSE_START["w_p"],
                  PULSE_START["q"], lm_ref["tau_peak1"], PULSE_START["w_q"])
     errors: list[str] = []
     pulses_off = tuple(PULSES_OFF[k] for k in PULSE_VARS)
-
-    def attempt(ctl0, pulses, free):
-        z0 = np.array([u0, v0, d0, step_time / T, th0, *ctl0, 1.0, 0.0, *pulses])
-        try:
-            z1, _, it1, _ = _cycle_search(z0, T_c, roll, targets, n_per_stance)
-            z2, cost = _shape_fit(z1, T_c, roll, targets, tau, prof_ref, h_ref_step, dt, T, tau_landmarks, free)
-        except FitError as e:
-            errors.append(str(e))
-            return None
-        return z2, cost, it1, z0
-
-    tried = [r for r in (attempt(c, pl, fr) for c in starts
-                         for pl, fr in ((pulses_off, ()), (pulses_on, ("p", "q")))) if r is not None]
-    best = None
-    for z2, cost, it1, z0 in sorted(tried, key=lambda r: r[1]):
-        try:
-            z, w, it2, _ = _cycle_search(z2, T_c, roll, targets, n_per_stance)
-        except FitError as e:
-            errors.append(str(e))
-            continue
-        best = (z, cost, w, it1 + it2, z0)
-        break
+    candidates = []
+    for ctl0 in starts:
+        for pulses, free in ((pulses_off, ()), (pulses_on, ("p", "q"))):
+            z0 = np.array([u0, v0, d0, step_time / T, th0, *ctl0, 1.0, 0.0, *pulses])
+            try:
+                z1, _, it1, _ = _cycle_search(z0, T_c, roll, targets, SHAPE_N_PER_STANCE)
+            except FitError as e:
+                errors.append(str(e))
+                continue
+            problem = _shape_problem(z1, T_c, roll, targets, tau, prof_ref, h_ref_step, dt, T, tau_landmarks, free)
+            candidates.append((problem, it1, z0))
+    best = _shape_fit_nearest(candidates, T_c, roll, targets, n_per_stance, errors)
     if best is None:  # what the clip is (the gait's decision, as info says it), then why it is refused
         raise FitError(f"{src}: {summary.kind} that the walking machine cannot follow: {errors[-1]}")
     z, cost, w, iters, z0 = best

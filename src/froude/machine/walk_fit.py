@@ -423,7 +423,7 @@ def _shape_fit_nearest(candidates, T_c, roll, targets, n_per_stance, errors):
     walk) the smallest start residual picked that same winner (27 Nov). Returns (z (17,), shape cost,
     WalkStep, evaluations, z0) or None.
     """
-    ranked = []
+    ranked: list[tuple] = []
     for (evaluate, to_z, n), it1, z0 in candidates:
         start = evaluate(np.zeros(n))
         if start is None:

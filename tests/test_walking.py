@@ -291,3 +291,36 @@ def test_constrained_gauss_newton_ends_at_the_minimum_whatever_the_last_bits():
     tangent = grad - (grad @ normal) / (normal @ normal) * normal
     assert np.max(np.abs(tangent)) < 1e-6
     assert max(np.max(np.abs(e - y)) for e in ends[1:]) < 1e-9
+
+
+def test_shape_fit_runs_from_the_nearest_start_and_falls_back(monkeypatch):
+    """The walking fit's one shape fit (``_shape_fit_nearest``) starts from the candidate whose shape residual
+    is the smallest, fits no other when that succeeds, and takes the next when it fails (with the reason
+    kept). Toy problems stand in for the machine (a linear residual, one linear constraint), and the exact
+    cycle search after the fit is replaced by a recorder."""
+    from froude.machine import walk_fit
+
+    fitted = []
+    monkeypatch.setattr(walk_fit, "_cycle_search", lambda z, *a, **k: (z, "step", 2, 0.0))
+
+    def problem(name, offset, valid_only_at_start=False):
+        def evaluate(y):
+            fitted.append(name)
+            if valid_only_at_start and np.any(y != 0.0):
+                return None  # every step away from the start leaves the model's valid region
+            return y - offset, np.array([y[0] - y[1]])
+
+        return (evaluate, lambda y: np.concatenate([[float(ord(name))], y]), 2)
+
+    near, far, broken = (problem("n", np.array([1.0, 2.0])), problem("f", np.array([5.0, 5.0])),
+                         problem("b", np.array([0.5, 0.5]), valid_only_at_start=True))
+    errors: list[str] = []
+    z, cost, w, calls, z0 = walk_fit._shape_fit_nearest([(far, 10, "z0 far"), (near, 20, "z0 near")], 1.0, 0.0,
+                                                        (1, 1, 1), 120, errors)
+    assert z0 == "z0 near" and z[0] == ord("n") and calls == 22 and errors == []
+    assert fitted.count("f") == 1  # the far start: its residual only, no fit
+    assert abs(z[1] - z[2]) < 1e-9 and abs(z[1] - 1.5) < 1e-2  # on the constraint, at the toy's minimum
+    fitted.clear()
+    z, *_, z0 = walk_fit._shape_fit_nearest([(near, 1, "z0 near"), (broken, 1, "z0 broken")], 1.0, 0.0,
+                                            (1, 1, 1), 120, errors)
+    assert z0 == "z0 near" and "b" in fitted and len(errors) == 1 and "valid steps" in errors[0]

@@ -293,13 +293,14 @@ def test_constrained_gauss_newton_ends_at_the_minimum_whatever_the_last_bits():
     assert max(np.max(np.abs(e - y)) for e in ends[1:]) < 1e-9
 
 
-def test_shape_fit_runs_from_the_nearest_start_and_falls_back(monkeypatch):
-    """The walking fit's one shape fit (``_shape_fit_nearest``) starts from the candidate whose shape residual
-    is the smallest, fits no other when that succeeds, and takes the next when it fails (with the reason
-    kept). Toy problems stand in for the machine (a linear residual, one linear constraint), and the exact
-    cycle search after the fit is replaced by a recorder."""
+def test_shape_fit_runs_from_the_nearest_starts_and_falls_back(monkeypatch):
+    """The walking fit's shape fits (``_shape_fit_nearest``) run from the NEAREST_STARTS (2) candidates whose
+    shape residual is the smallest, the lowest end cost wins, a farther start is not fitted while one of
+    them succeeds, and a failed fit's reason is kept. Toy problems stand in for the machine (a linear
+    residual, one linear constraint y0 = y1), and the exact cycle search after the fit is a recorder."""
     from froude.machine import walk_fit
 
+    assert walk_fit.NEAREST_STARTS == 2
     fitted = []
     monkeypatch.setattr(walk_fit, "_cycle_search", lambda z, *a, **k: (z, "step", 2, 0.0))
 
@@ -312,15 +313,18 @@ def test_shape_fit_runs_from_the_nearest_start_and_falls_back(monkeypatch):
 
         return (evaluate, lambda y: np.concatenate([[float(ord(name))], y]), 2)
 
-    near, far, broken = (problem("n", np.array([1.0, 2.0])), problem("f", np.array([5.0, 5.0])),
-                         problem("b", np.array([0.5, 0.5]), valid_only_at_start=True))
+    # start residuals ½‖offset‖²: near 1 (its minimum on y0 = y1 costs 1), mid 4 (costs ~0), far 25
+    near, mid, far = problem("n", np.array([1.0, -1.0])), problem("m", np.array([2.0, 2.0])), \
+        problem("f", np.array([5.0, 5.0]))
+    broken = problem("b", np.array([0.5, 0.5]), valid_only_at_start=True)  # residual 0.25, its fit fails
     errors: list[str] = []
-    z, cost, w, calls, z0 = walk_fit._shape_fit_nearest([(far, 10, "z0 far"), (near, 20, "z0 near")], 1.0, 0.0,
-                                                        (1, 1, 1), 120, errors)
-    assert z0 == "z0 near" and z[0] == ord("n") and calls == 22 and errors == []
-    assert fitted.count("f") == 1  # the far start: its residual only, no fit
-    assert abs(z[1] - z[2]) < 1e-9 and abs(z[1] - 1.5) < 1e-2  # on the constraint, at the toy's minimum
+    z, cost, w, calls, z0 = walk_fit._shape_fit_nearest([(far, 10, "far"), (near, 20, "near"), (mid, 30, "mid")],
+                                                        1.0, 0.0, (1, 1, 1), 120, errors)
+    assert z0 == "mid" and z[0] == ord("m") and calls == 32 and errors == [] and cost < 0.1
+    assert fitted.count("f") == 1 and fitted.count("n") > 1  # the far start: its residual only, no fit
+    assert abs(z[1] - z[2]) < 1e-9 and abs(z[1] - 2.0) < 2e-2  # on the constraint, at the toy's minimum
     fitted.clear()
-    z, *_, z0 = walk_fit._shape_fit_nearest([(near, 1, "z0 near"), (broken, 1, "z0 broken")], 1.0, 0.0,
-                                            (1, 1, 1), 120, errors)
-    assert z0 == "z0 near" and "b" in fitted and len(errors) == 1 and "valid steps" in errors[0]
+    z, *_, z0 = walk_fit._shape_fit_nearest([(far, 1, "far"), (near, 1, "near"), (broken, 1, "broken")], 1.0,
+                                            0.0, (1, 1, 1), 120, errors)
+    assert z0 == "near" and "b" in fitted and fitted.count("f") == 1
+    assert len(errors) == 1 and "valid steps" in errors[0]

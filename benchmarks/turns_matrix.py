@@ -51,7 +51,6 @@ def _clips() -> list[str]:
 
 def _step_heading_miss_deg(clip_path, out_path, L: float) -> float:
     """Largest |output step's heading change - the clip path's over the same stretch| [deg]."""
-    frames_c = np.arange(clip_path.arc_length_m.size)
     frames_o = np.arange(out_path.arc_length_m.size)
     worst = 0.0
     for st in out_path.steps:
@@ -112,9 +111,10 @@ def main(argv=None) -> int:
     ap.add_argument("--only", help="comma-separated substrings of clip names")
     ap.add_argument("--json", help="write every row here")
     args = ap.parse_args(argv)
-    from conftest import clip
     from froude import pipeline
     from froude.errors import FroudeError
+
+    from conftest import clip
 
     names = _clips()
     if args.only:

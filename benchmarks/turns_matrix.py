@@ -10,7 +10,10 @@ from the output motion alone). Per output, one row against acceptance 1 (bars in
 - dH: total heading change, output minus intended [deg] (3);
 - dH/step: largest difference of a step's heading change from the clip's path over the same stretch
   (the output step's arc length / L on the clip's path) [deg] (3);
-- r/L: median radius of the turning steps in leg lengths, output over clip - 1 [%] (5, pure scaling);
+- r/L: largest difference of a step's radius in leg lengths from the clip path's over the same stretch, over
+  the stretches turning 10 deg or more [%] (5, pure scaling). (The report's figure, the median radius of each
+  path's turning steps, compares steps placed differently along the path: the machine's first touchdown is
+  not the clip's; it is kept in the JSON as r_median_pct.)
 - face: facing vs travel, output minus clip [deg] (5);
 - v: speed along the path over the clip's x sqrt(L) x the speed factor - 1 [%] (2);
 - f: cadence over the clip's / sqrt(L) - 1 [%] (2, pure scaling; a speed change follows the speed law);
@@ -49,18 +52,29 @@ def _clips() -> list[str]:
     return [n for n in LOCO_TURNS if "walk-turn" in n] + list(CMU_TURN_CLIPS)
 
 
-def _step_heading_miss_deg(clip_path, out_path, L: float) -> float:
-    """Largest |output step's heading change - the clip path's over the same stretch| [deg]."""
+#: Steps whose stretch of the clip's path turns less than this [deg] have no radius per step worth comparing
+#: (5 % of the radius of a 10 deg step is 0.5 deg of turn).
+RADIUS_STEP_MIN_DEG = 10.0
+
+
+def _per_step_misses(clip_path, out_path, L: float) -> tuple[float, float | None]:
+    """Per output step, against the clip's path over the same stretch (the step's arc length / L; steps past
+    the clip's end left out): the largest |heading change difference| [deg] and the largest |radius ratio - 1|
+    [%] in leg lengths (clip turn / output turn, the arc lengths being L apart) over the stretches turning
+    >= RADIUS_STEP_MIN_DEG (None: none does)."""
     frames_o = np.arange(out_path.arc_length_m.size)
-    worst = 0.0
+    worst_h, worst_r = 0.0, None
     for st in out_path.steps:
         a0, a1 = (float(np.interp(t / out_path.frame_time, frames_o, out_path.arc_length_m)) / L
                   for t in (st.t0_s, st.t1_s))
         if a1 > clip_path.arc_length_m[-1]:
             continue  # past the clip's end the output runs straight on
         h0, h1 = (float(np.interp(a, clip_path.arc_length_m, clip_path.heading_rad)) for a in (a0, a1))
-        worst = max(worst, abs(math.degrees(st.heading_change_rad - (h1 - h0))))
-    return worst
+        worst_h = max(worst_h, abs(math.degrees(st.heading_change_rad - (h1 - h0))))
+        if abs(math.degrees(h1 - h0)) >= RADIUS_STEP_MIN_DEG:
+            r = 100 * abs((h1 - h0) / st.heading_change_rad - 1)
+            worst_r = r if worst_r is None else max(worst_r, r)
+    return worst_h, worst_r
 
 
 def row(prep, label: str, kw: dict) -> dict:
@@ -77,6 +91,7 @@ def row(prep, label: str, kw: dict) -> dict:
     com, markers = body.com_and_markers(res.motion)
     out_path = take_path(res.motion, body, com, detect_gait(res.motion, body, markers, com))
     speed = kw.get("speed", 1.0)
+    step_h, step_r = _per_step_misses(prep.path, out_path, L)
     h, f, r, v = (cmp[k] for k in ("heading_change_deg", "facing_vs_travel_deg", "radius_per_turning_step_L",
                                    "path_speed_m_s"))
     pure = speed == 1.0
@@ -84,8 +99,9 @@ def row(prep, label: str, kw: dict) -> dict:
     skate = rep.foot_skate_floor_mm
     out = {
         "dH": h["output"] - h["intended"],
-        "dH_step": _step_heading_miss_deg(prep.path, out_path, L),
-        "r_pct": 100 * (r["output"] / r["clip"] - 1) if pure and r["output"] and r["clip"] else None,
+        "dH_step": step_h,
+        "r_pct": step_r if pure else None,
+        "r_median_pct": 100 * (r["output"] / r["clip"] - 1) if r["output"] and r["clip"] else None,
         "face": f["output"] - f["clip"],
         "v_pct": 100 * (v["output"] / (v["clip"] * math.sqrt(L) * speed) - 1),
         "f_pct": 100 * (rep.step_frequency_hz / (prep.summary.step_frequency / math.sqrt(L)) - 1) if pure else None,
@@ -143,7 +159,7 @@ def main(argv=None) -> int:
                 continue
             n_ok += r["ok"]
             rows[f"{name} {label}"] = r
-            bars = "; ".join(b[:90] for b in r["bars"])
+            bars = "; ".join(b[:90] for b in r["bars"]) or "(a path or lean point)"
             print(f"{short:44s} {label:6s} {_fmt(r['dH']):>5s} {_fmt(r['dH_step'], '.1f'):>5s} "
                   f"{_fmt(r['r_pct']):>5s} {_fmt(r['face']):>5s} {_fmt(r['v_pct']):>5s} {_fmt(r['f_pct']):>5s} "
                   f"{_fmt(r['lean'], '.1f'):>5s}  {'OK' if r['ok'] else bars}", flush=True)

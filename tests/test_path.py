@@ -187,7 +187,7 @@ def _oracle_heading_deg(bvh_path, window_s: float) -> float:
 def test_a_turning_walk_is_scaled_along_its_path(prepared, tmp_path):
     """The walking machine runs along the straightened take and the output is rolled back onto the path
     scaled: the child turns as the clip does (+94.5 deg) within 3 deg, by its report and by the tests' own
-    BVH reader on the written file; facing vs travel within 5 deg; speed along the path x sqrt(L); every
+    BVH reader on the written file; facing vs travel within 5 deg; speed along the path x sqrt(L) within 2 %; every
     bar met (the clip's straight-line speed, 0.93 m/s, was what the machine ran before)."""
     prep = prepared[TURN]
     assert prep.turn is not None and prep.summary.mean_speed == pytest.approx(prep.path.path_speed_m_s, rel=0.02)
@@ -199,7 +199,9 @@ def test_a_turning_walk_is_scaled_along_its_path(prepared, tmp_path):
     f = cmp["facing_vs_travel_deg"]
     assert abs(f["output"] - f["clip"]) <= 5.0
     v = cmp["path_speed_m_s"]
-    assert v["output"] == pytest.approx(v["clip"] * math.sqrt(res.retarget.L), rel=0.03)
+    # acceptance 1's 2 %: the output travels the clip's travel line, not its stride-averaged path (averaged
+    # twice, it was 2.4 % slow: docs/path.md)
+    assert v["output"] == pytest.approx(v["clip"] * math.sqrt(res.retarget.L), rel=0.02)
     assert res.report.check_bars() == []
     out = tmp_path / "child.bvh"
     pipeline.write_result(res, out)

@@ -438,7 +438,7 @@ def _shape_fit_nearest(candidates, T_c, roll, targets, n_per_stance, errors):
             errors.append("the walking shape fit starts from an invalid machine step")
             continue
         ranked.append((0.5 * float(start[0] @ start[0]), len(ranked), evaluate, to_z, n, start, it1, z0))
-    fits = []
+    fits: list[tuple] = []
     for k, (_, _, evaluate, to_z, n, start, it1, z0) in enumerate(sorted(ranked, key=lambda c: c[:2])):
         if fits and k >= NEAREST_STARTS:
             break

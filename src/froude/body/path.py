@@ -119,13 +119,8 @@ class TakePath:
         and measured the same way was averaged twice: up to 2.9 % slower along its path than the clip x sqrt(L)
         and turning up to 6 degrees less over its end chords (benchmarks/turns_matrix.py, docs/path.md).
         """
-        n_box = max(1, int(round(self.stride_s / self.frame_time)))
-        track = unsmooth_path(self.p_world_path, n_box)
-        d = np.diff(track[:, HORIZONTAL_AXES], axis=0)
-        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(d, axis=1))])
-        vel = np.gradient(track, axis=0) if track.shape[0] > 1 else np.zeros_like(track)
-        vel[:, UP_AXIS] = 0.0
-        heading = np.unwrap(yaw_of(vel)) if track.shape[0] else np.zeros(0)
+        track = unsmooth_path(self.p_world_path, _stride_frames(self.stride_s, self.frame_time))
+        arc, heading, _ = _track_geometry(track, self.frame_time)
         # the same branch of the angle as the path's (the bend turns by heading differences from its start)
         if heading.size:
             heading += 2 * np.pi * np.round((self.heading_rad[0] - heading[0]) / (2 * np.pi))
@@ -263,6 +258,23 @@ def facing_yaw(motion: Motion, body: BodyModel) -> np.ndarray:
     return np.unwrap(yaw_of(fwd))
 
 
+def _stride_frames(stride_s: float, frame_time: float) -> int:
+    """The stride average's window [frames] (``smooth_path``'s n_box): one stride, at least one frame."""
+    return max(1, int(round(stride_s / frame_time)))
+
+
+def _track_geometry(p_world: np.ndarray, frame_time: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(arc length (F,) [m], heading (F,) [rad, unwrapped], horizontal velocity (F, 3) [m/s]) of a track
+    p_world (F, 3) [m] sampled every frame_time [s]: its horizontal distance travelled and direction."""
+    F = p_world.shape[0]
+    d = np.diff(p_world[:, HORIZONTAL_AXES], axis=0) if F > 1 else np.zeros((0, 2))
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(d, axis=1))])
+    vel = np.gradient(p_world, frame_time, axis=0) if F > 1 else np.zeros_like(p_world)
+    vel[:, UP_AXIS] = 0.0
+    heading = np.unwrap(yaw_of(vel)) if F else np.zeros(0)
+    return s, heading, vel
+
+
 def take_path(motion: Motion, body: BodyModel, com: np.ndarray, gait: Gait,
               window_strides: float | None = None) -> TakePath:
     """The path of a take (``TakePath``) from its COM (F, 3) [m] and gait (for the stride and the steps).
@@ -275,14 +287,8 @@ def take_path(motion: Motion, body: BodyModel, com: np.ndarray, gait: Gait,
     F, dt = motion.n_frames, motion.frame_time
     period = step_period(gait, F, com)
     stride_s = 2.0 * period if np.isfinite(period) and period > 0 else FALLBACK_STRIDE_S
-    n_box = max(1, int(round(stride_s / dt)))
-    p = smooth_path(com, n_box)
-    d = np.diff(p[:, HORIZONTAL_AXES], axis=0) if F > 1 else np.zeros((0, 2))
-    ds = np.linalg.norm(d, axis=1)
-    s = np.concatenate([[0.0], np.cumsum(ds)])
-    vel = np.gradient(p, dt, axis=0) if F > 1 else np.zeros_like(p)
-    vel[:, UP_AXIS] = 0.0
-    heading = np.unwrap(yaw_of(vel)) if F else np.zeros(0)
+    p = smooth_path(com, _stride_frames(stride_s, dt))
+    s, heading, vel = _track_geometry(p, dt)
     speed = np.linalg.norm(vel, axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
         curvature = np.gradient(heading, dt) / speed if F > 1 else np.zeros(F)

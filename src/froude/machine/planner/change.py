@@ -5,6 +5,7 @@ Gauss–Newton. The one-step solves and periodic orbits it starts from are in ``
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -60,7 +61,7 @@ class _ShootingProblem:
     H0: float
     t0: float
     n: int
-    U_ref: object  # (k, t [√(l0/g)]) -> step k's reference apex speed [√(g l0)]
+    U_ref: Callable[[int, float], float]  # (k, t [√(l0/g)]) -> step k's reference apex speed [√(g l0)]
     tau_p: np.ndarray  # (n,) prior fall times [√(l0/g)]
     b_p: np.ndarray  # (n,) prior energy knobs [l0 per stance]
     H_p: np.ndarray  # (n,) prior apex heights [l0]

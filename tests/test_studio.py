@@ -5,6 +5,7 @@ The page end to end in a browser is tests/test_studio_browser.py.
 from __future__ import annotations
 
 import socket
+import time
 
 import numpy as np
 import pytest
@@ -176,7 +177,12 @@ def test_speed_control_bounded_to_what_is_reachable(session, monkeypatch):
     studio = Studio(session.prep, port=_free_port())
     try:
         tab = studio.open_tab()
-        tab._bound_speed("same")
+        # the tab's worker runs this search when the tab opens: wait for it to end, so that it cannot
+        # overwrite the range set below (a race that failed this test once on a loaded machine)
+        deadline = time.monotonic() + 300.0
+        while not tab._range_note.startswith("speed reachable") and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert tab._range_note.startswith("speed reachable"), tab._range_note
         rng = tab.session.speed_ranges["same"]
         # the sample reaches x0.30-2.78 with every bar met: the slider keeps its own limits (x0.5-2)
         assert not rng.empty and rng.lo <= 0.5 and rng.hi >= 2.0

@@ -25,7 +25,7 @@ from .body.take import modelled_part, running_take, select_range
 from .core.motion import Motion
 from .errors import FitError, FroudeError
 from .machine import is_walking
-from .metrics import physics_report
+from .metrics import floor_height, physics_report, stance_rest_heights
 from .naive import naive_clip
 from .prepared import Prepared
 from .result import Result, report_path, write_result
@@ -36,7 +36,8 @@ from .synthesis.targets import build_targets, stance_only
 from .synthesis.timewarp import MachinePath, machine_path
 
 __all__ = ["PERIODIC_MIN_STRIDES", "Prepared", "Result", "ScalePlan", "accelerate", "add_report", "finish",
-           "naive_clip", "plan_scale", "prepare", "report_path", "scale", "targets_of", "write_result"]
+           "naive_clip", "plan_scale", "prepare", "report_path", "scale", "source_rest_heights", "targets_of",
+           "write_result"]
 
 
 def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, length_scale=None,
@@ -276,6 +277,13 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
     return add_report(prep, res) if report else res
 
 
+def source_rest_heights(prep: Prepared) -> np.ndarray:
+    """(2, 3) [m] how high the clip's foot markers rest in stance above its floor, both found from the clip
+    by the physics report's own measures (``metrics.floor_height``, ``metrics.stance_rest_heights``)."""
+    floor, _ = floor_height(prep.markers, prep.gait, prep.body.leg_length)
+    return stance_rest_heights(prep.markers, prep.gait, floor)[0]
+
+
 def add_report(prep: Prepared, res: Result) -> Result:
     """The result with its physics report (docs/architecture.md) computed: tracking against the machine, the loaded
     foot targets and the time-warped reference pose. (Separate so that a viewer can show the motion first.)
@@ -287,6 +295,7 @@ def add_report(prep: Prepared, res: Result) -> Result:
         marker_targets=stance_only(res.targets), reference_pose=res.targets.initial,
         reference_max_joint_jump_deg=prep.cycle.max_joint_jump_deg,
         reference_path=prep.path, reference_leg_length=prep.body.leg_length,
+        source_rest_heights=res.retarget.L * source_rest_heights(prep),
     )
     report.extras.update({"character": res.retarget.character.name, "L": res.retarget.L, "M": res.retarget.M,
                           "speed_factor": res.speed_factor, "method": res.method, "notes": list(res.notes),

@@ -346,10 +346,13 @@ def foot_skate_floor(markers: np.ndarray, gait: Gait, leg_length: float) -> tupl
     return 1000.0 * worst, where
 
 
-#: The file's own y = 0 is the floor when the feet's lowest points rest within these fractions of L of it
+#: The file's own y = 0 is the floor when the feet's lowest points rest within these fractions of L above it
 #: (a joint centre rests a sole's thickness above the floor: CMU's toe end sites 10-20 mm, a folded Bandai
-#: rig's estimated toe tip 20 mm); otherwise the floor is where they rest (``floor_height``).
-FLOOR_NEAR_L = (-0.02, 0.06)
+#: rig's estimated toe tip 20 mm); otherwise the floor is where they rest (``floor_height``). Not below it:
+#: nothing rests under the floor, so feet resting below y = 0 (Bandai dataset-2_walk_exhausted_001's 10 mm,
+#: dataset-1_walk_normal_001's 13 mm) stand on a floor that low; taken as y = 0, an output copying the
+#: clip's height above it was lowered into its floor (penetration 10-13 mm on a troll or a giant).
+FLOOR_NEAR_L = (0.0, 0.06)
 
 
 def floor_height(markers: np.ndarray, gait: Gait, leg_length: float) -> tuple[float, str]:

@@ -22,6 +22,7 @@ from .body.gait import detect_gait, require_running, summarize, walks
 from .body.model import BodyModel
 from .body.path import is_straight, straighten, take_path, turn_note
 from .body.take import modelled_part, running_take, select_range
+from .constants import UP_AXIS
 from .core.motion import Motion
 from .errors import FitError, FroudeError
 from .machine import is_walking
@@ -273,8 +274,26 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
             bad = np.flatnonzero(ik.failed)
             notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]
         motion = ik.motion
+    motion, path, targets = _raised(motion, path, targets, retarget.L * prep.cycle.floor_clearance)
     res = Result(motion, None, path, targets, retarget, method, speed, tuple(notes), plan, dict(extras or {}))
     return add_report(prep, res) if report else res
+
+
+def _raised(motion: Motion, path: MachinePath, targets, rise: float):
+    """The output, its machine path and its targets raised by rise [m]: the synthesis puts the clip's ground
+    (``ReferenceCycle.ground``: the median of its stances' lowest points) on y = 0, and that ground is
+    ``floor_clearance`` above the clip's floor (a joint centre rests a sole's thickness above the floor), so
+    the output, raised by it × L, stands on its floor y = 0 as the clip does on its own."""
+    if rise == 0.0:
+        return motion, path, targets
+    up = np.zeros(3)
+    up[UP_AXIS] = rise
+    motion = motion.with_(root_positions=motion.root_positions + up)
+    path = _replace(path, com=path.com + up, contacts=path.contacts + up)
+    floor_top = None if targets.floor_top is None else targets.floor_top + rise
+    targets = _replace(targets, initial=targets.initial.with_(root_positions=targets.initial.root_positions + up),
+                       com=targets.com + up, markers=targets.markers + up, floor_top=floor_top)
+    return motion, path, targets
 
 
 def source_rest_heights(prep: Prepared) -> np.ndarray:

@@ -97,8 +97,15 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     # to itself: its toe 15-23 mm up at every touchdown) the feet landed 0.5-0.9 frames late at 30 Hz
     own = body.foot_markers(initial) if cyc.order == "walking" else None
     markers = _lift_out_of_reach(hips, body, markers, own, path.frame[0])
+    # Each foot's lowest point rests on the ground at 0 until here (the cycle's heights are above each stance's
+    # own lowest point, the thresholds below are tuned so), its markers where the clip's rest above that point
+    rest = cyc.rest_heights
+    foot_low = np.zeros(2) if rest is None else np.where(np.isfinite(rest).all(axis=1), np.nanmin(rest, axis=1), 0.0)
+    if rest is not None:
+        markers = _rest_on_floor(markers, path, L * (rest - foot_low[:, None]))
     reach = _reach_factor(hips, body, markers)
-    weight = _marker_weights(path, markers, body.leg_length, fade=cyc.order != "walking") * reach
+    weight = _marker_weights(path, markers, body.leg_length, fade=cyc.order != "walking",
+                             frame_time=float(path.frame_time)) * reach
     # A swinging foot's target beyond the leg's reach keeps only OUT_OF_REACH_SWING of the swing weight: the
     # trailing foot's ground path after an acceleration's longer stance lies 1.2 L from the hip, and at the
     # full swing weight it dragged the pelvis 26 deg off the reference pose, which sprang back in one frame
@@ -112,8 +119,13 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     # Weights are per (leg length)^2, so the trade-off between a position error and a joint angle is the
     # same for a child and a giant (errors in metres grow with size, joint angles do not).
     per_size = (reference_leg_length / retarget.body.leg_length) ** 2
-    return Targets(initial, path.com, markers, weight * per_size, np.full(T, COM_WEIGHT * per_size),
-                   _floor_top(markers, retarget.body.leg_length, float(path.frame_time)))
+    floor_top = _floor_top(markers, retarget.body.leg_length, float(path.frame_time))
+    # ... and then each foot where the clip's rests relative to the ground level (one foot's lowest point may
+    # rest higher than the other's: CMU 09_01's left toe end site 11 mm above the right's)
+    markers = markers.copy()
+    markers[..., UP_AXIS] += L * foot_low[None, :, None]
+    floor_top = floor_top + L * foot_low[None, :, None]
+    return Targets(initial, path.com, markers, weight * per_size, np.full(T, COM_WEIGHT * per_size), floor_top)
 
 
 def _floor_top(markers: np.ndarray, leg_length: float, frame_time: float) -> np.ndarray:
@@ -132,6 +144,48 @@ def _floor_top(markers: np.ndarray, leg_length: float, frame_time: float) -> np.
         h = np.pad(markers[:, :, k, UP_AXIS], ((half, half), (0, 0)), mode="edge")
         low = np.lib.stride_tricks.sliding_window_view(h, 2 * half + 1, axis=0).min(axis=-1)  # (T, 2)
         out[:, :, k] = np.where(low <= SKATE_REACH_L * leg_length, low + SKATE_BAND_L * leg_length, -np.inf)
+    return out
+
+
+#: Margin [s] about each contact within which a foot marker's lowest target is its rest (_rest_on_floor): as
+#: the physics report's (metrics.SKATE_MARGIN_S), so a toe tip lowest at push-off counts.
+REST_MARGIN_S = 0.1
+
+
+def _rest_on_floor(markers: np.ndarray, path: MachinePath, rest: np.ndarray) -> np.ndarray:
+    """markers (T, 2, 3, 3) [m] with each foot's markers resting at ``rest`` (2, 3) [m] (the clip's, × L, above
+    the ground at 0) in every contact: each marker's lowest target about the contact (REST_MARGIN_S either
+    side, not past the middle of the swings) moved there, the whole contact by as much, the change fading
+    out (min-jerk) from the margin to the middle of the swings. A contact cut by the output's edges is left
+    as it is (its lowest point may lie beyond them: a walk's last contact, pulled down by a swinging foot's
+    height, dragged the foot along the floor).
+
+    The reference cycle averages the clip's stances at each phase (a low point reached at different phases
+    is raised: the mean of dips stays above them), its de-skating tilts a steep toe bone about its held end
+    (a folded rig's ball over its toe tip: 14 mm down on one foot of dataset-2_run_masculine_005), and the
+    time warp samples the cycle at other phases than the clip's frames: without this one foot rested up to
+    1 % of L above or below the clip's, scaled. NaN rest heights (a foot without a whole stance) change
+    nothing.
+    """
+    out = markers.copy()
+    t = path.times
+    for foot in range(2):
+        cols = np.flatnonzero(path.foot_of_step == foot)
+        if cols.size == 0 or not np.isfinite(rest[foot]).all():
+            continue
+        on, off = _contacts_extended(path, cols)
+        for i in range(len(on)):
+            lo = 0.5 * (off[i - 1] + on[i]) if i > 0 else on[i] - (off[i] - on[i])
+            hi = 0.5 * (off[i] + on[i + 1]) if i + 1 < len(on) else off[i] + (off[i] - on[i])
+            if on[i] < t[0] or off[i] > t[-1]:
+                continue  # cut by the output's edge (or a virtual contact beyond it): its lowest point unseen
+            a, b = max(lo, on[i] - REST_MARGIN_S), min(hi, off[i] + REST_MARGIN_S)
+            inside = (t >= a) & (t <= b)
+            change = rest[foot] - markers[inside, foot, :, UP_AXIS].min(axis=0)  # (3,)
+            w = np.where(t < a, min_jerk((t - lo) / max(a - lo, 1e-9)),
+                         np.where(t > b, min_jerk((hi - t) / max(hi - b, 1e-9)), 1.0))
+            w = np.where((t < lo) | (t > hi), 0.0, w)
+            out[:, foot, :, UP_AXIS] += w[:, None] * change[None, :]
     return out
 
 
@@ -411,7 +465,15 @@ def _psi_at(path: MachinePath, times: np.ndarray) -> np.ndarray:
     return np.where(times > t[-1], psi[-1] + (times - t[-1]) * rate, out)
 
 
-def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float, fade: bool = True) -> np.ndarray:
+#: A foot marker in stance is also held while within these fractions of L of its own lowest target about
+#: the contact (FLOOR_WINDOW_S either side): at REST_HOLD of the stance weight at the first, not at all from the
+#: second (_marker_weights).
+REST_BAND_L = (0.005, 0.02)
+REST_HOLD = 0.3
+
+
+def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float, fade: bool = True,
+                    frame_time: float | None = None) -> np.ndarray:
     """(T, 2, 3) foot marker weights: high for markers that bear load, low for the rest.
 
     A foot on the ground is weighted by STANCE_MARKER_WEIGHT, ramped (min-jerk over WEIGHT_RAMP_S) around
@@ -419,6 +481,13 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float, f
     the swing weight at ≥ 0.05 L. So the loaded point is held still while the rest of the foot may pivot
     about it (push-off on the toes when a faster or longer-legged run needs more reach than the
     reference's foot pose gives). markers: (T, 2, 3, 3) targets [m]; leg_length [m].
+    A marker that rests above that band (a heel: the ankle joint 0.12-0.15 L up) is held too while it is at
+    its own rest height (within REST_BAND_L of its lowest target about the contact; frame_time [s] of the
+    targets): held only by the posture pull, the ankles rested up to 0.6 % of L off the clip's, scaled (the
+    foot turned about its held ball). Held at 0.3 of the stance weight: at 1, where a foot's targets are not
+    quite its shape (each marker's rest is its own lowest point, reached at its own time) the IK split the
+    difference with the ball and the tip; 09_05, 09_06, dash_active_001, run_masculine_001 as giant, troll,
+    child, x1.2 and giant x0.7: 12 of 20 outputs missed a bar at 1, 6 at 0.3, 11 at 0.1.
     """
     t = path.times
     ramp = np.zeros((len(t), 2))
@@ -444,6 +513,12 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float, f
     height = markers[..., UP_AXIS]  # ground at 0
     lo, hi = 0.02 * leg_length, 0.05 * leg_length
     loaded = min_jerk((hi - height) / (hi - lo))  # 1 at or below lo, 0 at or above hi
+    if frame_time is not None:
+        half = max(1, int(round(FLOOR_WINDOW_S / frame_time)))
+        h = np.pad(height, ((half, half), (0, 0), (0, 0)), mode="edge")
+        low = np.lib.stride_tricks.sliding_window_view(h, 2 * half + 1, axis=0).min(axis=-1)  # (T, 2, 3)
+        r_lo, r_hi = REST_BAND_L[0] * leg_length, REST_BAND_L[1] * leg_length
+        loaded = np.maximum(loaded, REST_HOLD * min_jerk((r_hi - (height - low)) / (r_hi - r_lo)))
     # Around a touchdown every marker of the foot keeps at least LANDING_WEIGHT of the stance weight: a
     # landing foot follows its targets down to the contact point instead of being left by the posture pull
     # a centimetre lower and still sweeping forward (a scuff the report sees at touchdown). Not at lift-off:

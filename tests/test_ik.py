@@ -226,6 +226,23 @@ def test_frozen_joints_keep_their_input(clip, body, solved):
         ik.solve_ik(clip, [ik.ComTask(body, com_t)], freeze=["Hips"])
 
 
+def test_unused_joints_stay_frozen_under_rounding(clip, body):
+    """A joint the reference never turns (CMU's LHipJoint/RHipJoint, the shoulders) stays frozen when every
+    rotation carries rounding (1e-6 rad in a random direction: float32 keys, as Blender and FBX store them),
+    and a joint that turns by 0.02 rad (less than the least any shared clip uses) is not frozen (issue 26)."""
+    rng = np.random.default_rng(31)
+    axis = rng.standard_normal(clip.rotations.shape[:2] + (3,))
+    axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+    rounded = clip.with_(rotations=quat.mul(clip.rotations, quat.from_rotvec(1e-6 * axis)))
+    want = ik.default_frozen_joints(body, clip)
+    assert {"LHipJoint", "RHipJoint", "LeftShoulder", "RightShoulder"} <= {clip.skeleton.names[j] for j in want}
+    assert ik.default_frozen_joints(body, rounded) == want
+    j = clip.skeleton.names.index("LHipJoint")
+    turned = clip.rotations.copy()
+    turned[:, j] = quat.from_rotvec(np.linspace(0.0, 0.02, clip.n_frames)[:, None] * [1.0, 0.0, 0.0])
+    assert j not in ik.default_frozen_joints(body, clip.with_(rotations=turned))
+
+
 def test_weights_trade_accuracy_for_posture(clip, body):
     com, mk = body.com_and_markers(clip)
     tasks = [ik.ComTask(body, com + [0, 0.03, 0]), ik.MarkerTask.feet(body, mk)]

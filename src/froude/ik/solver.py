@@ -75,6 +75,12 @@ DEFAULT_MAX_ITERS = 4
 DEFAULT_MAX_ERROR = 0.02  # [m] a frame whose COM or marker error stays above this has failed
 DEFAULT_MAX_STEP = 0.5  # [rad or m] largest DOF increment applied in one iteration (trust region)
 DEFAULT_CHUNK = 2048  # frames processed together (memory stays O(chunk), cache-friendly rows)
+#: [rad] a joint whose rotation stays this close to its first frame's through the whole reference is one the
+#: reference does not use (frozen by default). Far above the rounding a joint's channels pick up on the way
+#: (float32 keys in Blender and FBX: ~1e-6 rad; an exact test froze CMU's LHipJoint in the BVH and moved it,
+#: 0.6 mm at the head, in the same clip with its rotations perturbed by 1e-6 rad: issue 26), far below any
+#: joint a clip uses (the shared clips' least-moving used joint turns 0.025 rad; unused ones 0 or 3e-8).
+UNUSED_JOINT_TOL = 1e-4
 
 
 # ---- result ------------------------------------------------------------------------------------------
@@ -149,9 +155,10 @@ def max_joint_step(motion: Motion, joints: Sequence[int] | None = None) -> float
 def default_frozen_joints(body: BodyModel, reference: Motion | None = None, freeze_head: bool = False) -> list[int]:
     """Joints the solver keeps at their input rotation by default: the hands and everything below them
     (fingers, thumbs), every joint that moves no segment mass and no foot marker, every joint whose
-    rotation never changes (bit for bit) in ``reference`` (e.g. CMU's LHipJoint/RHipJoint: a correction
-    should not start moving a joint the reference never uses; it would move the hip centre against the
-    pelvis), and optionally the head (neck and head joints)."""
+    rotation stays within UNUSED_JOINT_TOL of its first frame's in ``reference`` (e.g. CMU's
+    LHipJoint/RHipJoint: a correction should not start moving a joint the reference never uses; it would move
+    the hip centre against the pelvis; a tolerance, not bit equality, so that rounding in the input's last
+    bits does not unfreeze it), and optionally the head (neck and head joints)."""
     skel = body.skeleton
     J = skel.n_joints
     frozen = np.zeros(J, bool)
@@ -173,8 +180,8 @@ def default_frozen_joints(body: BodyModel, reference: Motion | None = None, free
         carries[skel.parents[j]] |= carries[j]
     frozen |= ~carries
     if reference is not None and reference.n_frames > 1:
-        rot = reference.rotations  # max == min over frames, per joint and component (exact)
-        frozen |= np.all(rot.max(axis=0) == rot.min(axis=0), axis=-1)
+        rot = reference.rotations
+        frozen |= quat.angle_between(rot, rot[:1]).max(axis=0) <= UNUSED_JOINT_TOL
     frozen[0] = False
     return [int(j) for j in np.flatnonzero(frozen)]
 

@@ -32,6 +32,7 @@ from .prepared import Prepared
 from .result import Result, report_path, write_result
 from .speed_change import check_human_speed, output_steps, plan_run_speed_change, speed_range_notes
 from .speed_goal import scale_factor
+from .synthesis.bend import bend
 from .synthesis.cycle import extract_cycle, fit_events
 from .synthesis.targets import build_targets, stance_only
 from .synthesis.timewarp import MachinePath, machine_path
@@ -96,7 +97,7 @@ class ScalePlan:
     """The first half of ``scale``: the character applied, the machine chosen and its path simulated.
 
     ``plan.finish()`` completes it (targets, IK, report); the studio shows ``path`` and the targets'
-    initial motion (``targets_of(prep, plan.path, plan.retarget).initial``) as an instant preview.
+    initial motion (``bend(targets_of(prep, plan.path, plan.retarget), ...)``) as an instant preview.
     """
 
     prep: Prepared
@@ -253,11 +254,7 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
     """
     from .ik.correct import WALK_REPAIR_ROUNDS, correct, tile_stride
 
-    targets = targets_of(prep, path, retarget)
-    if prep.turn is not None:  # the straight output rolled back onto the clip's path, scaled
-        from .synthesis.bend import bend
-
-        targets, path = bend(targets, path, prep.turn, retarget.L, prep.origin)
+    targets, path = bend(targets_of(prep, path, retarget), path, prep.turn, retarget.L, prep.origin)  # a turn
     n_strides = len(path.foot_of_step) / 2
     if periodic is not None and n_strides > PERIODIC_MIN_STRIDES and prep.turn is None:
         machine, stretch, fps = periodic

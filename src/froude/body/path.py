@@ -50,7 +50,10 @@ class PathStep:
     (+ = left); radius_m: arc length / heading change (signed like the turn; inf when straight);
     speed_m_s: arc length / duration; lean_rad: mean frontal-plane angle of the COM over the stance foot's
     contact point while that foot is on the ground (+ = the COM left of the foot); facing_vs_travel_rad:
-    mean facing minus travel heading.
+    mean facing minus travel heading; com_velocity_t0_m_s, com_velocity_t1_m_s: (3,) the COM's own horizontal
+    velocity [m/s] at the step's start and end (from one touchdown of a foot to its next, the same phase of the
+    gait, their difference over the time is the mean horizontal force per mass: the mean of the COM's
+    acceleration telescopes).
     """
 
     foot: int
@@ -62,6 +65,8 @@ class PathStep:
     speed_m_s: float
     lean_rad: float
     facing_vs_travel_rad: float
+    com_velocity_t0_m_s: tuple = (math.nan, math.nan, math.nan)
+    com_velocity_t1_m_s: tuple = (math.nan, math.nan, math.nan)
 
 
 @dataclass(frozen=True)
@@ -258,6 +263,11 @@ def _steps(gait: Gait, com: np.ndarray, s: np.ndarray, heading: np.ndarray, fvt:
     """Per step, touchdown to the next touchdown (stances that begin inside the take)."""
     on = sorted((st for st in gait.stances if st.start > 0), key=lambda st: st.start)
     frames = np.arange(F)
+    u = np.gradient(com, dt, axis=0) if F > 1 else np.zeros_like(com)
+    u[:, UP_AXIS] = 0.0
+
+    def u_at(t):
+        return tuple(float(np.interp(t, frames, u[:, k])) for k in range(3))
     out = []
     for a, b in zip(on[:-1], on[1:]):
         t0 = a.t_on if math.isfinite(a.t_on) else float(a.start)
@@ -277,7 +287,8 @@ def _steps(gait: Gait, com: np.ndarray, s: np.ndarray, heading: np.ndarray, fvt:
         seg = fvt[int(t0) : int(math.ceil(t1)) + 1]
         seg = seg[np.isfinite(seg)]
         f_t = float(np.angle(np.mean(np.exp(1j * seg)))) if seg.size else float("nan")
-        out.append(PathStep(a.foot, t0 * dt, t1 * dt, arc, dpsi, radius, arc / ((t1 - t0) * dt), lean, f_t))
+        out.append(PathStep(a.foot, t0 * dt, t1 * dt, arc, dpsi, radius, arc / ((t1 - t0) * dt), lean, f_t,
+                            u_at(t0), u_at(t1)))
     return tuple(out)
 
 

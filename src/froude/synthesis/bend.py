@@ -16,10 +16,10 @@ from dataclasses import replace as _replace
 
 import numpy as np
 
-__all__ = ["Centreline", "bend", "bend_points"]
+__all__ = ["Centreline", "bend", "bend_points", "lean_shift"]
 
 from ..body.path import TakePath, yaw_quat
-from ..constants import UP, UP_AXIS
+from ..constants import GRAVITY, UP, UP_AXIS
 from ..core import quat
 from .targets import Targets
 from .timewarp import MachinePath
@@ -71,17 +71,142 @@ def bend_points(x: np.ndarray, line: Centreline, origin: np.ndarray) -> np.ndarr
     return out
 
 
-def bend(targets: Targets, path: MachinePath, clip: TakePath, L: float,
+def _clip_step_figures(clip: TakePath) -> tuple[np.ndarray, ...]:
+    """Per clip step: foot (n,), arc length at touchdown (n,) [m], lean (n,) [rad] and the turn's Froude
+    number v^2 / (g r) (n,) [-] (signed like the turn; 0 on a straight step)."""
+    frames = np.arange(clip.arc_length_m.size)
+    foot = np.array([s.foot for s in clip.steps], int)
+    s_td = np.interp([s.t0_s / clip.frame_time for s in clip.steps], frames, clip.arc_length_m)
+    lean = np.array([s.lean_rad for s in clip.steps])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        kappa = np.array([s.heading_change_rad / s.arc_length_m if s.arc_length_m > 0 else 0.0
+                          for s in clip.steps])
+    fr = np.array([s.speed_m_s for s in clip.steps]) ** 2 * kappa / GRAVITY
+    return foot, s_td, lean, np.nan_to_num(fr)
+
+
+#: The share of a swing at each end during which a foot keeps the sideways shift of the stance it leaves
+#: or reaches (its toes are near the floor there).
+SWING_HOLD = 0.25
+
+
+def _smooth_blend(u: np.ndarray) -> np.ndarray:
+    """Smoothstep 3u^2 - 2u^3 of u clipped to [0, 1]: a swing's sideways shift starts and ends at rest."""
+    u = np.clip(u, 0.0, 1.0)
+    return u * u * (3.0 - 2.0 * u)
+
+
+def lean_shift(com: np.ndarray, markers: np.ndarray, path: MachinePath, clip: TakePath, L: float, origin: np.ndarray,
+               fwd0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How far to move each foot sideways in the straight output [m] so that it leans into the turn as the
+    clip does (issue 28, acceptance 2): per frame (T, 2) and per machine step (n,), along UP x fwd0 (+ =
+    left of the straight travel).
+
+    The machines repeat one reference stride, whose COM sways over the stance foot as on a straight walk:
+    the lean into the curve (the COM inside the stance foot, tan phi = v^2 / (g r) for the mean force of a
+    steady turn) is not in it. The lean is dimensionless, so dynamic similarity keeps the clip's per step:
+    each output step is asked for the lean of the clip's steps of the same foot at its place along the path
+    (arc length a / L; more than a stride before the clip's first step of that foot or past its last,
+    the machine's stride as it is), and a speed change turns it by arctan(v'^2 / (g r')) - arctan(v^2 / (g r)) with the
+    output's speed along its straight travel and the clip's radius scaled by L. A planted foot is moved by
+    one amount for its whole stance (no skate); a swing goes from one amount to the next smoothly. The COM
+    (the path) stays: the feet go out of the curve, as the clip's do. The move is not
+    bounded: the turns of the shared walks ask up to 0.11 leg lengths under pure scaling, a faster walk or an
+    erratic step (the exhausted walks) up to 0.19; a bound of 0.05-0.09 (tried) cost the lean of steady turns
+    more than it saved in skating.
+    com: (T, 3), markers: (T, 2, 3, 3) the straight output's COM and foot marker targets [m]; origin, fwd0: (3,)
+    its start and travel direction.
+    """
+    n = len(path.foot_of_step)
+    T = len(path.times)
+    left0 = np.cross(UP, fwd0)
+    shift_step = np.zeros(n)
+    out = np.zeros((T, 2))
+    foot_c, s_c, lean_c, fr_c = _clip_step_figures(clip)
+    if n == 0 or len(foot_c) < 2 or T < 2:
+        return out, shift_step
+    t = path.times
+    a_com = (com - origin * (1 - UP)) @ fwd0  # (T,) straight arc length of the COM target [m]
+    for k in range(n):
+        f = int(path.foot_of_step[k])
+        on = (t >= path.contact_on[k]) & (t < path.contact_off[k])
+        same = foot_c == f
+        if on.sum() < 2 or same.sum() < 1:
+            continue
+        # the stance foot's contact point as the report measures it (body.gait: the mean of the foot's
+        # lowest marker over the stance), here of its targets: the machine's contact point lies elsewhere
+        # on the foot (2-3 cm sideways on the Bandai walks)
+        mk = markers[on, f]  # (n_on, 3, 3)
+        low = mk[np.arange(mk.shape[0]), np.argmin(mk[:, :, UP_AXIS], axis=1)]
+        if not np.isfinite(low).all():
+            continue
+        d = com[on] - low.mean(axis=0)
+        h = float(np.mean(d[:, UP_AXIS]))
+        if not h > 0:
+            continue
+        pred = float(np.mean(np.arctan2(d @ left0, d[:, UP_AXIS])))
+        s_k = float(np.interp(path.contact_on[k], t, a_com)) / L  # the clip's arc length here [m]
+        # before the clip's first step of this foot or past its last by more than a stride: the machine's
+        # stride as it is; within one stride, the end step's (the report may place a step a little differently)
+        reach = float(np.median(np.diff(s_c[same]))) if same.sum() > 1 else 0.0
+        if not s_c[same][0] - reach <= s_k <= s_c[same][-1] + reach:
+            continue
+        want = float(np.interp(s_k, s_c[same], lean_c[same]))
+        # a speed change at the same (scaled) radius: the lean follows tan phi = v^2 / (g r)
+        i_on = np.flatnonzero(on)
+        dur = t[i_on[-1]] - t[i_on[0]]
+        v_out = (a_com[i_on[-1]] - a_com[i_on[0]]) / dur if dur > 0 else 0.0
+        fr = float(np.interp(s_k, s_c, fr_c))
+        v_clip = float(np.interp(s_k, s_c, [s.speed_m_s for s in clip.steps]))
+        if v_clip > 0 and v_out > 0:
+            ratio = v_out**2 / (L * v_clip**2)
+            want += float(np.arctan(fr * ratio) - np.arctan(fr))
+        # the foot goes right (against left0) to put the COM further left of it
+        shift_step[k] = -h * (np.tan(want) - np.tan(pred))
+    return _per_frame(path, shift_step), shift_step
+
+
+def _per_frame(path: MachinePath, shift_step: np.ndarray) -> np.ndarray:
+    """(T, 2) each foot's sideways move [m] per frame from its steps' (n,): one amount over a stance, a
+    smooth change over the middle of the swing to the next stance of that foot."""
+    t = path.times
+    out = np.zeros((len(t), 2))
+    for f in (0, 1):
+        ks = np.flatnonzero(path.foot_of_step == f)
+        if ks.size == 0:
+            continue
+        on, off, dx = path.contact_on[ks], path.contact_off[ks], shift_step[ks]
+        col = np.full(len(t), dx[0])
+        for j in range(ks.size):
+            col[t >= on[j]] = dx[j]
+            if j + 1 < ks.size:  # the swing to the next stance of this foot
+                # over the middle half of the swing: the heel and toes leave and reach the floor where they
+                # are (a sideways move as the toes push off or touch down would skate them)
+                sw = (t >= off[j]) & (t < on[j + 1])
+                span = on[j + 1] - off[j]
+                u = (t[sw] - off[j] - SWING_HOLD * span) / max((1.0 - 2.0 * SWING_HOLD) * span, 1e-9)
+                col[sw] = dx[j] + (dx[j + 1] - dx[j]) * _smooth_blend(u)
+        out[:, f] = col
+    return out
+
+
+def bend(targets: Targets, path: MachinePath, clip: TakePath | None, L: float,
          origin: np.ndarray) -> tuple[Targets, MachinePath]:
-    """The straight output's IK targets and machine path rolled onto the clip's path scaled by L.
+    """The straight output's IK targets and machine path rolled onto the clip's path scaled by L (as they are
+    when clip is None: a straight take, modelled as it is).
 
     COM, foot markers, the machine's COM and contact points are moved point by point; the initial motion's
     pose (the IK's start and the pose it is pulled toward) is moved rigidly with its COM target, turned
     by the heading gained there. origin: (3,) [m] where the straight output starts (``Prepared.origin``).
     """
-    line = Centreline.of(clip, L, origin, path.frame[0])
+    if clip is None:
+        return targets, path
+    fwd0 = path.frame[0]
+    line = Centreline.of(clip, L, origin, fwd0)
+    shift, shift_step = lean_shift(targets.com, targets.markers, path, clip, L, origin, fwd0)
+    left0 = np.cross(UP, fwd0)
     com = bend_points(targets.com, line, origin)
-    markers = bend_points(targets.markers, line, origin)
+    markers = bend_points(targets.markers + shift[:, :, None, None] * left0, line, origin)
     init = targets.initial
     # the pose moved rigidly with its COM target: turned by the heading gained there, about it (a rig's root
     # may lie far from the body: Bandai's joint_Root, 2.4 m ahead of the COM in a straightened turn)
@@ -93,7 +218,7 @@ def bend(targets: Targets, path: MachinePath, clip: TakePath, L: float,
     initial = _replace(init, root_positions=root, rotations=rot)
     new_targets = _replace(targets, com=com, markers=markers, initial=initial)
     new_path = _replace(path, com=bend_points(path.com, line, origin),
-                        contacts=bend_points(path.contacts, line, origin))
+                        contacts=bend_points(path.contacts + shift_step[:, None] * left0, line, origin))
     return new_targets, new_path
 
 

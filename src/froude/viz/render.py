@@ -4,7 +4,9 @@ A figure is drawn as thick round-capped lines along the skeleton's bones ("capsu
 head, a soft shadow on the ground and a ground line (side camera) or ground grid (three-quarter, front).
 Limbs are shaded by side: the side away from the camera darker, the near side lighter, so left and
 right read at a glance. Projection is orthographic: a point p [m] appears at (p·right, p·up) on screen,
-with the camera basis built from the runner's mean heading, so every runner travels left to right.
+with the camera basis built from the runner's mean heading, so every runner travels left to right. A take
+that turns (``body.path``) is drawn unrolled along its path (``body.path.straighten``): the camera follows
+the curve, and the speed shown is the speed along the path.
 
 Everything is drawn at one common scale [px/m] across rows and panels, so a child looks small next to
 a giant. matplotlib (and imageio + imageio-ffmpeg for GIF/MP4) are optional extras imported lazily;
@@ -24,6 +26,7 @@ import numpy as np
 
 from ..body.gait import detect_gait, summarize
 from ..body.model import BodyModel
+from ..body.path import is_straight, straighten, take_path
 from ..constants import UP, UP_AXIS
 from ..core.kinematics import ancestor_mask, points_world
 from ..core.motion import Motion
@@ -283,6 +286,11 @@ def _actors(motions: Sequence[Motion], labels: Sequence[str] | None, camera: str
         body = BodyModel.from_skeleton(m.skeleton)
         com, markers = body.com_and_markers(m)
         gait = detect_gait(m, body, markers)
+        path = take_path(m, body, com, gait)
+        if not is_straight(path):  # the camera follows a turn: the take is drawn unrolled along its path
+            m = straighten(m, path)
+            com, markers = body.com_and_markers(m)
+            gait = detect_gait(m, body, markers)
         summary = summarize(m, body, com, gait)
         speed = float(summary.mean_speed) if np.isfinite(summary.mean_speed) else 0.0
         heading = np.asarray(summary.heading, dtype=float)

@@ -1126,7 +1126,9 @@ class Tab:
         return (f"**{html.escape(self.clip_name)}**  \n"
                 f"units: {unit} · {m.fps:.0f} frames/s · {m.n_frames} frames ({m.n_frames * m.frame_time:.2f} s)  \n"
                 f"speed {sm.mean_speed:.2f} m/s · Froude number {sm.froude:.2f} · leg {sm.leg_length:.2f} m · "
-                f"height {prep.body.stature:.2f} m")
+                f"height {prep.body.stature:.2f} m" + ("" if prep.turn is None else  # a turn: its facts
+                f"  \nturns {np.degrees(prep.turn.heading_change_rad):+.0f}° over {prep.turn.length_m:.2f} m "
+                "(+ = left; speeds along the path)"))
 
     def _table_md(self) -> str:
         """Reference, physical and naive side by side: the physics numbers that tell them apart."""

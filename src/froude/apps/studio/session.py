@@ -17,6 +17,7 @@ from ... import pipeline
 from ...body.characters import apply_character, list_presets, resolve_character
 from ...errors import FitError, FroudeError
 from ...result import Result
+from ...synthesis.bend import bend
 from .tracks import Track, machine_track, motion_hash, reference_track
 
 MODES = ("scale", "accelerate")
@@ -161,7 +162,8 @@ class Session:
         plan = pipeline.plan_scale(self.prep, spec, speed=params.speed, strides=int(params.strides), **nums)
         retarget, path = plan.retarget, plan.path
         assert path is not None  # the physical method (the studio has no naive preview)
-        targets = pipeline.targets_of(self.prep, path, retarget)
+        targets, path = bend(pipeline.targets_of(self.prep, path, retarget), path, self.prep.turn, retarget.L,
+                             self.prep.origin)  # a turning take: along its path, as the result
         _require_finite(targets.initial)
         track = machine_track(targets.initial, retarget.body, path)
         return Solved(params, track, None, True, time.perf_counter() - t0, motion_hash(targets.initial),

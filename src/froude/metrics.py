@@ -402,6 +402,14 @@ def stance_rest_heights(markers: np.ndarray, gait: Gait, floor: float) -> tuple[
     return rest, per
 
 
+def source_rest_heights(markers: np.ndarray, gait: Gait, leg_length: float) -> np.ndarray:
+    """(2, 3) [m] how high a clip's foot markers (F, 2, 3, 3) [m] rest in stance above its floor, both found
+    from the clip by the report's own measures (``floor_height``, ``stance_rest_heights``): × L, what an
+    output's feet must rest at (``physics_report``'s source_rest_heights)."""
+    floor, _ = floor_height(markers, gait, leg_length)
+    return stance_rest_heights(markers, gait, floor)[0]
+
+
 def rest_height_error(rest: np.ndarray, expected: np.ndarray, per_stance: list,
                       tol: float) -> tuple[float, dict]:
     """How far a foot rests above or below the source's: the largest |foot rest - expected| [mm] over the two

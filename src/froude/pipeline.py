@@ -22,11 +22,10 @@ from .body.gait import detect_gait, require_running, summarize, walks
 from .body.model import BodyModel
 from .body.path import is_straight, straighten, take_path, turn_note
 from .body.take import modelled_part, running_take, select_range
-from .constants import UP_AXIS
 from .core.motion import Motion
 from .errors import FitError, FroudeError
 from .machine import is_walking
-from .metrics import floor_height, physics_report, stance_rest_heights
+from .metrics import physics_report, source_rest_heights
 from .naive import naive_clip
 from .prepared import Prepared
 from .result import Result, report_path, write_result
@@ -34,11 +33,11 @@ from .speed_change import check_human_speed, output_steps, plan_run_speed_change
 from .speed_goal import scale_factor
 from .synthesis.bend import bend
 from .synthesis.cycle import extract_cycle, fit_events
-from .synthesis.targets import build_targets, stance_only
+from .synthesis.targets import build_targets, raised, stance_only
 from .synthesis.timewarp import MachinePath, machine_path
 
 __all__ = ["PERIODIC_MIN_STRIDES", "Prepared", "Result", "ScalePlan", "accelerate", "add_report", "finish",
-           "naive_clip", "plan_scale", "prepare", "report_path", "scale", "source_rest_heights", "targets_of",
+           "naive_clip", "plan_scale", "prepare", "report_path", "scale", "targets_of",
            "write_result"]
 
 
@@ -271,33 +270,9 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
             bad = np.flatnonzero(ik.failed)
             notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]
         motion = ik.motion
-    motion, path, targets = _raised(motion, path, targets, retarget.L * prep.cycle.floor_clearance)
+    motion, path, targets = raised(motion, path, targets, retarget.L * prep.cycle.floor_clearance)
     res = Result(motion, None, path, targets, retarget, method, speed, tuple(notes), plan, dict(extras or {}))
     return add_report(prep, res) if report else res
-
-
-def _raised(motion: Motion, path: MachinePath, targets, rise: float):
-    """The output, its machine path and its targets raised by rise [m]: the synthesis puts the clip's ground
-    (``ReferenceCycle.ground``: the median of its stances' lowest points) on y = 0, and that ground is
-    ``floor_clearance`` above the clip's floor (a joint centre rests a sole's thickness above the floor), so
-    the output, raised by it × L, stands on its floor y = 0 as the clip does on its own."""
-    if rise == 0.0:
-        return motion, path, targets
-    up = np.zeros(3)
-    up[UP_AXIS] = rise
-    motion = motion.with_(root_positions=motion.root_positions + up)
-    path = _replace(path, com=path.com + up, contacts=path.contacts + up)
-    floor_top = None if targets.floor_top is None else targets.floor_top + rise
-    targets = _replace(targets, initial=targets.initial.with_(root_positions=targets.initial.root_positions + up),
-                       com=targets.com + up, markers=targets.markers + up, floor_top=floor_top)
-    return motion, path, targets
-
-
-def source_rest_heights(prep: Prepared) -> np.ndarray:
-    """(2, 3) [m] how high the clip's foot markers rest in stance above its floor, both found from the clip
-    by the physics report's own measures (``metrics.floor_height``, ``metrics.stance_rest_heights``)."""
-    floor, _ = floor_height(prep.markers, prep.gait, prep.body.leg_length)
-    return stance_rest_heights(prep.markers, prep.gait, floor)[0]
 
 
 def add_report(prep: Prepared, res: Result) -> Result:
@@ -311,7 +286,7 @@ def add_report(prep: Prepared, res: Result) -> Result:
         marker_targets=stance_only(res.targets), reference_pose=res.targets.initial,
         reference_max_joint_jump_deg=prep.cycle.max_joint_jump_deg,
         reference_path=prep.path, reference_leg_length=prep.body.leg_length,
-        source_rest_heights=res.retarget.L * source_rest_heights(prep),
+        source_rest_heights=res.retarget.L * source_rest_heights(prep.markers, prep.gait, prep.body.leg_length),
     )
     report.extras.update({"character": res.retarget.character.name, "L": res.retarget.L, "M": res.retarget.M,
                           "speed_factor": res.speed_factor, "method": res.method, "notes": list(res.notes),

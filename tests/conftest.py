@@ -6,6 +6,7 @@ Euler angles (intrinsic, file order) and for composing joint transforms.
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -102,6 +103,58 @@ def prepared():
     return _Prepared()
 
 
+@dataclass(frozen=True)
+class MatrixOutput:
+    """What the tests keep of one output of the scale / accelerate matrix (tests/golden/make_golden.cases):
+    the golden summary (root and sparse joint world positions, frame count), the physics report, and
+    whether the motion is finite everywhere. Small, so the whole matrix stays in memory."""
+
+    summary: dict
+    report: object
+    finite: bool
+
+
+class _MatrixOutputs(dict):
+    """Outputs of the matrix by make_golden key ("scale/09_01/child/0.7", "accelerate/09_01/1.3"), each
+    computed once per test process and shared by test_golden, test_scale and test_accelerate (their cases
+    of one clip share an xdist group, so under scripts/test's ``--dist loadgroup`` they meet in one worker).
+    The clips are prepared once each (the last two kept)."""
+
+    def __init__(self):
+        super().__init__()
+        self._prepared: dict = {}
+
+    def __missing__(self, key: str) -> MatrixOutput:
+        import make_golden
+
+        from froude import pipeline
+
+        row = next((r for r in make_golden.cases() if r[0] == key), None)
+        assert row is not None, f"{key}: not a case of tests/golden/make_golden.py"
+        _, name, kind, kw = row
+        if name not in self._prepared:
+            if len(self._prepared) >= 2:
+                self._prepared.pop(next(iter(self._prepared)))
+            self._prepared[name] = pipeline.prepare(clip(name))
+        res = make_golden.run_case(self._prepared[name], kind, kw)
+        m = res.motion
+        self[key] = MatrixOutput(make_golden.summarise(m), res.report,
+                                 bool(np.all(np.isfinite(m.rotations)) and np.all(np.isfinite(m.root_positions))))
+        return self[key]
+
+
+@pytest.fixture(scope="session")
+def matrix_outputs():
+    """The scale / accelerate matrix's outputs, each computed once per test process: ``matrix_outputs[key]``."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent / "golden"))
+    return _MatrixOutputs()
+
+
+def matrix_group(name: str):
+    """The xdist group of one clip's matrix outputs (its golden, scale and accelerate cases)."""
+    return pytest.mark.xdist_group(f"matrix-{name}")
+
+
 def clip_params(names=None):
     """pytest parameters over real clips; a single skipping parameter when the data is absent."""
     names = list(names or ALL_CLIPS)
@@ -113,6 +166,37 @@ def clip_params(names=None):
     if (MOCAP is None and not bandai) or (bandai and BANDAI is None) or not names:
         return [pytest.param(None, marks=pytest.mark.skip(reason=NO_BANDAI if bandai else NO_DATA))]
     return names
+
+
+# ---- test tiers --------------------------------------------------------------------------------------
+#: A test measured slower than this [s] (tests/durations.tsv: one process, file by file, written by
+#: scripts/test_durations.py) is marked ``slow``: ``./scripts/test -m "not slow"`` is the fast tier run
+#: before every commit; CI (.ci/run) runs every test. A test not in the file (a new one) counts as fast:
+#: measure it with the script when it is not cheap.
+SLOW_S = 1.0
+DURATIONS = Path(__file__).with_name("durations.tsv")
+
+
+def _measured_slow() -> set[str]:
+    """Node ids ("tests/test_x.py::name[param]") measured over SLOW_S."""
+    if not DURATIONS.is_file():
+        return set()
+    rows = (line.split("\t", 1) for line in DURATIONS.read_text().splitlines() if line and line[0] != "#")
+    return {node for sec, node in rows if float(sec) > SLOW_S}
+
+
+#: Module fixtures whose first user pays for a fit (tens of seconds here): every test using one is slow, or
+#: leaving the measured slow ones out would only move the fit onto the next test of the module.
+SLOW_FIXTURES = {"tests/test_walk_scale.py": "walks"}
+
+
+def pytest_collection_modifyitems(config, items):
+    slow = _measured_slow()
+    for item in items:
+        heavy_fixture = SLOW_FIXTURES.get(item.nodeid.split("::")[0]) in getattr(item, "fixturenames", ())
+        # a browser test starts Chromium and a studio: minutes on this machine, measured or not
+        if item.nodeid in slow or heavy_fixture or item.get_closest_marker("browser") is not None:
+            item.add_marker(pytest.mark.slow)
 
 
 # ---- an independent BVH reader and FK (the oracle) -----------------------------------------------

@@ -593,7 +593,7 @@ def test_bandai_loop_is_unrolled_and_walk_scaled(run_cli, tmp_path):
 
 @pytest.mark.parametrize("name", clip_params(BANDAI_RUNS))
 def test_bandai_clips_render_without_a_root_capsule(name, tmp_path):
-    from froude.viz.render import build_rig
+    from froude.viz.rig import build_rig
 
     m = load_bvh(clip(name))
     rig = build_rig(BodyModel.from_skeleton(m.skeleton))

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import MOCAP, NO_DATA
+from conftest import MOCAP, NO_DATA, matrix_group
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "golden"))
 import make_golden  # noqa: E402
@@ -26,12 +26,12 @@ def _saved(key: str) -> dict:
 
 
 @pytest.mark.skipif(MOCAP is None, reason=NO_DATA)
-@pytest.mark.parametrize("clip", make_golden.RUNNING)
-def test_outputs_match_golden(clip):
+@pytest.mark.parametrize("clip", [pytest.param(c, marks=matrix_group(c)) for c in make_golden.RUNNING])
+def test_outputs_match_golden(clip, matrix_outputs):
     assert GOLDEN is not None, f"{make_golden.OUT} missing: run tests/golden/make_golden.py"
     assert int(GOLDEN["_stride"]) == make_golden.STRIDE
     keys = [k for k, c, _, _ in make_golden.cases() if c == clip]
-    now = make_golden.compute(MOCAP, only=set(keys))
+    now = {k: matrix_outputs[k].summary for k in keys}  # shared with test_scale and test_accelerate
     worst = []
     for key in keys:
         want, got = _saved(key), now[key]

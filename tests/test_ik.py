@@ -15,6 +15,8 @@ from froude.core import quat
 from froude.core.kinematics import apply_dof_increment
 from froude.errors import IkError
 from froude.ik import solver as ik
+from froude.ik.fk import _FK
+from froude.ik.plan import _make_plan
 from froude.ik.tasks import DEFAULT_JOINT_WEIGHT
 
 from conftest import clip as real_clip
@@ -271,13 +273,13 @@ def test_kept_buffer_fk_matches_fk_soa(clip, body):
 
     m = clip[:50]
     w_pos, w_rot = ik.dof_weights(m.skeleton, ik.PostureTask(), ik.RootTask())
-    plan = ik._make_plan(m.skeleton, body, ik.default_frozen_joints(body, m), w_pos, w_rot,
+    plan = _make_plan(m.skeleton, body, ik.default_frozen_joints(body, m), w_pos, w_rot,
                          body.marker_joint.reshape(6), body.marker_local.reshape(6, 3), True)
     root_T = np.ascontiguousarray(m.root_positions.T)
     rot_T = np.ascontiguousarray(m.rotations[:, plan.sub].transpose(1, 2, 0))
     rng = np.random.default_rng(3)
     tr_T = np.ascontiguousarray(plan.offsets[:, :, None] + rng.normal(0, 0.01, (len(plan.sub), 3, m.n_frames)))
-    fk = ik._FK(plan, rot_T)
+    fk = _FK(plan, rot_T)
     for tr in (None, tr_T):
         P, R = fk(root_T, rot_T, tr)
         P0, R0 = fk_soa(plan.parents, plan.offsets, root_T, rot_T, tr)
@@ -290,7 +292,7 @@ def test_folded_subtrees_keep_the_com(clip, body):
     pose is still the body model's, with the skeleton's offsets and with per-frame joint translations."""
     m = clip[:40]
     w_pos, w_rot = ik.dof_weights(m.skeleton, ik.PostureTask(), ik.RootTask())
-    plan = ik._make_plan(m.skeleton, body, ik.default_frozen_joints(body, m, freeze_head=True), w_pos, w_rot,
+    plan = _make_plan(m.skeleton, body, ik.default_frozen_joints(body, m, freeze_head=True), w_pos, w_rot,
                          body.marker_joint.reshape(6), body.marker_local.reshape(6, 3), True)
     assert {"Head", "LeftHand", "RightHand"} <= {m.skeleton.names[j] for j in plan.fold_orig}
     rng = np.random.default_rng(4)

@@ -82,3 +82,34 @@ def test_layout_rules_of_the_redesign():
     assert n_pipeline <= 300, f"pipeline.py has {n_pipeline} lines (at most 300: move what is not orchestration)"
     silent = [f"{where} {name} ({length} lines)" for length, where, name, why in long_functions(src) if not why]
     assert not silent, "functions over 80 lines without a '# Long because' comment: " + "; ".join(silent)
+
+
+#: Modules allowed over MAX_MODULE_LINES, each with why (issue 27: "no module over 700 lines except
+#: machine/dynamics.py"). synthesis/cycle.py (phases / cycle / feet) is split once the foot-contact work
+#: that edits it has landed: listed so that this test names it rather than skipping the rule.
+MAX_MODULE_LINES = 700
+LARGE_MODULES = {
+    "machine/dynamics.py": "one idea: the running machine's integrator (stance, flight, the scalar twin)",
+    "synthesis/cycle.py": "to split (phases / cycle / feet) after the foot-contact work in flight on it",
+}
+#: Functions over 80 lines today (scripts/long_functions.py); issue 27 asks for at most 5. The count may only
+#: go down: lower it when one is split.
+MAX_LONG_FUNCTIONS = 16
+
+
+def test_modules_of_one_idea():
+    """No module of froude over MAX_MODULE_LINES lines except the listed ones (which must still need it),
+    and no more functions over 80 lines than MAX_LONG_FUNCTIONS."""
+    sys.path.insert(0, str(REPO / "scripts"))
+    from long_functions import long_functions
+
+    src = REPO / "src" / "froude"
+    sizes = {p.relative_to(src).as_posix(): len(p.read_text().splitlines()) for p in src.rglob("*.py")}
+    big = {name: n for name, n in sizes.items() if n > MAX_MODULE_LINES}
+    unlisted = {name: n for name, n in big.items() if name not in LARGE_MODULES}
+    assert not unlisted, f"modules over {MAX_MODULE_LINES} lines (split them by idea): {unlisted}"
+    stale = sorted(set(LARGE_MODULES) - set(big))
+    assert not stale, f"listed as large but now within {MAX_MODULE_LINES} lines (take them off the list): {stale}"
+    n_long = len(long_functions(src))
+    assert n_long <= MAX_LONG_FUNCTIONS, (f"{n_long} functions over 80 lines, more than the {MAX_LONG_FUNCTIONS} "
+                                          "of today: split the new one (scripts/long_functions.py lists them)")

@@ -16,7 +16,7 @@ from froude.core import quat
 from froude.ik.correct import correct
 from froude.metrics import physics_report
 
-from conftest import RUNNING, clip, clip_params
+from conftest import RUNNING, clip, clip_params, matrix_group
 
 PRESETS = ["child", "troll", "giant", "small"]
 SPEEDS = [0.7, 1.0, 1.2]
@@ -41,14 +41,17 @@ def _scale_cases():
             for s in SPEEDS:
                 miss = SCALE_MISSES.get((name, preset, s))
                 marks = () if miss is None else pytest.mark.xfail(strict=True, reason=miss)
-                cases.append(pytest.param(name, preset, s, marks=marks, id=f"{name}-{preset}-x{s}"))
+                cases.append(pytest.param(name, preset, s, marks=(*marks, matrix_group(name)),
+                                          id=f"{name}-{preset}-x{s}"))
     return cases
 
 
 @pytest.mark.parametrize("name,preset,s", _scale_cases())
-def test_physics_bars_every_preset_and_speed(prepared, name, preset, s):
-    """Acceptance 1: every output of every clip, preset and speed meets the physics bars (docs/architecture.md)."""
-    rep = pipeline.scale(prepared[name], preset, speed=s, strides=4).report
+def test_physics_bars_every_preset_and_speed(matrix_outputs, name, preset, s):
+    """Acceptance 1: every output of every clip, preset and speed meets the physics bars (docs/architecture.md).
+    The outputs are the golden matrix's (``pipeline.scale(prepared, preset, speed=s, strides=4)``), computed
+    once for this test and test_golden."""
+    rep = matrix_outputs[f"scale/{name}/{preset}/{s:g}"].report
     assert np.isfinite(rep.com_tracking_max_mm) and rep.reference_max_joint_jump_deg > 0
     assert rep.check_bars() == []
 

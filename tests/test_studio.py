@@ -297,7 +297,12 @@ def test_a_change_is_not_held_up_by_the_speed_range_search(session, monkeypatch)
         assert len(mine) == len(set(mine)) == len(rng.probes)  # every output checked once, none again
         assert rng.lo == pytest.approx(0.5, abs=speed_range.SPEED_SEARCH_TOL)
         assert rng.hi == pytest.approx(1.5, abs=speed_range.SPEED_SEARCH_TOL)
-        assert tab.gui_speed.min == round(rng.lo, 2) and tab.gui_speed.max == round(rng.hi, 2)
+        # The worker stores the range, then sets the slider's two bounds one after the other: wait for both.
+        bounds = (round(rng.lo, 2), round(rng.hi, 2))
+        t_end = time.monotonic() + 30
+        while (tab.gui_speed.min, tab.gui_speed.max) != bounds and time.monotonic() < t_end:
+            time.sleep(0.05)
+        assert (tab.gui_speed.min, tab.gui_speed.max) == bounds
     finally:
         studio.stop()
 

@@ -488,9 +488,7 @@ def _true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 def max_joint_jump_deg(motion: Motion) -> float:
     """Largest frame-to-frame rotation change of any joint [deg] (root orientation included)."""
-    if motion.n_frames < 2:
-        return 0.0
-    return float(np.degrees(quat.angle_between(motion.rotations[1:], motion.rotations[:-1]).max()))
+    return float(np.degrees(quat.max_step_angle(motion.rotations)))
 
 
 def vertical_force_bw(com: np.ndarray, frame_time: float) -> np.ndarray:

@@ -118,6 +118,16 @@ def summarise(motion) -> dict:
     return {"root": p[:, 0].copy(), "sparse": p[::STRIDE].copy(), "n_frames": np.array(len(p))}
 
 
+def run_case(prep, kind: str, kw: dict):
+    """One output of the matrix (a ``cases()`` row's kind and kwargs) through the public pipeline."""
+    from froude import pipeline
+
+    if kind == "scale":
+        kw = dict(kw)
+        return pipeline.scale(prep, kw.pop("character"), **kw)
+    return pipeline.accelerate(prep, **kw)
+
+
 def compute(mocap: Path, only=None):
     """{key: summary} for every case (or the keys in ``only``), through the public pipeline."""
     from froude import pipeline
@@ -128,13 +138,7 @@ def compute(mocap: Path, only=None):
             continue
         if c not in prepared:
             prepared = {c: pipeline.prepare(mocap / f"{c}.bvh")}  # one clip in memory at a time
-        prep = prepared[c]
-        if kind == "scale":
-            kw = dict(kw)
-            res = pipeline.scale(prep, kw.pop("character"), **kw)
-        else:
-            res = pipeline.accelerate(prep, **kw)
-        out[key] = summarise(res.motion)
+        out[key] = summarise(run_case(prepared[c], kind, kw).motion)
     return out
 
 

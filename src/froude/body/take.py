@@ -101,7 +101,7 @@ def unroll_loop(motion: Motion, body: BodyModel) -> tuple[Motion, str] | None:
         return None
     rot = quat.make_continuous(motion.rotations)
     # mean over joints: one joint landing fast at the seam (or a glitch at a clip's edge) does not decide
-    step = quat.angle_between(rot[1:], rot[:-1]).mean(axis=1)
+    step = quat.step_angles(rot).mean(axis=1)
     close = float(quat.angle_between(rot[-1], rot[0]).mean())
     typical = float(np.median(step))
     if not typical > 0:

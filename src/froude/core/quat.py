@@ -217,3 +217,19 @@ def angle_between(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
     """Rotation angle (...) [rad] in [0, π] between unit quaternions (..., 4)."""
     dot = np.abs(np.sum(q0 * q1, axis=-1))
     return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
+
+
+def step_angles(q: np.ndarray) -> np.ndarray:
+    """(F-1, ...) rotation angle [rad] between consecutive rows of unit quaternions (F, ..., 4): a motion's
+    frame-to-frame joint rotation (the one measure of it: the report's joint jump, the IK's step bound, the
+    BVH pose-frame test and the loop detection all read it here)."""
+    return angle_between(q[1:], q[:-1])
+
+
+def max_step_angle(q: np.ndarray, chunk: int = 4096) -> float:
+    """Largest ``step_angles`` [rad] of unit quaternions (F, ..., 4); 0 with fewer than two rows. Computed
+    ``chunk`` rows at a time, so long motions need no (F, J, 4) temporaries (the same maximum)."""
+    out = 0.0
+    for a in range(0, len(q) - 1, chunk):
+        out = np.maximum(out, np.max(step_angles(q[a:min(a + chunk + 1, len(q))])))  # a NaN stays NaN
+    return float(out)

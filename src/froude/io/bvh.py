@@ -291,7 +291,7 @@ def _pose_jump_deg(rot: np.ndarray) -> np.ndarray:
     # one joint at a time: no (F, J, 4) temporaries on long clips
     jumps = np.empty((rot.shape[0] - 1, rot.shape[1]))
     for j in range(rot.shape[1]):
-        jumps[:, j] = quat.angle_between(rot[1:, j], rot[:-1, j])
+        jumps[:, j] = quat.step_angles(rot[:, j])
     # joints that never turn (helper, twist or reference bones) would hide the pose frame in the median
     moving = jumps.max(axis=0) > 1e-9
     return np.degrees(np.median(jumps[:, moving] if moving.any() else jumps, axis=1))

@@ -46,7 +46,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import PlanError
-from .dynamics import Control
+from .dynamics import Control, _hermite
 
 __all__ = ["WalkControl", "ControlPulses", "PULSES_OFF", "WalkState", "desired_leg_length", "WalkStep",
            "WalkTrajectory", "RecordedStep", "walk_step", "record_step", "simulate_walk", "N_PER_STANCE",
@@ -470,13 +470,3 @@ def simulate_walk(state: WalkState, theta0: float, control: Control, times, *, r
     invalid.
     """
     return record_step(state, theta0, control, roll=roll, l_td=l_td, n_per_stance=n_per_stance).sample(times)
-
-
-def _hermite(t0, t1, y0, d0, y1, d1, t):
-    """Cubic Hermite interpolation between nodes t0 < t1 (arrays broadcast)."""
-    hh = t1 - t0
-    s = (t - t0) / hh
-    s2 = s * s
-    s3 = s2 * s
-    return ((2 * s3 - 3 * s2 + 1) * y0 + (s3 - 2 * s2 + s) * hh * d0
-            + (-2 * s3 + 3 * s2) * y1 + (s3 - s2) * hh * d1)

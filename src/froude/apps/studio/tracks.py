@@ -70,7 +70,7 @@ class Track:
     @functools.cached_property
     def rig(self):
         """The capsules of this skeleton (``froude render``'s): the same widths, head and sides."""
-        from ...viz.render import build_rig
+        from ...viz.rig import build_rig
 
         assert self.body is not None, "a track without a body model is drawn as lines"
         return build_rig(self.body)
@@ -94,7 +94,7 @@ class Track:
 
     def exact_rig(self) -> None:
         """Replace a borrowed rig by this body's own (and redo the capsules)."""
-        from ...viz.render import build_rig
+        from ...viz.rig import build_rig
 
         assert self.body is not None, "a track without a body draws lines only"
         self.__dict__["rig"] = build_rig(self.body)

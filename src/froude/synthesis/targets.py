@@ -200,6 +200,33 @@ def _rest_on_floor(markers: np.ndarray, path: MachinePath, rest: np.ndarray) -> 
                          np.where(t > b, min_jerk((hi - t) / max(hi - b, 1e-9)), 1.0))
             w = np.where((t < lo) | (t > hi), 0.0, w)
             out[:, foot, :, UP_AXIS] += w[:, None] * change[None, :]
+        # Each marker is moved up or down by its own change, so the toe bone (ball to tip) would stretch: the
+        # higher of the two is put back at the bone's length from the lower, on which the toes pivot,
+        # horizontally along the foot (the toes pitched about the resting point, as they are, instead of
+        # asking for a longer toe: the IK met the tip and left the ball 4 mm ahead of its held target, and
+        # it swung 6 mm forward at lift-off, dash_normal_001 as a giant). Not the ankle: its bone to the ball
+        # is steep, and put back so it moved 10-20 mm horizontally for a few mm of height (CMU 09_05 and
+        # 09_06 as giants: their held heels turned the feet, the stricter skate 11-43 mm)
+        bone = np.linalg.norm(markers[:, foot, 1] - markers[:, foot, 2], axis=-1)  # (T,) [m]
+        tip_low = (out[:, foot, 2, UP_AXIS] <= out[:, foot, 1, UP_AXIS])[:, None]  # the lower one holds
+        ball = _at_bone_length(out[:, foot, 2], out[:, foot, 1], bone)
+        tip = _at_bone_length(out[:, foot, 1], out[:, foot, 2], bone)
+        out[:, foot, 1] = np.where(tip_low, ball, out[:, foot, 1])
+        out[:, foot, 2] = np.where(tip_low, out[:, foot, 2], tip)
+    return out
+
+
+def _at_bone_length(fixed: np.ndarray, moved: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """(T, 3) [m] ``moved`` shifted horizontally, away from or toward ``fixed`` (T, 3) [m] along their
+    horizontal line, to ``length`` (T,) [m] from it at its own height (unchanged where it cannot be)."""
+    v = moved - fixed
+    horizontal = [a for a in range(3) if a != UP_AXIS]
+    flat = np.linalg.norm(v[:, horizontal], axis=-1)
+    want = np.sqrt(np.maximum(length**2 - v[:, UP_AXIS] ** 2, 0.0))
+    ok = (flat > 1e-6) & (length > np.abs(v[:, UP_AXIS]))
+    out = moved.copy()
+    along = fixed[:, horizontal] + v[:, horizontal] * (want / np.maximum(flat, 1e-9))[:, None]
+    out[:, horizontal] = np.where(ok[:, None], along, moved[:, horizontal])
     return out
 
 

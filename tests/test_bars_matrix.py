@@ -47,25 +47,13 @@ def test_every_preset_at_one_and_a_half_times_the_speed(prepared, name, preset):
     assert rep.check_bars() == []
 
 
-#: Bandai runs whose x1.2 misses issue 30's rest-height bar (a foot's lowest point in stance within 0.3 % of L
-#: of the clip's), measured at e1c635e: dash_normal_001's right toe tip rests 2.8 mm (0.35 % L) above the
-#: clip's at x1.2, so its reachable range ends below x1.2 (main: x0.30-2.27).
-REST_LIMITED = ("dataset-1_dash_normal_001",)
-
-
 @pytest.mark.parametrize("name", clip_params(BANDAI_RUNS))
 def test_bandai_speed_factors_met_or_refused_with_the_range(prepared, name):
     """Acceptance 13.4 on the Bandai runs (the CMU runs: tests/test_take.py): inside the reachable range an
     output meets every bar; its ends were produced and met them."""
     prep = prepared[name]
     rng = reachable_speed_range(prep)
-    assert not rng.empty and rng.lo <= 1.0 <= rng.hi
-    if name in REST_LIMITED:  # x1.2 misses only issue 30's rest-height bar, and so is out of the range
-        assert rng.hi < 1.2
-        fails = pipeline.scale(prep, speed=1.2).report.check_bars()
-        assert fails and all(" foot rests " in f for f in fails), fails
-    else:
-        assert rng.hi >= 1.2
+    assert not rng.empty and rng.lo <= 1.0 <= rng.hi and rng.hi >= 1.2
     for s in SPEEDS_134:
         if rng.lo <= s <= rng.hi:
             assert pipeline.scale(prep, speed=s).report.check_bars() == [], s

@@ -102,7 +102,7 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     rest = cyc.rest_heights
     foot_low = np.zeros(2) if rest is None else np.where(np.isfinite(rest).all(axis=1), np.nanmin(rest, axis=1), 0.0)
     if rest is not None:
-        markers = _rest_on_floor(markers, path, L * (rest - foot_low[:, None]))
+        markers = _rest_on_floor(markers, path, L * (rest - foot_low[:, None]), toe_bone=cyc.order != "walking")
     reach = _reach_factor(hips, body, markers)
     weight = _marker_weights(path, markers, body.leg_length, fade=cyc.order != "walking",
                              frame_time=float(path.frame_time)) * reach
@@ -152,7 +152,7 @@ def _floor_top(markers: np.ndarray, leg_length: float, frame_time: float) -> np.
 REST_MARGIN_S = 0.1
 
 
-def _rest_on_floor(markers: np.ndarray, path: MachinePath, rest: np.ndarray) -> np.ndarray:
+def _rest_on_floor(markers: np.ndarray, path: MachinePath, rest: np.ndarray, toe_bone: bool = True) -> np.ndarray:
     """markers (T, 2, 3, 3) [m] with each foot's markers resting at ``rest`` (2, 3) [m] (the clip's, × L, above
     the ground at 0) in every contact: each marker's lowest target about the contact (REST_MARGIN_S either
     side, not past the middle of the swings) moved there, the whole contact by as much, the change fading
@@ -200,13 +200,18 @@ def _rest_on_floor(markers: np.ndarray, path: MachinePath, rest: np.ndarray) -> 
                          np.where(t > b, min_jerk((hi - t) / max(hi - b, 1e-9)), 1.0))
             w = np.where((t < lo) | (t > hi), 0.0, w)
             out[:, foot, :, UP_AXIS] += w[:, None] * change[None, :]
+        if not toe_bone:
+            continue
         # Each marker is moved up or down by its own change, so the toe bone (ball to tip) would stretch: the
         # higher of the two is put back at the bone's length from the lower, on which the toes pivot,
         # horizontally along the foot (the toes pitched about the resting point, as they are, instead of
         # asking for a longer toe: the IK met the tip and left the ball 4 mm ahead of its held target, and
         # it swung 6 mm forward at lift-off, dash_normal_001 as a giant). Not the ankle: its bone to the ball
         # is steep, and put back so it moved 10-20 mm horizontally for a few mm of height (CMU 09_05 and
-        # 09_06 as giants: their held heels turned the feet, the stricter skate 11-43 mm)
+        # 09_06 as giants: their held heels turned the feet, the stricter skate 11-43 mm). Not in a walk
+        # (toe_bone False): CMU 07_01 as a troll, its stricter skate 2.84 mm without, 8.18 mm with (its foot
+        # rolls over one pivot at a time, cycle._remove_sliding_rolling, ball and tip pass each other's height
+        # and which of them is put back switches there: the likely cause, not yet shown)
         bone = np.linalg.norm(markers[:, foot, 1] - markers[:, foot, 2], axis=-1)  # (T,) [m]
         tip_low = (out[:, foot, 2, UP_AXIS] <= out[:, foot, 1, UP_AXIS])[:, None]  # the lower one holds
         ball = _at_bone_length(out[:, foot, 2], out[:, foot, 1], bone)

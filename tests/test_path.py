@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from froude import pipeline
-from froude.body.path import direction_of, heading_change, smooth_path, wrap_angle, yaw_of
+from froude.body.path import direction_of, heading_change, smooth_path, unsmooth_path, wrap_angle, yaw_of
 from froude.constants import UP
 
 from conftest import BANDAI_LOCO, CMU_TURN_CLIPS, CMU_TURNS, LOCO_TURNS, clip, oracle_fk, read_bvh_oracle
@@ -137,6 +137,36 @@ def test_heading_change_of_an_arc_with_sway(turn_deg):
     assert length == pytest.approx(speed * t[-1], rel=0.01)
 
 
+def test_the_travel_line_undoes_the_stride_average():
+    """A 90 deg turn of radius 1.2 m ending a stride before the take does, with a 3 cm sway: the stride
+    average (the path) cuts the corner; travelled again and averaged again (an output made along the path,
+    measured as the clip), it would be 3.4 % shorter and turn 7 deg less over its end chords than the walker.
+    The travel line (``unsmooth_path``) averaged once more gives back the path, and its own length and end
+    chords are the walker's within 0.5 % and 1.5 deg."""
+    dt, stride, speed = 1 / 120, 1.1, 1.2
+    com = _arc(math.radians(90.0), 1.2, speed, dt, straight_s=stride)
+    t = np.arange(len(com)) * dt
+    vel = np.gradient(com, dt, axis=0)
+    left = np.cross(UP, vel / np.linalg.norm(vel, axis=1, keepdims=True))
+    swayed = com + 0.03 * np.sin(2 * math.pi * t / stride)[:, None] * left
+    n_box = int(round(stride / dt))
+    path = smooth_path(swayed, n_box)
+    track = unsmooth_path(path, n_box)
+
+    def length(x):
+        return np.linalg.norm(np.diff(x[:, [0, 2]], axis=0), axis=1).sum()
+
+    def end_chord_turn_deg(x):
+        return math.degrees(heading_change(x, dt, stride)[0])
+
+    true_length = length(com)
+    twice = smooth_path(path, n_box)
+    assert np.abs(smooth_path(track, n_box) - path)[:, [0, 2]].max() < 0.01  # [m]
+    assert abs(length(track) / true_length - 1) < 0.005 < abs(length(twice) / true_length - 1)
+    walker = end_chord_turn_deg(swayed)
+    assert abs(end_chord_turn_deg(track) - walker) < 1.5 < abs(end_chord_turn_deg(twice) - walker)
+
+
 # ---- machines along the path, and never silently straight (issue 28 points 2 and 4) ---------------------
 #: A turning walk that today's walking machine fits (the other turns: see docs/path.md for which pass).
 TURN = "bandai-locomotion/turns/dataset-2_walk-turn-left_masculine_001"
@@ -163,7 +193,7 @@ TURN_REST_MISS = "left foot 2.7 mm below the clip's rest (0.43 % of L)"
 def test_a_turning_walk_is_scaled_along_its_path(prepared, tmp_path):
     """The walking machine runs along the straightened take and the output is rolled back onto the path
     scaled: the child turns as the clip does (+94.5 deg) within 3 deg, by its report and by the tests' own
-    BVH reader on the written file; facing vs travel within 5 deg; speed along the path x sqrt(L); every
+    BVH reader on the written file; facing vs travel within 5 deg; speed along the path x sqrt(L) within 2 %; every
     bar met (the clip's straight-line speed, 0.93 m/s, was what the machine ran before)."""
     prep = prepared[TURN]
     assert prep.turn is not None and prep.summary.mean_speed == pytest.approx(prep.path.path_speed_m_s, rel=0.02)
@@ -175,7 +205,9 @@ def test_a_turning_walk_is_scaled_along_its_path(prepared, tmp_path):
     f = cmp["facing_vs_travel_deg"]
     assert abs(f["output"] - f["clip"]) <= 5.0
     v = cmp["path_speed_m_s"]
-    assert v["output"] == pytest.approx(v["clip"] * math.sqrt(res.retarget.L), rel=0.03)
+    # acceptance 1's 2 %: the output travels the clip's travel line, not its stride-averaged path (averaged
+    # twice, it was 2.4 % slow: docs/path.md)
+    assert v["output"] == pytest.approx(v["clip"] * math.sqrt(res.retarget.L), rel=0.02)
     fails = res.report.check_bars()
     rest = [b for b in fails if " foot rests " in b]
     assert rest, f"the child now meets the rest-height bar: TURN_REST_MISS is stale ({TURN_REST_MISS})"

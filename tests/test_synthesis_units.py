@@ -25,11 +25,12 @@ ORIGIN = np.array([0.3, 0.9, -0.2])  # [m]; its height is not part of the path (
 
 def _arc(radius_m: float, turn_rad: float, n: int = 4001):
     """A clip's path as Centreline.of reads it: arc length (n,) [m] and heading (n,) [rad] of a steady turn
-    of radius radius_m (inf: straight) through turn_rad (heading starts at 0.7 rad: only changes count)."""
+    of radius radius_m (inf: straight) through turn_rad (heading starts at 0.7 rad: only changes count); its
+    travel line is the path itself (a track without sway)."""
     length = abs(turn_rad) * radius_m if math.isfinite(radius_m) else 6.0
     s = np.linspace(0.0, length, n)
     heading = 0.7 + (s / radius_m * np.sign(turn_rad) if math.isfinite(radius_m) else 0.0 * s)
-    return SimpleNamespace(arc_length_m=s, heading_rad=heading)
+    return SimpleNamespace(arc_length_m=s, heading_rad=heading, travel_line=lambda: (heading, s))
 
 
 def _on_circle(a_m, radius_m):

@@ -242,3 +242,89 @@ def test_fit_refuses_a_walk_without_a_complete_step():
     m = load_bvh(clip("02_01")).cut(0, 100)  # 0.83 s: two touchdowns, no complete step
     with pytest.raises(NotAWalkingMotion, match="no complete walking step"):
         fit_walking_detailed(m, source="02_01[:100]")
+
+
+def test_acceleration_response_is_what_smooth_com_measures_of_a_sinusoid():
+    """The walking fit sees the machine's periodic COM through the clip's filter as its frequency response
+    (body.com_force.acceleration_response): away from the edges, smooth_com's acceleration of a sampled
+    sinusoid is the sinusoid's times that gain, at 30 and 120 Hz and on both sides of the 8 Hz cutoff."""
+    from froude.body.com_force import acceleration_response, smooth_com
+
+    for dt in (1 / 30, 1 / 120):
+        t = np.arange(int(6.0 / dt)) * dt
+        for f_hz in (1.7, 5.3, 9.1):
+            pos = np.zeros((t.size, 3))
+            pos[:, 1] = 0.02 * np.sin(2 * np.pi * f_hz * t + 0.3)
+            _, _, acc = smooth_com(pos, dt)
+            mid = slice(t.size // 3, 2 * t.size // 3)  # far from the edges' extension
+            want = float(acceleration_response(np.array([f_hz]), dt)[0]) * pos[mid, 1]
+            scale = 0.02 * (2 * np.pi * f_hz) ** 2
+            assert np.max(np.abs(acc[mid, 1] - want)) < 1e-3 * scale, (dt, f_hz)
+
+
+def test_constrained_gauss_newton_ends_at_the_minimum_whatever_the_last_bits():
+    """The shape fit's solver (issue 26) ends at the constrained minimum, not where a budget ran out: on a
+    problem whose minimum is known (a nonlinear residual, a curved constraint, a weak prior), perturbing
+    the residual by 1e-12 moves the end point by far less than the step tolerance."""
+    from froude.machine.gauss_newton import constrained_gauss_newton
+
+    target = np.array([0.8, -0.3, 0.5])
+
+    def evaluate(y, eps=0.0):
+        r = np.array([np.sin(y[0]) - target[0], y[1] ** 3 + y[1] - target[1], 2 * (y[2] - target[2]),
+                      0.3 * y[0] * y[2]]) + eps
+        c = np.array([y[0] ** 2 + y[1] - 0.5])  # a curved constraint
+        return r, c
+
+    ends = [constrained_gauss_newton(lambda y, e=e: evaluate(y, e), 3, 0.05, step_tol=1e-9)[0]
+            for e in (0.0, 1e-12, -1e-12)]
+    y = ends[0]
+    assert abs(y[0] ** 2 + y[1] - 0.5) < 1e-10  # on the constraint
+    # stationary: the cost's gradient lies along the constraint's normal
+    def cost(y):
+        r = evaluate(y)[0]
+        return 0.5 * r @ r + 0.5 * 0.05 ** 2 * y @ y
+
+    h = 1e-6
+    grad = np.array([(cost(y + h * e) - cost(y - h * e)) / (2 * h) for e in np.eye(3)])
+    normal = np.array([2 * y[0], 1.0, 0.0])
+    tangent = grad - (grad @ normal) / (normal @ normal) * normal
+    assert np.max(np.abs(tangent)) < 1e-6
+    assert max(np.max(np.abs(e - y)) for e in ends[1:]) < 1e-9
+
+
+def test_shape_fit_runs_from_the_nearest_starts_and_falls_back(monkeypatch):
+    """The walking fit's shape fits (``_shape_fit_nearest``) run from the NEAREST_STARTS (2) candidates whose
+    shape residual is the smallest, the lowest end cost wins, a farther start is not fitted while one of
+    them succeeds, and a failed fit's reason is kept. Toy problems stand in for the machine (a linear
+    residual, one linear constraint y0 = y1), and the exact cycle search after the fit is a recorder."""
+    from froude.machine import walk_fit
+
+    assert walk_fit.NEAREST_STARTS == 2
+    fitted = []
+    monkeypatch.setattr(walk_fit, "_cycle_search", lambda z, *a, **k: (z, "step", 2, 0.0))
+
+    def problem(name, offset, valid_only_at_start=False):
+        def evaluate(y):
+            fitted.append(name)
+            if valid_only_at_start and np.any(y != 0.0):
+                return None  # every step away from the start leaves the model's valid region
+            return y - offset, np.array([y[0] - y[1]])
+
+        return (evaluate, lambda y: np.concatenate([[float(ord(name))], y]), 2)
+
+    # start residuals ½‖offset‖²: near 1 (its minimum on y0 = y1 costs 1), mid 4 (costs ~0), far 25
+    near, mid, far = problem("n", np.array([1.0, -1.0])), problem("m", np.array([2.0, 2.0])), \
+        problem("f", np.array([5.0, 5.0]))
+    broken = problem("b", np.array([0.5, 0.5]), valid_only_at_start=True)  # residual 0.25, its fit fails
+    errors: list[str] = []
+    z, cost, w, calls, z0 = walk_fit._shape_fit_nearest([(far, 10, "far"), (near, 20, "near"), (mid, 30, "mid")],
+                                                        1.0, 0.0, (1, 1, 1), 120, errors)
+    assert z0 == "mid" and z[0] == ord("m") and calls == 32 and errors == [] and cost < 0.1
+    assert fitted.count("f") == 1 and fitted.count("n") > 1  # the far start: its residual only, no fit
+    assert abs(z[1] - z[2]) < 1e-9 and abs(z[1] - 2.0) < 2e-2  # on the constraint, at the toy's minimum
+    fitted.clear()
+    z, *_, z0 = walk_fit._shape_fit_nearest([(far, 1, "far"), (near, 1, "near"), (broken, 1, "broken")], 1.0,
+                                            0.0, (1, 1, 1), 120, errors)
+    assert z0 == "near" and "b" in fitted and fitted.count("f") == 1
+    assert len(errors) == 1 and "valid steps" in errors[0]

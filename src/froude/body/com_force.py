@@ -17,7 +17,8 @@ from ..constants import G_WORLD, GRAVITY, UP_AXIS
 from ..errors import FitError
 
 __all__ = ["CUTOFF_HZ", "FILTER_ORDER", "EDGE_PAD_S", "EDGE_FIT_S", "butter_lowpass", "filtfilt", "smooth_com",
-           "ground_force", "vertical_force_bw"]
+           "ground_force", "vertical_force_bw",
+           "acceleration_response", "force_landmarks"]
 
 #: Low-pass cutoff of the COM filter [Hz] (−6 dB point of the forward-backward filter).
 CUTOFF_HZ = 8.0
@@ -114,11 +115,25 @@ def smooth_com(p_world_com: np.ndarray, frame_time: float, cutoff_hz: float = CU
     return ps[sl], v[sl], a[sl]
 
 
+def acceleration_response(freq_hz: np.ndarray, frame_time: float, cutoff_hz: float = CUTOFF_HZ) -> np.ndarray:
+    """Steady-state gain [1/s²] of :func:`smooth_com`'s acceleration for a sinusoid of the COM position at
+    freq_hz (N,) [Hz], sampled every frame_time [s]: the forward-backward filter's |H|² times the two
+    central differences' −sin²(ω dt)/dt² (real: the chain has zero phase). Away from the clip's edges, the
+    acceleration ``smooth_com`` measures of a periodic motion is its harmonics times this gain (aliases of
+    harmonics above the Nyquist frequency aside), so a model's motion can be seen through the same
+    instrument without sampling it (:func:`froude.machine.walk_fit.stance_force_profile`)."""
+    w_dt = 2.0 * math.pi * np.asarray(freq_hz, float) * frame_time
+    z1 = np.exp(-1j * w_dt)
+    gain = np.ones(w_dt.shape)
+    for (b0, b1, b2), (_, a1, a2) in butter_lowpass(FILTER_ORDER, cutoff_hz, 1.0 / frame_time):
+        h = (b0 + z1 * (b1 + z1 * b2)) / (1.0 + z1 * (a1 + z1 * a2))
+        gain = gain * np.abs(h) ** 2
+    return -gain * np.sin(w_dt) ** 2 / frame_time ** 2
+
+
 def ground_force(a_world_com: np.ndarray, mass: float) -> np.ndarray:
     """Eq. 1: total ground force f = m (a_com − g) (F, 3) [N]; a_world_com (F, 3) [m/s²], mass [kg]."""
     return mass * (np.asarray(a_world_com, float) - G_WORLD)
-
-
 
 
 def vertical_force_bw(p_world_com: np.ndarray, frame_time: float, cutoff_hz: float = CUTOFF_HZ) -> np.ndarray:
@@ -126,3 +141,46 @@ def vertical_force_bw(p_world_com: np.ndarray, frame_time: float, cutoff_hz: flo
     (``smooth_com``; 1 for a body at rest, 0 in flight)."""
     _, _, a = smooth_com(p_world_com, frame_time, cutoff_hz)
     return 1.0 + a[:, UP_AXIS] / GRAVITY
+
+
+def force_landmarks(tau: np.ndarray, fy_bw: np.ndarray, tau_double: float) -> dict:
+    """The two peaks and the trough of the vertical force over one stance.
+
+    tau: (N,) stance phase 0 … 1; fy_bw: (N,) total vertical ground force [BW]; tau_double: the phase
+    length of one double support. The weight-acceptance peak is the largest local maximum of the force
+    in the first 2·tau_double of the stance, the push-off peak the largest in the last 2·tau_double (each
+    double support and as long again into single support: where the gait literature places them, around
+    the other foot's liftoff and touchdown; the window's largest value if it holds no local maximum);
+    the trough is the smallest force between them. Extrema are refined to the parabola's vertex.
+    Returns {peak1, trough, peak2 [BW], tau_peak1, tau_trough, tau_peak2 [-]}.
+    """
+    w = min(max(2.0 * tau_double, 0.15), 0.45)
+    # A peak is a local maximum: the force at the stance's very start or end is the tail of the other
+    # foot's peak (the profile of a periodic walk wraps around), not this stance's.
+    interior = np.zeros(tau.size, bool)
+    interior[1:-1] = (fy_bw[1:-1] >= fy_bw[:-2]) & (fy_bw[1:-1] >= fy_bw[2:])
+    first = tau <= w
+    last = tau >= 1.0 - w
+    first = first & interior if (first & interior).any() else first
+    last = last & interior if (last & interior).any() else last
+    i1 = np.flatnonzero(first)[np.argmax(fy_bw[first])]
+    i2 = np.flatnonzero(last)[np.argmax(fy_bw[last])]
+    mid = np.arange(i1, i2 + 1)
+    it = mid[np.argmin(fy_bw[mid])]
+    out = {}
+    for key, i in (("peak1", i1), ("trough", it), ("peak2", i2)):
+        out[key], out["tau_" + key] = _vertex(tau, fy_bw, int(i))
+    return out
+
+
+def _vertex(x, y, i):
+    """(y, x) at the vertex of the parabola through samples i − 1, i, i + 1 of an extremum (evenly spaced
+    x), so a landmark is not quantised to the sample grid; the sample itself at an end or when the vertex
+    would leave the three samples."""
+    if 0 < i < len(y) - 1:
+        den = y[i - 1] - 2.0 * y[i] + y[i + 1]
+        if den != 0.0:
+            d = 0.5 * (y[i - 1] - y[i + 1]) / den
+            if abs(d) <= 1.0:
+                return float(y[i] - 0.25 * (y[i - 1] - y[i + 1]) * d), float(x[i] + d * (x[i + 1] - x[i]))
+    return float(y[i]), float(x[i])

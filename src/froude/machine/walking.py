@@ -163,14 +163,6 @@ def _ld(tau, a1, b, c, e):
     return a1 + tau * (b + tau * (c + e * tau))
 
 
-def _bump(x):
-    """B(x) = cos²(π x / 2) for |x| < 1, else 0 (scalar; see ``WalkControl``)."""
-    if -1.0 < x < 1.0:
-        cx = math.cos(0.5 * math.pi * x)
-        return cx * cx
-    return 0.0
-
-
 def desired_leg_length(control: Control, tau) -> np.ndarray:
     """l_d(τ) [l0] of a walking leg control (``WalkControl``; a running ``Control`` has no cubic term and
     no pulses) at stance phases tau (N,)."""
@@ -205,10 +197,13 @@ class _Machine:
         self.h = self.Tc / n_per_stance
 
     def ld(self, tau):
-        """l_d(τ) (scalar, as ``desired_leg_length``)."""
-        v = _ld(tau, self.a1, self.b, self.c, self.e)
+        """l_d(τ) (scalar, as ``desired_leg_length``; the bump B of ``WalkControl`` written out, as in ``accel``)."""
+        v = self.a1 + tau * (self.b + tau * (self.c + self.e * tau))
         for amp, centre, width in self.pulses:
-            v += amp * _bump((tau - centre) / width)
+            xb = (tau - centre) / width
+            if -1.0 < xb < 1.0:
+                cx = math.cos(0.5 * math.pi * xb)
+                v += amp * (cx * cx)
         return v
 
     def leg(self, x, y, t, xc, t0, armed):
@@ -224,11 +219,25 @@ class _Machine:
         return f, g, dx / l, y / l
 
     def accel(self, x, y, t, legs, armed):
+        """(ax, ay) of the COM [g]: gravity and the legs' forces (``leg`` written out, with ``ld``: this is the
+        simulator's inner loop, and the calls cost more than the arithmetic; the same operations in the same
+        order, so the result is the same to the bit)."""
         ax, ay = 0.0, -1.0
+        K, Tc, roll, a1, b, c, e, pulses = self.K, self.Tc, self.roll, self.a1, self.b, self.c, self.e, self.pulses
         for (xc, t0), arm in zip(legs, armed):
-            f, _, ux, uy = self.leg(x, y, t, xc, t0, arm)
-            ax += f * ux
-            ay += f * uy
+            tau = (t - t0) / Tc
+            dx = x - xc - roll * tau
+            l = math.sqrt(dx * dx + y * y)
+            v = a1 + tau * (b + tau * (c + e * tau))
+            for amp, centre, width in pulses:
+                xb = (tau - centre) / width
+                if -1.0 < xb < 1.0:
+                    cx = math.cos(0.5 * math.pi * xb)
+                    v += amp * (cx * cx)
+            g = v - l
+            f = K * (g if arm else max(g, 0.0))
+            ax += f * (dx / l)
+            ay += f * (y / l)
         return ax, ay
 
     def rk4(self, s, t, h, legs, armed):

@@ -2,8 +2,9 @@
 take (``body.path.straighten``), and their output's targets are rolled back onto the path, scaled.
 
 A point of the straight output at distance a along its travel direction and offset r (sideways and up)
-goes to C(a) + Rot(Δψ(a)) r, where the centreline C turns as the clip's path does: Δψ(a) is the heading
-the clip's path has gained at arc length a / L (the path scaled by L about the start; a speed change keeps
+goes to C(a) + Rot(Δψ(a)) r, where the centreline C turns as the clip's travel line does (the track whose
+stride average is the clip's path, ``TakePath.travel_line``): Δψ(a) is the heading it has gained where
+the clip's path has arc length a / L (the path scaled by L about the start; a speed change keeps
 it in metres), and C is the integral of the turned travel direction. A point that stays (a planted foot)
 stays, so the IK in the world frame plants the feet where the map puts them; the COM's offset from the
 path (its sway, its lean into the turn) is turned with the path, so the lateral dynamics are the clip's.
@@ -37,13 +38,23 @@ class Centreline:
 
     @staticmethod
     def of(clip: TakePath, L: float, origin: np.ndarray, fwd0: np.ndarray) -> Centreline:
-        """The clip's path scaled by L, starting at origin (3,) [m] along fwd0 (3,) (the straight output's)."""
+        """The clip's path scaled by L, starting at origin (3,) [m] along fwd0 (3,) (the straight output's).
+
+        The straight output's distance a is the clip's path arc length x L (the straightened take runs at the
+        speed along the path); it goes to the clip's travel line (``TakePath.travel_line``: the track whose
+        stride average is the path) at that place, so the output measured as the clip was (its COM averaged
+        over a stride) has the clip's path, not the path averaged twice.
+        """
+        heading, track_m = clip.travel_line()
         s = np.maximum.accumulate(clip.arc_length_m)
         keep = np.concatenate([[True], np.diff(s) > 0])  # strictly increasing for the interpolation
         a = L * s[keep]
-        dpsi = (clip.heading_rad - clip.heading_rad[0])[keep]
+        # points and offsets follow the travel line (offsets turned by the path's own heading instead, tried with
+        # a sharper travel line, lagged the body's turn behind its travel: two walk-turns' giants skated 16-28 mm)
+        dpsi = (heading - clip.heading_rad[0])[keep]  # fwd0 is the path's first direction
         dirs = quat.rotate(yaw_quat(dpsi), np.broadcast_to(fwd0, (a.size, 3)))
-        steps = 0.5 * (dirs[1:] + dirs[:-1]) * np.diff(a)[:, None]  # trapezoid
+        track = L * np.maximum.accumulate(track_m)[keep]
+        steps = 0.5 * (dirs[1:] + dirs[:-1]) * np.diff(track)[:, None]  # trapezoid
         p = np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)]) + origin * (1 - UP)
         return Centreline(a, dpsi, p, fwd0)
 

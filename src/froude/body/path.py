@@ -360,9 +360,10 @@ def straighten(motion: Motion, path: TakePath) -> Motion:
     P_0 + s_i · direction(heading_0): the COM keeps its offset from the path (its sway and lean) in the
     path's own frame, the travel becomes straight at the speed along the path. A foot planted while the
     path turns moves a little in the straightened take (rigid per frame: about a δ²/2 sideways and a δ
-    along for a foot n from the path and an angle δ = Δs/r of turn between it and the COM, 1-4 cm in
-    CMU 16_51's 1.3 m turn, well below the contact test's speed). The inverse, point by point, is
-    ``synthesis.bend``. Returns a new Motion (meta "straightened": the heading change undone [rad]).
+    along for a foot n from the path and an angle δ = Δs/r of turn between it and the COM). In a gentle
+    walk-turn that is centimetres; in CMU 16_51's sharp running turn a planted foot moves 0.3-0.4 m over
+    a stance (measured in the turns3 work, issue 28), which is why that clip's fit refuses it. The inverse,
+    point by point, is ``synthesis.bend``. Returns a new Motion (meta "straightened": the heading change undone [rad]).
     """
     from dataclasses import replace
 

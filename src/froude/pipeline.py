@@ -37,8 +37,8 @@ from .synthesis.targets import build_targets, raised, stance_only
 from .synthesis.timewarp import MachinePath, machine_path
 
 __all__ = ["PERIODIC_MIN_STRIDES", "Prepared", "Result", "ScalePlan", "accelerate", "add_report", "finish",
-           "naive_clip", "plan_scale", "prepare", "report_path", "scale", "targets_of",
-           "write_result"]
+           "naive_clip", "placed_targets", "plan_scale", "prepare", "report_path", "scale",
+           "targets_of", "write_result"]
 
 
 def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, length_scale=None,
@@ -243,6 +243,15 @@ def targets_of(prep: Prepared, path: MachinePath, retarget: Retarget):
     return build_targets(prep.cycle, path, retarget, prep.body.leg_length, prep.output_meta)
 
 
+def placed_targets(prep: Prepared, path: MachinePath, retarget: Retarget):
+    """(targets, path) of an output where it is solved and shown: along a turning take's path (``bend``) and
+    standing on the floor y = 0 as the clip stands on its own (``synthesis.targets.raised``). The result's
+    IK and the studio's preview both start here."""
+    targets, path = bend(targets_of(prep, path, retarget), path, prep.turn, retarget.L, prep.origin)  # a turn
+    path, targets = raised(path, targets, retarget.L * prep.cycle.floor_clearance)
+    return targets, path
+
+
 def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, notes, method: str, plan=None,
            periodic=None, report: bool = True, extras: dict | None = None) -> Result:
     """Targets → IK → report: the common tail of scale and accelerate.
@@ -253,7 +262,7 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
     """
     from .ik.correct import WALK_REPAIR_ROUNDS, correct, tile_stride
 
-    targets, path = bend(targets_of(prep, path, retarget), path, prep.turn, retarget.L, prep.origin)  # a turn
+    targets, path = placed_targets(prep, path, retarget)
     n_strides = len(path.foot_of_step) / 2
     if periodic is not None and n_strides > PERIODIC_MIN_STRIDES and prep.turn is None:
         machine, stretch, fps = periodic
@@ -270,7 +279,6 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
             bad = np.flatnonzero(ik.failed)
             notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]
         motion = ik.motion
-    motion, path, targets = raised(motion, path, targets, retarget.L * prep.cycle.floor_clearance)
     res = Result(motion, None, path, targets, retarget, method, speed, tuple(notes), plan, dict(extras or {}))
     return add_report(prep, res) if report else res
 

@@ -173,16 +173,12 @@ def _rest_on_floor(markers: np.ndarray, path: MachinePath, rest: np.ndarray, toe
         cols = np.flatnonzero(path.foot_of_step == foot)
         if cols.size == 0 or not np.isfinite(rest[foot]).all():
             continue
-        on, off = _contacts_extended(path, cols)
         spans: list[tuple[float, float, float, float]] = []
         changes: dict[int, np.ndarray] = {}
         visible: list[np.ndarray] = []
-        for i in range(len(on)):
-            lo = 0.5 * (off[i - 1] + on[i]) if i > 0 else on[i] - (off[i] - on[i])
-            hi = 0.5 * (off[i] + on[i + 1]) if i + 1 < len(on) else off[i] + (off[i] - on[i])
-            if on[i] < t[0] or off[i] > t[-1]:
+        for on, off, lo, a, b, hi in _rest_windows(path, cols):
+            if on < t[0] or off > t[-1]:
                 continue  # cut by the output's edge (or a virtual contact beyond it): its lowest point unseen
-            a, b = max(lo, on[i] - REST_MARGIN_S), min(hi, off[i] + REST_MARGIN_S)
             inside = (t >= a) & (t <= b)
             whole = a >= t[0] - 1e-9 and b <= t[-1] + 1e-9
             if whole:
@@ -200,30 +196,63 @@ def _rest_on_floor(markers: np.ndarray, path: MachinePath, rest: np.ndarray, toe
                          np.where(t > b, min_jerk((hi - t) / max(hi - b, 1e-9)), 1.0))
             w = np.where((t < lo) | (t > hi), 0.0, w)
             out[:, foot, :, UP_AXIS] += w[:, None] * change[None, :]
-        if not toe_bone:
-            continue
-        # Each marker is moved up or down by its own change, so the toe bone (ball to tip) would stretch: the
-        # higher of the two is put back at the bone's length from the lower, on which the toes pivot,
-        # horizontally along the foot (the toes pitched about the resting point, as they are, instead of
-        # asking for a longer toe: the IK met the tip and left the ball 4 mm ahead of its held target, and
-        # it swung 6 mm forward at lift-off, dash_normal_001 as a giant). Not the ankle: its bone to the ball
-        # is steep, and put back so it moved 10-20 mm horizontally for a few mm of height (CMU 09_05 and
-        # 09_06 as giants: their held heels turned the feet, the stricter skate 11-43 mm). Not in a walk
-        # (toe_bone False): CMU 07_01 as a troll, its stricter skate 2.84 mm without, 8.18 mm with (its foot
-        # rolls over one pivot at a time, cycle._remove_sliding_rolling, ball and tip pass each other's height
-        # and which of them is put back switches there: the likely cause, not yet shown)
-        bone = np.linalg.norm(markers[:, foot, 1] - markers[:, foot, 2], axis=-1)  # (T,) [m]
-        tip_low = (out[:, foot, 2, UP_AXIS] <= out[:, foot, 1, UP_AXIS])[:, None]  # the lower one holds
-        ball = _at_bone_length(out[:, foot, 2], out[:, foot, 1], bone)
-        tip = _at_bone_length(out[:, foot, 1], out[:, foot, 2], bone)
-        out[:, foot, 1] = np.where(tip_low, ball, out[:, foot, 1])
-        out[:, foot, 2] = np.where(tip_low, out[:, foot, 2], tip)
-        # The ankle moves as the ball does, so the foot bone (ankle to ball) keeps its length too: moved by
-        # its own rest change, the ankle's target sat up to 5 mm off the one the held ball and tip allow (CMU
-        # 09_05 as a giant), the IK's repair traded the two frame by frame and the ball jittered 5 mm sideways
-        # on the floor (stricter skate 5.42 mm; main 1.15). The ankle's rest is the foot's posture over the
-        # point it rests on, which the report shows and does not bar (metrics.rest_height_error).
+        if toe_bone:
+            # Each marker is moved up or down by its own change, so the toe bone (ball to tip) would stretch:
+            # the higher of the two is put back at the bone's length from the lower, on which the toes pivot,
+            # horizontally along the foot (the toes pitched about the resting point, as they are, instead of
+            # asking for a longer toe: the IK met the tip and left the ball 4 mm ahead of its held target, and
+            # it swung 6 mm forward at lift-off, dash_normal_001 as a giant). Not the ankle: its bone to the ball
+            # is steep, and put back so it moved 10-20 mm horizontally for a few mm of height (CMU 09_05 and
+            # 09_06 as giants: their held heels turned the feet, the stricter skate 11-43 mm). Not in a walk
+            # (toe_bone False): CMU 07_01 as a troll, its stricter skate 2.84 mm without, 8.18 mm with (its foot
+            # rolls over one pivot at a time, cycle._remove_sliding_rolling, ball and tip pass each other's height
+            # and which of them is put back switches there: the likely cause, not yet shown)
+            bone = np.linalg.norm(markers[:, foot, 1] - markers[:, foot, 2], axis=-1)  # (T,) [m]
+            tip_low = (out[:, foot, 2, UP_AXIS] <= out[:, foot, 1, UP_AXIS])[:, None]  # the lower one holds
+            ball = _at_bone_length(out[:, foot, 2], out[:, foot, 1], bone)
+            tip = _at_bone_length(out[:, foot, 1], out[:, foot, 2], bone)
+            out[:, foot, 1] = np.where(tip_low, ball, out[:, foot, 1])
+            out[:, foot, 2] = np.where(tip_low, out[:, foot, 2], tip)
+        # The ankle moves as the ball does (after the toe bone's correction above, in a run), so the foot
+        # bone (ankle to ball) keeps its length: moved by its own rest change, the ankle's target sat up to
+        # 5 mm off the one the held ball and tip allow (CMU 09_05 as a giant: the IK's repair traded the two
+        # frame by frame and the ball jittered 5 mm sideways on the floor, stricter skate 5.42 mm; main
+        # 1.15), 33 mm in a walk's push-off (dataset-1_walk_normal_001 slowed to 0.5x: the heel guided there
+        # turned the knee to another solution and the toe tip slid 18 mm). The ankle's rest is the foot's
+        # posture over the point it rests on, which the report shows and does not bar (rest_height_error).
         out[:, foot, 0] = markers[:, foot, 0] + (out[:, foot, 1] - markers[:, foot, 1])
+    return out
+
+
+def _rest_windows(path: MachinePath, cols: np.ndarray) -> list[tuple[float, float, float, float, float, float]]:
+    """Per contact of one foot (its steps ``cols``, with _contacts_extended's virtual contact either side):
+    (on, off, lo, a, b, hi) [s]: the contact, the window [a, b] about it in which a marker's lowest target is
+    its rest (REST_MARGIN_S either side, as the physics report's skate windows, so a toe tip lowest at
+    push-off counts) and the span [lo, hi] it reaches, to the middle of the swings either side."""
+    on, off = _contacts_extended(path, cols)
+    out = []
+    for i in range(len(on)):
+        lo = 0.5 * (off[i - 1] + on[i]) if i > 0 else on[i] - (off[i] - on[i])
+        hi = 0.5 * (off[i] + on[i + 1]) if i + 1 < len(on) else off[i] + (off[i] - on[i])
+        a, b = max(lo, on[i] - REST_MARGIN_S), min(hi, off[i] + REST_MARGIN_S)
+        out.append((float(on[i]), float(off[i]), float(lo), float(a), float(b), float(hi)))
+    return out
+
+
+def _contact_lows(path: MachinePath, height: np.ndarray) -> np.ndarray:
+    """(T, 2, 3) [m] each foot marker's lowest target height in the rest window of the contact a frame
+    belongs to (_rest_windows), NaN in frames of no whole window inside the output (a contact cut by its
+    edges shows no rest). height: (T, 2, 3) [m] the targets'."""
+    t = path.times
+    out = np.full(height.shape, np.nan)
+    for foot in range(2):
+        cols = np.flatnonzero(path.foot_of_step == foot)
+        if cols.size == 0:
+            continue
+        for _, _, _, a, b, _ in _rest_windows(path, cols):
+            inside = (t >= a) & (t <= b)
+            if a >= t[0] and b <= t[-1] and inside.any():
+                out[inside, foot] = height[inside, foot].min(axis=0)
     return out
 
 
@@ -518,7 +547,7 @@ def _psi_at(path: MachinePath, times: np.ndarray) -> np.ndarray:
 
 
 #: A foot marker in stance is also held while within these fractions of L of its own lowest target about
-#: the contact (FLOOR_WINDOW_S either side): at REST_HOLD of the stance weight at the first, not at all from the
+#: its whole contact (_contact_lows): at REST_HOLD of the stance weight at the first, not at all from the
 #: second (_marker_weights).
 REST_BAND_L = (0.005, 0.02)
 REST_HOLD = 0.3
@@ -566,11 +595,15 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float, f
     lo, hi = 0.02 * leg_length, 0.05 * leg_length
     loaded = min_jerk((hi - height) / (hi - lo))  # 1 at or below lo, 0 at or above hi
     if frame_time is not None:
-        half = max(1, int(round(FLOOR_WINDOW_S / frame_time)))
-        h = np.pad(height, ((half, half), (0, 0), (0, 0)), mode="edge")
-        low = np.lib.stride_tricks.sliding_window_view(h, 2 * half + 1, axis=0).min(axis=-1)  # (T, 2, 3)
+        # about the frame's own whole contact, not a sliding window: a heel rising at push-off that pauses
+        # (dataset-1_walk_normal_001 slowed to 0.5x: its heel target dipped 3 mm 0.4 s after it rose) was
+        # lowest in its window and held as at rest, 33 mm above its rest, and the IK turned the knee to reach
+        # it: the toe tip slid 18 mm; at an output's first frames a heel rising after a contact cut by the
+        # start was lowest in every window there (Bandai dataset-2_walk_active_002 giant: tip slid 6.1 mm)
+        low = _contact_lows(path, height)
         r_lo, r_hi = REST_BAND_L[0] * leg_length, REST_BAND_L[1] * leg_length
-        loaded = np.maximum(loaded, REST_HOLD * min_jerk((r_hi - (height - low)) / (r_hi - r_lo)))
+        near = np.where(np.isfinite(low), (r_hi - (height - low)) / (r_hi - r_lo), 0.0)
+        loaded = np.maximum(loaded, REST_HOLD * min_jerk(near))
     # Around a touchdown every marker of the foot keeps at least LANDING_WEIGHT of the stance weight: a
     # landing foot follows its targets down to the contact point instead of being left by the posture pull
     # a centimetre lower and still sweeping forward (a scuff the report sees at touchdown). Not at lift-off:

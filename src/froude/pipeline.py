@@ -37,8 +37,7 @@ from .synthesis.targets import build_targets, raised, stance_only
 from .synthesis.timewarp import MachinePath, machine_path
 
 __all__ = ["PERIODIC_MIN_STRIDES", "Prepared", "Result", "ScalePlan", "accelerate", "add_report", "finish",
-           "naive_clip", "placed_targets", "plan_scale", "prepare", "report_path", "scale",
-           "targets_of", "write_result"]
+           "naive_clip", "plan_scale", "prepare", "report_path", "scale", "targets_of", "write_result"]
 
 
 def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, length_scale=None,
@@ -96,7 +95,7 @@ class ScalePlan:
     """The first half of ``scale``: the character applied, the machine chosen and its path simulated.
 
     ``plan.finish()`` completes it (targets, IK, report); the studio shows ``path`` and the targets'
-    initial motion (``bend(targets_of(prep, plan.path, plan.retarget), ...)``) as an instant preview.
+    initial motion (``targets_of(prep, plan.path, plan.retarget)``) as an instant preview.
     """
 
     prep: Prepared
@@ -239,17 +238,10 @@ PERIODIC_OVERSAMPLE = 4
 
 
 def targets_of(prep: Prepared, path: MachinePath, retarget: Retarget):
-    """``synthesis.targets.build_targets`` for a path of this clip (the reference cycle on the machine)."""
-    return build_targets(prep.cycle, path, retarget, prep.body.leg_length, prep.output_meta)
-
-
-def placed_targets(prep: Prepared, path: MachinePath, retarget: Retarget):
-    """(targets, path) of an output where it is solved and shown: along a turning take's path (``bend``) and
-    standing on the floor y = 0 as the clip stands on its own (``synthesis.targets.raised``). The result's
-    IK and the studio's preview both start here."""
-    targets, path = bend(targets_of(prep, path, retarget), path, prep.turn, retarget.L, prep.origin)  # a turn
-    path, targets = raised(path, targets, retarget.L * prep.cycle.floor_clearance)
-    return targets, path
+    """(targets, path) where an output is solved (IK) and previewed: the cycle on the machine (build_targets),
+    along a turning take's path (bend), on the floor y = 0 as the clip stands on its own (raised)."""
+    targets = build_targets(prep.cycle, path, retarget, prep.body.leg_length, prep.output_meta)
+    return raised(*bend(targets, path, prep.turn, retarget.L, prep.origin), retarget.L * prep.cycle.floor_clearance)
 
 
 def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, notes, method: str, plan=None,
@@ -262,14 +254,14 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
     """
     from .ik.correct import WALK_REPAIR_ROUNDS, correct, tile_stride
 
-    targets, path = placed_targets(prep, path, retarget)
+    targets, path = targets_of(prep, path, retarget)
     n_strides = len(path.foot_of_step) / 2
     if periodic is not None and n_strides > PERIODIC_MIN_STRIDES and prep.turn is None:
         machine, stretch, fps = periodic
         m = machine.scaled(retarget.L, retarget.M)
         dense_fps = PERIODIC_OVERSAMPLE * fps
         one_path = machine_path(prep.cycle, m, retarget.L, prep.origin, stretch=stretch, n_steps=2, fps=dense_fps)
-        one = correct(targets_of(prep, one_path, retarget), retarget.body).motion
+        one = correct(targets_of(prep, one_path, retarget)[0], retarget.body).motion
         stride = path.contacts[2] - path.contacts[0] if len(path.contacts) > 2 else np.zeros(3)
         motion = tile_stride(one, 2.0 * m.step_time * m.time_unit, dense_fps, targets, path.times, stride,
                              retarget.body)

@@ -620,19 +620,20 @@ def stance_only(targets: Targets) -> np.ndarray:
     return out
 
 
-def raised(path: MachinePath, targets: Targets, rise: float) -> tuple[MachinePath, Targets]:
-    """A machine path and its targets raised by rise [m]: the synthesis puts the clip's ground
-    (``ReferenceCycle.ground``: the median of its stances' lowest points) on y = 0, and that ground is
-    ``floor_clearance`` above the clip's floor (a joint centre rests a sole's thickness above the floor), so
-    the output solved on them, raised by it × L, stands on its floor y = 0 as the clip does on its own.
-    Raised before the IK (which is translation-invariant), so the preview (the targets' initial motion) and
-    the result stand on the same floor."""
+def raised(targets: Targets, path: MachinePath, rise: float) -> tuple[Targets, MachinePath]:
+    """Targets and their machine path raised by rise [m] (in the order ``bend`` returns them).
+
+    The synthesis puts the clip's ground (``ReferenceCycle.ground``: the median of its stances' lowest points)
+    on y = 0, and that ground is ``floor_clearance`` above the clip's floor (a joint centre rests a sole's
+    thickness above the floor), so the output solved on them, raised by it × L, stands on its floor y = 0 as
+    the clip does on its own. Raised before the IK (which is translation-invariant), so the preview (the
+    targets' initial motion) and the result stand on the same floor."""
     if rise == 0.0:
-        return path, targets
+        return targets, path
     up = np.zeros(3)
     up[UP_AXIS] = rise
     path = replace(path, com=path.com + up, contacts=path.contacts + up)
     floor_top = None if targets.floor_top is None else targets.floor_top + rise
     targets = replace(targets, initial=targets.initial.with_(root_positions=targets.initial.root_positions + up),
                       com=targets.com + up, markers=targets.markers + up, floor_top=floor_top)
-    return path, targets
+    return targets, path

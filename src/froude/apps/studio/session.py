@@ -162,7 +162,7 @@ class Session:
         retarget, path = plan.retarget, plan.path
         assert path is not None  # the physical method (the studio has no naive preview)
         # along a turning take's path and on its floor, as the result
-        targets, path = pipeline.placed_targets(self.prep, path, retarget)
+        targets, path = pipeline.targets_of(self.prep, path, retarget)
         _require_finite(targets.initial)
         track = machine_track(targets.initial, retarget.body, path)
         return Solved(params, track, None, True, time.perf_counter() - t0, motion_hash(targets.initial),

@@ -546,7 +546,7 @@ def _psi_at(path: MachinePath, times: np.ndarray) -> np.ndarray:
     return np.where(times > t[-1], psi[-1] + (times - t[-1]) * rate, out)
 
 
-#: A foot marker in stance is also held while within these fractions of L of its own lowest target about
+#: A toe marker (ball, tip) in stance is also held while within these fractions of L of its own lowest target about
 #: its whole contact (_contact_lows): at REST_HOLD of the stance weight at the first, not at all from the
 #: second (_marker_weights).
 REST_BAND_L = (0.005, 0.02)
@@ -562,13 +562,10 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float, f
     the swing weight at ≥ 0.05 L. So the loaded point is held still while the rest of the foot may pivot
     about it (push-off on the toes when a faster or longer-legged run needs more reach than the
     reference's foot pose gives). markers: (T, 2, 3, 3) targets [m]; leg_length [m].
-    A marker that rests above that band (a heel: the ankle joint 0.12-0.15 L up) is held too while it is at
-    its own rest height (within REST_BAND_L of its lowest target about the contact; frame_time [s] of the
-    targets): held only by the posture pull, the ankles rested up to 0.6 % of L off the clip's, scaled (the
-    foot turned about its held ball). Held at 0.3 of the stance weight: at 1, where a foot's targets are not
-    quite its shape (each marker's rest is its own lowest point, reached at its own time) the IK split the
-    difference with the ball and the tip; 09_05, 09_06, dash_active_001, run_masculine_001 as giant, troll,
-    child, x1.2 and giant x0.7: 12 of 20 outputs missed a bar at 1, 6 at 0.3, 11 at 0.1.
+    A toe marker that rests above that band (a folded rig's ball, 0.039 L up) is held too while it is at
+    its own rest height (within REST_BAND_L of its lowest target about its contact, _contact_lows; frame_time
+    [s] of the targets), at REST_HOLD of the stance weight (at 1 the IK split the difference between targets
+    that are not quite the foot's shape, each marker's rest its own lowest point). Not the ankle (see below).
     """
     t = path.times
     ramp = np.zeros((len(t), 2))
@@ -603,6 +600,10 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float, f
         low = _contact_lows(path, height)
         r_lo, r_hi = REST_BAND_L[0] * leg_length, REST_BAND_L[1] * leg_length
         near = np.where(np.isfinite(low), (r_hi - (height - low)) / (r_hi - r_lo), 0.0)
+        # not the ankle: it moves with the ball (_rest_on_floor), which is held; held as well, over-determining
+        # the foot, its hold pulled a straight-legged dash_normal_001 (x1.5 in 12 steps) back 13 mm at
+        # lift-off (its tip slid 5.2 mm) and flipped a knee at 1.3x and 120 Hz (a 111 deg joint jump)
+        near[..., 0] = 0.0
         loaded = np.maximum(loaded, REST_HOLD * min_jerk(near))
     # Around a touchdown every marker of the foot keeps at least LANDING_WEIGHT of the stance weight: a
     # landing foot follows its targets down to the contact point instead of being left by the posture pull

@@ -73,8 +73,11 @@ def test_the_clean_output_meets_every_bar(output):
 
 def test_rest_heights_against_an_independent_reader(output, tmp_path):
     """The written BVH read back by the oracle: each foot joint's (ankle, ball) lowest point in its stances
-    (found by the test from the oracle's joints) is the report's rest height within a millimetre and the
-    source's, scaled, within 0.3 % of L."""
+    (found by the test from the oracle's joints) is the report's rest height within a millimetre, and the
+    ball's (a toe marker, held at its rest) the source's, scaled, within 0.3 % of L. Not the ankle's:
+    the bar is the foot's (metrics.rest_height_error), the ankle's rest its posture over the ball; since the
+    ankle is no longer held to its own rest (3a8c0ee: held, it over-determined the foot and flipped a knee of
+    dash_normal_001 at 1.3x) 09_01's troll's right ankle rests 7.0 mm (0.6 % of L) under the source's, scaled."""
     res, body, _, _, expected = output
     path = tmp_path / "troll.bvh"
     write_result(res, path)
@@ -92,7 +95,8 @@ def test_rest_heights_against_an_independent_reader(output, tmp_path):
         for k, name in enumerate(("ankle", "ball")):
             low = float(np.median([P[a:c, joints[k], UP_AXIS].min() for a, c in runs]))
             assert abs(low - rep.rest_height_mm[side][name] / 1000.0) < 1e-3, (side, name)
-            assert abs(low - expected[foot, k]) <= tol, (side, name, low, expected[foot, k])
+            if name == "ball":
+                assert abs(low - expected[foot, k]) <= tol, (side, name, low, expected[foot, k])
 
 
 @pytest.mark.parametrize("foot,sign", [(0, +1), (1, -1)], ids=["left-floats", "right-sinks"])

@@ -213,14 +213,15 @@ def _rest_on_floor(markers: np.ndarray, path: MachinePath, rest: np.ndarray, toe
             tip = _at_bone_length(out[:, foot, 1], out[:, foot, 2], bone)
             out[:, foot, 1] = np.where(tip_low, ball, out[:, foot, 1])
             out[:, foot, 2] = np.where(tip_low, out[:, foot, 2], tip)
-        # The ankle moves as the ball does (after the toe bone's correction above, in a run), so the foot
-        # bone (ankle to ball) keeps its length: moved by its own rest change, the ankle's target sat up to
-        # 5 mm off the one the held ball and tip allow (CMU 09_05 as a giant: the IK's repair traded the two
-        # frame by frame and the ball jittered 5 mm sideways on the floor, stricter skate 5.42 mm; main
-        # 1.15), 33 mm in a walk's push-off (dataset-1_walk_normal_001 slowed to 0.5x: the heel guided there
-        # turned the knee to another solution and the toe tip slid 18 mm). The ankle's rest is the foot's
-        # posture over the point it rests on, which the report shows and does not bar (rest_height_error).
-        out[:, foot, 0] = markers[:, foot, 0] + (out[:, foot, 1] - markers[:, foot, 1])
+        # In a run the ankle moves as the ball does (after the toe bone's correction above), so the foot bone
+        # (ankle to ball) keeps its length: moved by its own rest change, the ankle's target sat up to 5 mm
+        # off the one the held ball and tip allow (CMU 09_05 as a giant: the IK's repair traded the two frame
+        # by frame and the ball jittered 5 mm sideways on the floor, stricter skate 5.42 mm; main 1.15). The
+        # ankle's rest is the foot's posture over the point it rests on, which the report shows and does not
+        # bar (rest_height_error). Not in a walk, whose foot rolls heel to toe: CMU 07_01 slowed to 0.6x, its
+        # stricter skate 4.68 -> 6.24 mm with it.
+        if toe_bone:
+            out[:, foot, 0] = markers[:, foot, 0] + (out[:, foot, 1] - markers[:, foot, 1])
     return out
 
 
@@ -600,7 +601,7 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float, f
         low = _contact_lows(path, height)
         r_lo, r_hi = REST_BAND_L[0] * leg_length, REST_BAND_L[1] * leg_length
         near = np.where(np.isfinite(low), (r_hi - (height - low)) / (r_hi - r_lo), 0.0)
-        # not the ankle: it moves with the ball (_rest_on_floor), which is held; held as well, over-determining
+        # not the ankle (as on main): in a run it moves with the ball (_rest_on_floor); held as well, over-determining
         # the foot, its hold pulled a straight-legged dash_normal_001 (x1.5 in 12 steps) back 13 mm at
         # lift-off (its tip slid 5.2 mm) and flipped a knee at 1.3x and 120 Hz (a 111 deg joint jump)
         near[..., 0] = 0.0

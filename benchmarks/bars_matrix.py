@@ -89,7 +89,8 @@ class Row:
 #: short names of the bars, by the start of check_bars' text (the longest match wins)
 BAR_NAMES = {"flight gravity": "gravity", "COM tracking RMS": "COM rms", "COM tracking max": "COM max",
              "foot skate": "skate", "foot skate (ball and tip": "skate floor", "ground penetration": "penetration",
-             "joint jump": "joint jump"}
+             "joint jump": "joint jump", "left foot rests": "rest height", "right foot rests": "rest height",
+             "step of": "step length"}
 
 
 def bar_name(text: str) -> str:

@@ -11,12 +11,13 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .body.gait import Gait, detect_gait, summarize
-from .body.model import BodyModel
+from .body.model import SIDES, BodyModel
 from .body.path import TakePath, is_straight, take_path
 from .constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
 from .core import quat
 from .core.motion import Motion
 from .io.jsonable import dumps, jsonable
+from .machine.speed_law import STEP_MAX_PER_STATURE
 
 #: The project's physics bars (docs/architecture.md, "Quality bars").
 BARS = {
@@ -27,6 +28,8 @@ BARS = {
     "foot_skate_floor_mm": 5.0,
     "penetration_mm": 5.0,
     "joint_jump_ratio": 1.5,
+    "rest_height_L": 0.003,
+    "step_length_stature": STEP_MAX_PER_STATURE,
 }
 
 
@@ -47,7 +50,13 @@ UNMEASURED = {
     "pose_deviation_max_deg": "no reference pose given",
     "reference_max_joint_jump_deg": "no reference given",
     "froude_U": "no leg length",
+    "rest_height_error_mm": "no source rest heights given, or no whole stance of a foot in one of the motions",
+    "max_step_length_m": "fewer than two whole foot contacts inside the motion",
+    "floor_m": "no foot contact",
 }
+
+#: Foot marker names in the report, in the body model's order.
+MARKER_NAMES = ("ankle", "ball", "tip")
 
 
 @dataclass
@@ -87,6 +96,25 @@ class Report:
     pose_deviation_mean_deg: float = float("nan")
     pose_deviation_max_deg: float = float("nan")
     reference_max_joint_jump_deg: float = float("nan")
+    #: the floor the rest heights are measured from [m] and how it was found (``floor_height``)
+    floor_m: float = float("nan")
+    floor_found: str = ""
+    #: per foot (left, right) and marker (ankle, ball, tip): the median over the foot's whole stances of the
+    #: marker's lowest height in the stance above the floor [mm] (``stance_rest_heights``); None if no stance
+    rest_height_mm: dict = field(default_factory=dict)
+    #: the same of the source, scaled by L [mm] (what the output should rest at), when given
+    source_rest_height_mm: dict = field(default_factory=dict)
+    #: the largest |foot rest height - source's| over both feet [mm] (a foot's: its lowest marker's;
+    #: ``rest_height_error``), and its foot, the marker it rests on and the frames of that foot's stances
+    rest_height_error_mm: float = float("nan")
+    rest_height_worst: dict = field(default_factory=dict)
+    #: the longest step (horizontal distance between consecutive contacts of the two feet) [m], and the
+    #: stature it is held against [m], with the frames of the two contacts
+    max_step_length_m: float = float("nan")
+    stature_m: float = float("nan")
+    longest_step: dict = field(default_factory=dict)
+    #: where the stricter skate is largest: foot, marker and frames
+    skate_worst: dict = field(default_factory=dict)
     extras: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
@@ -118,9 +146,25 @@ class Report:
         if not self.foot_skate_mm <= BARS["foot_skate_mm"]:
             fails.append(f"foot skate {self.foot_skate_mm:.2f} mm (<= 5)")
         if not self.foot_skate_floor_mm <= BARS["foot_skate_floor_mm"]:
-            fails.append(f"foot skate (ball and tip near the floor) {self.foot_skate_floor_mm:.2f} mm (<= 5)")
+            fails.append(f"foot skate (ball and tip near the floor) {self.foot_skate_floor_mm:.2f} mm (<= 5)"
+                         + _where(self.skate_worst))
         if not self.penetration_mm <= BARS["penetration_mm"]:
             fails.append(f"ground penetration {self.penetration_mm:.2f} mm (<= 5)")
+        if not np.isnan(self.rest_height_error_mm):
+            tol = 1000.0 * BARS["rest_height_L"] * self.leg_length_m
+            if not self.rest_height_error_mm <= tol:
+                w = self.rest_height_worst
+                fails.append(
+                    f"{w['foot']} foot rests {abs(w['error_mm']):.1f} mm {'above' if w['error_mm'] > 0 else 'below'} "
+                    f"the source's stance height (on its {w['marker']}, {w['height_mm']:.1f} mm over the floor; "
+                    f"the source's foot {w['expected_mm']:.1f} mm, scaled; within {tol:.1f} mm = 0.3 % of L)"
+                    + _where(w, foot=False))
+        if np.isfinite(self.max_step_length_m) and np.isfinite(self.stature_m):
+            lim = BARS["step_length_stature"] * self.stature_m
+            if not self.max_step_length_m <= lim:
+                fails.append(f"step of {self.max_step_length_m:.2f} m, longer than "
+                             f"{BARS['step_length_stature']:g} x stature ({lim:.2f} m)"
+                             + _where(self.longest_step))
         if not np.isnan(self.reference_max_joint_jump_deg):
             lim = BARS["joint_jump_ratio"] * self.reference_max_joint_jump_deg
             if not self.max_joint_jump_deg <= lim:
@@ -129,6 +173,15 @@ class Report:
                     f"(<= 1.5 x reference {self.reference_max_joint_jump_deg:.2f})"
                 )
         return fails
+
+
+def _where(w: dict, foot: bool = True) -> str:
+    """": left foot, frames 12-20, 38-46" for a report's worst-case dict (foot and frames [start, stop)), ""
+    if it has no frames; without the foot when foot=False or it names none."""
+    if not w or not w.get("frames"):
+        return ""
+    spans = ", ".join(f"{a}-{b - 1}" if b - 1 > a else f"{a}" for a, b in w["frames"])
+    return f": {w['foot']} foot, frames {spans}" if foot and "foot" in w else f": frames {spans}"
 
 
 #: Fewest frames of a flight phase the flight-gravity parabola is fitted to (3 samples determine it: at
@@ -242,6 +295,11 @@ def foot_skate_mm(markers: np.ndarray, gait: Gait, leg_length: float) -> float:
 
 
 def foot_skate_floor_mm(markers: np.ndarray, gait: Gait, leg_length: float) -> float:
+    """foot_skate_floor (below) without where."""
+    return foot_skate_floor(markers, gait, leg_length)[0]
+
+
+def foot_skate_floor(markers: np.ndarray, gait: Gait, leg_length: float) -> tuple[float, dict]:
     """Largest sliding of the ball or the tip of a foot while it is on or just above the floor [mm].
 
     markers: (F, 2, 3, 3) [m] (ankle, toe, toe end per foot: joint centres, which sit a sole's thickness
@@ -254,8 +312,9 @@ def foot_skate_floor_mm(markers: np.ndarray, gait: Gait, leg_length: float) -> f
     by the clip's edge whose marker is lowest outside the stance (a landing foot's ball still in its swing
     at the last frame, heel first) never has that marker on the floor within the clip: it is not counted.
     Nor is the part of a cut stance above where the marker rests on the floor (_floor_rest_heights).
+    Returns the skate [mm] and where it is largest: {"foot", "marker", "frames": [(start, stop)]} ({} if 0).
     """
-    worst = 0.0
+    worst, where = 0.0, dict[str, object]()
     band = SKATE_BAND_L * leg_length
     rest = _floor_rest_heights(markers, gait)
     for foot, s, a, b in _skate_windows(gait, markers.shape[0]):
@@ -281,8 +340,116 @@ def foot_skate_floor_mm(markers: np.ndarray, gait: Gait, leg_length: float) -> f
             for r0, r1 in _true_runs(low):
                 p = seg[r0:r1][:, HORIZONTAL_AXES]
                 p_rest = p[int(np.argmin(h[r0:r1]))]
-                worst = max(worst, float(np.max(np.linalg.norm(p - p_rest, axis=1))))
-    return 1000.0 * worst
+                slide = float(np.max(np.linalg.norm(p - p_rest, axis=1)))
+                if slide > worst:
+                    worst = slide
+                    where = {"foot": SIDES[foot], "marker": MARKER_NAMES[k], "frames": [(int(a + r0), int(a + r1))]}
+    return 1000.0 * worst, where
+
+
+#: The file's own y = 0 is the floor when the feet's lowest points rest within these fractions of L above it
+#: (a joint centre rests a sole's thickness above the floor: CMU's toe end sites 10-20 mm, a folded Bandai
+#: rig's estimated toe tip 20 mm); otherwise the floor is where they rest (``floor_height``). Not below it:
+#: nothing rests under the floor, so feet resting below y = 0 (Bandai dataset-2_walk_exhausted_001's 10 mm,
+#: dataset-1_walk_normal_001's 13 mm) stand on a floor that low; taken as y = 0, an output copying the
+#: clip's height above it was lowered into its floor (penetration 10-13 mm on a troll or a giant).
+FLOOR_NEAR_L = (0.0, 0.06)
+
+
+def floor_height(markers: np.ndarray, gait: Gait, leg_length: float) -> tuple[float, str]:
+    """The floor of a motion [m] found from its feet alone, and a sentence saying how.
+
+    markers: (F, 2, 3, 3) [m]. Each foot rests at the median over its whole stances of its lowest point in
+    the stance; the floor is the file's y = 0 when the lower foot's rest is within FLOOR_NEAR_L × L of it,
+    else that rest (the feet's lowest points then taken to stand on the floor). NaN without a stance.
+    """
+    rest = []
+    for foot in (0, 1):
+        st = [s for s in gait.stances if s.foot == foot and not s.partial] or \
+             [s for s in gait.stances if s.foot == foot]
+        if st:
+            rest.append(float(np.median([markers[s.start:s.stop, foot, :, UP_AXIS].min() for s in st])))
+    if not rest:
+        return float("nan"), "no foot contact"
+    low = min(rest)
+    lo, hi = FLOOR_NEAR_L
+    if lo * leg_length <= low <= hi * leg_length:
+        return 0.0, f"the file's y = 0 (the feet's lowest points rest {1000 * low:.1f} mm above it)"
+    return low, f"where the feet's lowest points rest ({1000 * low:.1f} mm from the file's y = 0)"
+
+
+def stance_rest_heights(markers: np.ndarray, gait: Gait, floor: float) -> tuple[np.ndarray, list]:
+    """How high each foot marker rests in stance above the floor [m].
+
+    markers: (F, 2, 3, 3) [m]; floor [m]. Returns rest (2, 3) [m]: per foot and marker (ankle, ball, tip) the
+    median over the foot's whole stances of the marker's lowest height about the stance (NaN for a foot
+    without a whole stance: a contact cut by the clip's edge may not reach its lowest point), and per whole
+    stance (foot, start, stop, (3,) lowest heights [m]). About the stance: widened as the skate measure's
+    (_skate_windows: SKATE_MARGIN_S, not past the middle of the swings), because a toe tip comes lowest as
+    the heel rises at push-off, where the contact test may already have let the foot go (a frame earlier in
+    one motion than in another would change the figure by the tip's drop in that frame). A point below the
+    floor rests on it (0): how deep it goes is the penetration's bar (a folded rig's estimated toe tip rests
+    5 mm under the floor of dataset-1_run_tired_001, which its troll, copying it, took 8 mm deep).
+    """
+    per = [(foot, s.start, s.stop, np.maximum(markers[a:b, foot, :, UP_AXIS].min(axis=0) - floor, 0.0))
+           for foot, s, a, b in _skate_windows(gait, markers.shape[0]) if not s.partial]
+    per.sort(key=lambda x: x[1])
+    rest = np.full((2, 3), np.nan)
+    for foot in (0, 1):
+        h = [x[3] for x in per if x[0] == foot]
+        if h:
+            rest[foot] = np.median(np.array(h), axis=0)
+    return rest, per
+
+
+def source_rest_heights(markers: np.ndarray, gait: Gait, leg_length: float) -> np.ndarray:
+    """(2, 3) [m] how high a clip's foot markers (F, 2, 3, 3) [m] rest in stance above its floor, both found
+    from the clip by the report's own measures (``floor_height``, ``stance_rest_heights``): × L, what an
+    output's feet must rest at (``physics_report``'s source_rest_heights)."""
+    floor, _ = floor_height(markers, gait, leg_length)
+    return stance_rest_heights(markers, gait, floor)[0]
+
+
+def rest_height_error(rest: np.ndarray, expected: np.ndarray, per_stance: list) -> tuple[float, dict]:
+    """How far a foot rests above or below the source's: the largest |foot rest - expected| [mm] over the two
+    feet, where a foot's rest is its lowest marker's rest height (rest, expected (2, 3) [m] per marker), and
+    where: {"foot", "marker" (the one it rests on), "height_mm", "expected_mm", "error_mm", "frames"}; frames:
+    every whole stance of that foot (the figure is their median: which of them alone was off by more than the
+    bar hung on the last bit, CMU 16_18's child listing other stances under 1e-9 m noise, issue 26). NaN, {}
+    when neither foot has both.
+
+    The foot, not each marker: a foot floats or sinks when the point it rests on does. The other markers'
+    heights are its posture over that point (a heel that stays up at a higher speed, a troll's short-legged
+    ankle dropped with the toes on the floor) and are reported (``rest_height_mm``), not held to the clip's:
+    each marker against the clip's refused 09_01 at x1.6, whose toes rest where the clip's do but whose
+    ankle, heel up as a faster runner's, rests 8 mm (0.9 % of L) higher."""
+    low = np.where(np.isfinite(rest).all(axis=1), np.nanmin(np.where(np.isfinite(rest), rest, np.inf), axis=1), np.nan)
+    exp = np.where(np.isfinite(expected).all(axis=1),
+                   np.nanmin(np.where(np.isfinite(expected), expected, np.inf), axis=1), np.nan)
+    err = low - exp
+    if not np.isfinite(err).any():
+        return float("nan"), {}
+    f = int(np.nanargmax(np.abs(err)))
+    k = int(np.argmin(rest[f]))
+    st = [(a, b) for foot, a, b, h in per_stance if foot == f]
+    return 1000.0 * abs(float(err[f])), {
+        "foot": SIDES[f], "marker": MARKER_NAMES[k], "height_mm": 1000.0 * float(low[f]),
+        "expected_mm": 1000.0 * float(exp[f]), "error_mm": 1000.0 * float(err[f]),
+        "frames": [(int(a), int(b)) for a, b in st]}
+
+
+def longest_step(gait: Gait) -> tuple[float, dict]:
+    """The longest step [m] (horizontal distance between the contact points of consecutive whole stances of
+    the two feet) and where: {"frames": [(start, stop) of the two stances]}; NaN, {} with fewer than two."""
+    st = sorted(gait.full_stances, key=lambda s: s.start)
+    best, where = float("nan"), dict[str, object]()
+    for a, b in zip(st[:-1], st[1:]):
+        if a.foot == b.foot:
+            continue
+        d = float(np.linalg.norm((b.contact_point - a.contact_point)[list(HORIZONTAL_AXES)]))
+        if not d <= best:
+            best, where = d, {"frames": [(int(a.start), int(a.stop)), (int(b.start), int(b.stop))]}
+    return best, where
 
 
 def _skate_windows(gait: Gait, n_frames: int):
@@ -348,6 +515,7 @@ def physics_report(
     com_and_markers: tuple[np.ndarray, np.ndarray] | None = None,
     reference_path: TakePath | None = None,
     reference_leg_length: float | None = None,
+    source_rest_heights: np.ndarray | None = None,
 ) -> Report:
     """The physics report (docs/architecture.md) for any motion; tracking figures when targets are given.
 
@@ -358,6 +526,12 @@ def physics_report(
     reference_path: the clip's path (``body.path.take_path``) and reference_leg_length [m] its leg length:
     the output's path, measured here from the motion, is compared with it (``path_report``; a turn lost is
     a bar missed). Every report carries the motion's own path in ``extras["path"]``.
+    source_rest_heights: (2, 3) [m] how high the source's foot markers rest in stance (its
+    ``stance_rest_heights``, scaled by L): each foot's lowest is then a bar (within BARS["rest_height_L"] × L;
+    ``rest_height_error``).
+    Contacts are always found from the motion; the floor too unless ground_height is given (an output
+    written on y = 0). The rest heights are measured from ``ground_height`` when given, else from the
+    floor found (``floor_height``).
     """
     if body is None:
         body = BodyModel.from_skeleton(motion.skeleton)
@@ -379,7 +553,13 @@ def physics_report(
     floats = [float(np.min(h_low[s.start : s.stop, s.foot]) - ground_f[s.start]) for s in gait.stances]
     float_mm = 1000.0 * max([0.0] + floats)
     skate = foot_skate_mm(markers, gait, L)
-    skate_floor = foot_skate_floor_mm(markers, gait, L)
+    skate_floor, skate_where = foot_skate_floor(markers, gait, L)
+    floor, how = floor_height(markers, gait, L)
+    if ground_height is not None:
+        how = f"given ({1000 * ground_height:.1f} mm); found from the motion: {how}"
+        floor = float(ground_height)
+    rest, per_stance = stance_rest_heights(markers, gait, floor)
+    step_max, step_where = longest_step(gait)
 
     fz = vertical_force_bw(com, dt) if motion.n_frames >= 8 else np.full(motion.n_frames, np.nan)
     inner = slice(3, max(3, motion.n_frames - 3))  # filter edges are least trustworthy
@@ -396,6 +576,8 @@ def physics_report(
         foot_skate_floor_mm=skate_floor,
         penetration_mm=penetration, float_mm=float_mm, peak_vertical_force_bw=peak_bw,
         leg_stiffness_n_m=k_leg, leg_stiffness_K=K, max_joint_jump_deg=max_joint_jump_deg(motion),
+        floor_m=floor, floor_found=how, rest_height_mm=_by_foot(rest), max_step_length_m=step_max,
+        stature_m=body.stature, longest_step=step_where, skate_worst=skate_where,
     )
     if motion.n_frames >= 3:
         # compared with a turning clip, the output's heading is measured over the clip's share of a stride
@@ -410,6 +592,10 @@ def physics_report(
 
             ref_L = L if reference_leg_length is None else float(reference_leg_length)
             rep.extras["path_vs_clip"] = path_comparison(reference_path, path, ref_L, L)
+    if source_rest_heights is not None:
+        expected = np.asarray(source_rest_heights, float)
+        rep.source_rest_height_mm = _by_foot(expected)
+        rep.rest_height_error_mm, rep.rest_height_worst = rest_height_error(rest, expected, per_stance)
     if machine_com is not None:
         err = np.linalg.norm(com - machine_com, axis=1)
         rep.com_tracking_rms_mm = 1000.0 * float(np.sqrt(np.mean(err**2)))
@@ -427,6 +613,12 @@ def physics_report(
     if reference_max_joint_jump_deg is not None:
         rep.reference_max_joint_jump_deg = float(reference_max_joint_jump_deg)
     return rep
+
+
+def _by_foot(h: np.ndarray) -> dict:
+    """{"left": {"ankle": mm, "ball": mm, "tip": mm}, "right": ...} from (2, 3) [m] (None where NaN)."""
+    return {SIDES[f]: {MARKER_NAMES[k]: (round(1000.0 * float(h[f, k]), 2) if np.isfinite(h[f, k]) else None)
+                       for k in range(3)} for f in (0, 1)}
 
 
 def _with_ground(gait: Gait, ground: float) -> Gait:

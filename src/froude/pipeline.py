@@ -25,7 +25,7 @@ from .body.take import modelled_part, running_take, select_range
 from .core.motion import Motion
 from .errors import FitError, FroudeError
 from .machine import is_walking
-from .metrics import physics_report
+from .metrics import physics_report, source_rest_heights
 from .naive import naive_clip
 from .prepared import Prepared
 from .result import Result, report_path, write_result
@@ -33,7 +33,7 @@ from .speed_change import check_human_speed, output_steps, plan_run_speed_change
 from .speed_goal import scale_factor
 from .synthesis.bend import bend
 from .synthesis.cycle import extract_cycle, fit_events
-from .synthesis.targets import build_targets, stance_only
+from .synthesis.targets import build_targets, raised, stance_only
 from .synthesis.timewarp import MachinePath, machine_path
 
 __all__ = ["PERIODIC_MIN_STRIDES", "Prepared", "Result", "ScalePlan", "accelerate", "add_report", "finish",
@@ -95,7 +95,7 @@ class ScalePlan:
     """The first half of ``scale``: the character applied, the machine chosen and its path simulated.
 
     ``plan.finish()`` completes it (targets, IK, report); the studio shows ``path`` and the targets'
-    initial motion (``bend(targets_of(prep, plan.path, plan.retarget), ...)``) as an instant preview.
+    initial motion (``targets_of(prep, plan.path, plan.retarget)``) as an instant preview.
     """
 
     prep: Prepared
@@ -238,8 +238,10 @@ PERIODIC_OVERSAMPLE = 4
 
 
 def targets_of(prep: Prepared, path: MachinePath, retarget: Retarget):
-    """``synthesis.targets.build_targets`` for a path of this clip (the reference cycle on the machine)."""
-    return build_targets(prep.cycle, path, retarget, prep.body.leg_length, prep.output_meta)
+    """(targets, path) where an output is solved (IK) and previewed: the cycle on the machine (build_targets),
+    along a turning take's path (bend), on the floor y = 0 as the clip stands on its own (raised)."""
+    targets = build_targets(prep.cycle, path, retarget, prep.body.leg_length, prep.output_meta)
+    return raised(*bend(targets, path, prep.turn, retarget.L, prep.origin), retarget.L * prep.cycle.floor_clearance)
 
 
 def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, notes, method: str, plan=None,
@@ -252,14 +254,14 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
     """
     from .ik.correct import WALK_REPAIR_ROUNDS, correct, tile_stride
 
-    targets, path = bend(targets_of(prep, path, retarget), path, prep.turn, retarget.L, prep.origin)  # a turn
+    targets, path = targets_of(prep, path, retarget)
     n_strides = len(path.foot_of_step) / 2
     if periodic is not None and n_strides > PERIODIC_MIN_STRIDES and prep.turn is None:
         machine, stretch, fps = periodic
         m = machine.scaled(retarget.L, retarget.M)
         dense_fps = PERIODIC_OVERSAMPLE * fps
         one_path = machine_path(prep.cycle, m, retarget.L, prep.origin, stretch=stretch, n_steps=2, fps=dense_fps)
-        one = correct(targets_of(prep, one_path, retarget), retarget.body).motion
+        one = correct(targets_of(prep, one_path, retarget)[0], retarget.body).motion
         stride = path.contacts[2] - path.contacts[0] if len(path.contacts) > 2 else np.zeros(3)
         motion = tile_stride(one, 2.0 * m.step_time * m.time_unit, dense_fps, targets, path.times, stride,
                              retarget.body)
@@ -284,6 +286,7 @@ def add_report(prep: Prepared, res: Result) -> Result:
         marker_targets=stance_only(res.targets), reference_pose=res.targets.initial,
         reference_max_joint_jump_deg=prep.cycle.max_joint_jump_deg,
         reference_path=prep.path, reference_leg_length=prep.body.leg_length,
+        source_rest_heights=res.retarget.L * source_rest_heights(prep.markers, prep.gait, prep.body.leg_length),
     )
     report.extras.update({"character": res.retarget.character.name, "L": res.retarget.L, "M": res.retarget.M,
                           "speed_factor": res.speed_factor, "method": res.method, "notes": list(res.notes),

@@ -52,6 +52,7 @@ class Result:
             ("COM tracking", f"RMS {f(r.com_tracking_rms_mm, '.2f')} mm, max {f(r.com_tracking_max_mm, '.2f')} mm"),
             ("foot skate / penetration", f"{f(r.foot_skate_mm, '.2f')} mm / {f(r.penetration_mm, '.2f')} mm "
              f"(ball and tip near the floor: {f(r.foot_skate_floor_mm, '.2f')} mm)"),
+            ("feet at rest", _rest_row(r)),
             ("joint jump",
              f"{f(r.max_joint_jump_deg, '.1f')} deg (reference {f(r.reference_max_joint_jump_deg, '.1f')})"),
         ]
@@ -64,6 +65,17 @@ class Result:
 
             rows += walking_rows(r)
         return rows
+
+
+def _rest_row(r: Report) -> str:
+    """The summary's "feet at rest" cell: the balls' rest heights over the floor and the largest difference of
+    a foot marker's from the source's, scaled (or n/a)."""
+    h = r.rest_height_mm
+    balls = " / ".join(_shown(h.get(side, {}).get("ball"), ".1f") for side in ("left", "right"))
+    w = r.rest_height_worst
+    off = (f"; off the source's (scaled) by {_shown(r.rest_height_error_mm, '.1f')} mm at most "
+           f"({w['foot']} {w['marker']})") if w else ""
+    return f"balls {balls} mm over the floor (left / right){off}"
 
 
 def _shown(v, spec: str) -> str:

@@ -113,6 +113,13 @@ class ReferenceCycle:
     ground: float
     max_joint_jump_deg: float
     order: str = "running"
+    #: how far [m] ``ground`` (the median of the stances' own grounds, each its lowest marker's lowest
+    #: height: the level the cycle's heights and the machine's COM are above) is above the clip's floor
+    #: (``metrics.floor_height``): an output is raised by it × L, to stand on its floor as the clip does
+    floor_clearance: float = 0.0
+    #: (2, 3) [m] how high each foot marker rests in the clip's stances above ``ground`` (``rest_above``):
+    #: where an output's foot targets rest, × L (``synthesis.targets``); None: not known
+    rest_heights: np.ndarray | None = None
 
     @property
     def n_samples(self) -> int:
@@ -241,6 +248,8 @@ def extract_cycle(
     stance_ground = np.full((F, 2), np.nan)
     for s in gait.stances:
         stance_ground[s.start : s.stop, s.foot] = s.ground
+    ground = float(np.nanmedian(stance_ground))
+    clearance, rest = rest_above(gait, markers, body.leg_length, ground)
 
     # Per-frame anchors of each foot: stance contact point or a min-jerk blend between contacts.
     stride_vec = speed * T * Rh[0]  # one stride along the heading [m]
@@ -248,7 +257,7 @@ def extract_cycle(
     rel = np.einsum("ij,fpkj->fpki", Rh, markers - anchors[:, :, None, :])  # heading frame
     root_from_com = (motion.root_positions - com) @ Rh.T
     from_com = np.einsum("ij,fpkj->fpki", Rh, markers - com[:, None, None, :])
-    from_com[..., 1] = markers[..., UP_AXIS] - np.nanmedian(stance_ground)
+    from_com[..., 1] = markers[..., UP_AXIS] - ground
     contact_lat = np.zeros(2)
     for foot in range(2):
         c = [s.contact_point @ Rh[2] - np.interp((s.start + s.stop) / 2 * dt, t, lat_line)
@@ -292,7 +301,7 @@ def extract_cycle(
     q_avg = quat.normalize(np.sum(q_occ * sign[..., None] * occ_w[:, :, None, None], axis=0))
     rotations = _close_loop_quat(q_avg)
 
-    com_height = _close_loop_linear(average(com_h[:, 1] - np.nanmedian(stance_ground)))
+    com_height = _close_loop_linear(average(com_h[:, 1] - ground))
     uniform = speed * t
     com_forward = _close_loop_linear(average(com_h[:, 0] - uniform))
     com_lateral = _close_loop_linear(average(com_h[:, 2] - lat_line))
@@ -346,9 +355,27 @@ def extract_cycle(
         rotations=rotations, root_from_com=root_rel, com_height=com_height, com_forward=com_forward,
         com_lateral=com_lateral, marker_rel=marker_rel, marker_from_com=marker_from_com,
         contact_lateral=contact_lat, speed=speed,
-        stride_time=T, leg_length=body.leg_length, ground=float(np.nanmedian(stance_ground)),
-        max_joint_jump_deg=max_joint_jump_deg(motion), order=order,
+        stride_time=T, leg_length=body.leg_length, ground=ground,
+        max_joint_jump_deg=max_joint_jump_deg(motion), order=order, floor_clearance=clearance,
+        rest_heights=rest,
     )
+
+
+def rest_above(gait: Gait, markers: np.ndarray, leg_length: float, ground: float) -> tuple[float, np.ndarray]:
+    """How far ``ground`` [m] is above the clip's floor, and how high each foot marker rests in the clip's
+    stances above ``ground`` (2, 3) [m] (NaN without a whole stance of that foot).
+
+    The floor and the rest heights are the clip's as the physics report defines them (``metrics.floor_height``,
+    ``metrics.stance_rest_heights``: the definition of what an output must match, measured here on the clip
+    only; the report measures the output by itself). markers: (F, 2, 3, 3) [m].
+    """
+    from ..metrics import floor_height, stance_rest_heights
+
+    floor, _ = floor_height(markers, gait, leg_length)
+    if not np.isfinite(floor):
+        return 0.0, np.full((2, 3), np.nan)
+    rest, _ = stance_rest_heights(markers, gait, floor)
+    return float(ground - floor), rest - (ground - floor)
 
 
 def _slerp_frames(rots: np.ndarray, f: np.ndarray) -> np.ndarray:

@@ -3,7 +3,7 @@ marker targets with their weights (loaded markers held, swinging feet only guide
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -97,8 +97,15 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     # to itself: its toe 15-23 mm up at every touchdown) the feet landed 0.5-0.9 frames late at 30 Hz
     own = body.foot_markers(initial) if cyc.order == "walking" else None
     markers = _lift_out_of_reach(hips, body, markers, own, path.frame[0])
+    # Each foot's lowest point rests on the ground at 0 until here (the cycle's heights are above each stance's
+    # own lowest point, the thresholds below are tuned so), its markers where the clip's rest above that point
+    rest = cyc.rest_heights
+    foot_low = np.zeros(2) if rest is None else np.where(np.isfinite(rest).all(axis=1), np.nanmin(rest, axis=1), 0.0)
+    if rest is not None:
+        markers = _rest_on_floor(markers, path, L * (rest - foot_low[:, None]), toe_bone=cyc.order != "walking")
     reach = _reach_factor(hips, body, markers)
-    weight = _marker_weights(path, markers, body.leg_length, fade=cyc.order != "walking") * reach
+    weight = _marker_weights(path, markers, body.leg_length, fade=cyc.order != "walking",
+                             frame_time=float(path.frame_time)) * reach
     # A swinging foot's target beyond the leg's reach keeps only OUT_OF_REACH_SWING of the swing weight: the
     # trailing foot's ground path after an acceleration's longer stance lies 1.2 L from the hip, and at the
     # full swing weight it dragged the pelvis 26 deg off the reference pose, which sprang back in one frame
@@ -112,8 +119,13 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     # Weights are per (leg length)^2, so the trade-off between a position error and a joint angle is the
     # same for a child and a giant (errors in metres grow with size, joint angles do not).
     per_size = (reference_leg_length / retarget.body.leg_length) ** 2
-    return Targets(initial, path.com, markers, weight * per_size, np.full(T, COM_WEIGHT * per_size),
-                   _floor_top(markers, retarget.body.leg_length, float(path.frame_time)))
+    floor_top = _floor_top(markers, retarget.body.leg_length, float(path.frame_time))
+    # ... and then each foot where the clip's rests relative to the ground level (one foot's lowest point may
+    # rest higher than the other's: CMU 09_01's left toe end site 11 mm above the right's)
+    markers = markers.copy()
+    markers[..., UP_AXIS] += L * foot_low[None, :, None]
+    floor_top = floor_top + L * foot_low[None, :, None]
+    return Targets(initial, path.com, markers, weight * per_size, np.full(T, COM_WEIGHT * per_size), floor_top)
 
 
 def _floor_top(markers: np.ndarray, leg_length: float, frame_time: float) -> np.ndarray:
@@ -132,6 +144,130 @@ def _floor_top(markers: np.ndarray, leg_length: float, frame_time: float) -> np.
         h = np.pad(markers[:, :, k, UP_AXIS], ((half, half), (0, 0)), mode="edge")
         low = np.lib.stride_tricks.sliding_window_view(h, 2 * half + 1, axis=0).min(axis=-1)  # (T, 2)
         out[:, :, k] = np.where(low <= SKATE_REACH_L * leg_length, low + SKATE_BAND_L * leg_length, -np.inf)
+    return out
+
+
+#: Margin [s] about each contact within which a foot marker's lowest target is its rest (_rest_on_floor): as
+#: the physics report's (metrics.SKATE_MARGIN_S), so a toe tip lowest at push-off counts.
+REST_MARGIN_S = 0.1
+
+
+def _rest_on_floor(markers: np.ndarray, path: MachinePath, rest: np.ndarray, toe_bone: bool = True) -> np.ndarray:
+    """markers (T, 2, 3, 3) [m] with each foot's markers resting at ``rest`` (2, 3) [m] (the clip's, × L, above
+    the ground at 0) in every contact: each marker's lowest target about the contact (REST_MARGIN_S either
+    side, not past the middle of the swings) moved there, the whole contact by as much, the change fading
+    out (min-jerk) from the margin to the middle of the swings. A contact cut by the output's edges is left
+    as it is (its lowest point may lie beyond them: a walk's last contact, pulled down by a swinging foot's
+    height, dragged the foot along the floor).
+
+    The reference cycle averages the clip's stances at each phase (a low point reached at different phases
+    is raised: the mean of dips stays above them), its de-skating tilts a steep toe bone about its held end
+    (a folded rig's ball over its toe tip: 14 mm down on one foot of dataset-2_run_masculine_005), and the
+    time warp samples the cycle at other phases than the clip's frames: without this one foot rested up to
+    1 % of L above or below the clip's, scaled. NaN rest heights (a foot without a whole stance) change
+    nothing.
+    """
+    out = markers.copy()
+    t = path.times
+    for foot in range(2):
+        cols = np.flatnonzero(path.foot_of_step == foot)
+        if cols.size == 0 or not np.isfinite(rest[foot]).all():
+            continue
+        spans: list[tuple[float, float, float, float]] = []
+        changes: dict[int, np.ndarray] = {}
+        visible: list[np.ndarray] = []
+        for on, off, lo, a, b, hi in _rest_windows(path, cols):
+            if on < t[0] or off > t[-1]:
+                continue  # cut by the output's edge (or a virtual contact beyond it): its lowest point unseen
+            inside = (t >= a) & (t <= b)
+            whole = a >= t[0] - 1e-9 and b <= t[-1] + 1e-9
+            if whole:
+                changes[len(spans)] = rest[foot] - markers[inside, foot, :, UP_AXIS].min(axis=0)  # (3,)
+            visible.append(rest[foot] - markers[inside, foot, :, UP_AXIS].min(axis=0))
+            spans.append((lo, a, b, hi))
+        # A contact whose margin the output's edges cut (its toe's lowest point, at push-off, may lie beyond
+        # them: CMU 09_06 as a giant ends 0.07 s after a lift-off, and that contact's tip, lowered by its
+        # highest visible point, slid 6.5 mm) takes the change of the same foot's nearest whole contact: the
+        # cycle is periodic, so consecutive contacts of one foot rest alike. Without a whole contact (the one
+        # stride a long output is solved on and tiled) each is moved by what it shows.
+        for j, (lo, a, b, hi) in enumerate(spans):
+            change = changes[min(changes, key=lambda w: abs(w - j))] if changes else visible[j]
+            w = np.where(t < a, min_jerk((t - lo) / max(a - lo, 1e-9)),
+                         np.where(t > b, min_jerk((hi - t) / max(hi - b, 1e-9)), 1.0))
+            w = np.where((t < lo) | (t > hi), 0.0, w)
+            out[:, foot, :, UP_AXIS] += w[:, None] * change[None, :]
+        if toe_bone:
+            # Each marker is moved up or down by its own change, so the toe bone (ball to tip) would stretch:
+            # the higher of the two is put back at the bone's length from the lower, on which the toes pivot,
+            # horizontally along the foot (the toes pitched about the resting point, as they are, instead of
+            # asking for a longer toe: the IK met the tip and left the ball 4 mm ahead of its held target, and
+            # it swung 6 mm forward at lift-off, dash_normal_001 as a giant). Not the ankle: its bone to the ball
+            # is steep, and put back so it moved 10-20 mm horizontally for a few mm of height (CMU 09_05 and
+            # 09_06 as giants: their held heels turned the feet, the stricter skate 11-43 mm). Not in a walk
+            # (toe_bone False): CMU 07_01 as a troll, its stricter skate 2.84 mm without, 8.18 mm with (its foot
+            # rolls over one pivot at a time, cycle._remove_sliding_rolling, ball and tip pass each other's height
+            # and which of them is put back switches there: the likely cause, not yet shown)
+            bone = np.linalg.norm(markers[:, foot, 1] - markers[:, foot, 2], axis=-1)  # (T,) [m]
+            tip_low = (out[:, foot, 2, UP_AXIS] <= out[:, foot, 1, UP_AXIS])[:, None]  # the lower one holds
+            ball = _at_bone_length(out[:, foot, 2], out[:, foot, 1], bone)
+            tip = _at_bone_length(out[:, foot, 1], out[:, foot, 2], bone)
+            out[:, foot, 1] = np.where(tip_low, ball, out[:, foot, 1])
+            out[:, foot, 2] = np.where(tip_low, out[:, foot, 2], tip)
+        # In a run the ankle moves as the ball does (after the toe bone's correction above), so the foot bone
+        # (ankle to ball) keeps its length: moved by its own rest change, the ankle's target sat up to 5 mm
+        # off the one the held ball and tip allow (CMU 09_05 as a giant: the IK's repair traded the two frame
+        # by frame and the ball jittered 5 mm sideways on the floor, stricter skate 5.42 mm; main 1.15). The
+        # ankle's rest is the foot's posture over the point it rests on, which the report shows and does not
+        # bar (rest_height_error). Not in a walk, whose foot rolls heel to toe: CMU 07_01 slowed to 0.6x, its
+        # stricter skate 4.68 -> 6.24 mm with it.
+        if toe_bone:
+            out[:, foot, 0] = markers[:, foot, 0] + (out[:, foot, 1] - markers[:, foot, 1])
+    return out
+
+
+def _rest_windows(path: MachinePath, cols: np.ndarray) -> list[tuple[float, float, float, float, float, float]]:
+    """Per contact of one foot (its steps ``cols``, with _contacts_extended's virtual contact either side):
+    (on, off, lo, a, b, hi) [s]: the contact, the window [a, b] about it in which a marker's lowest target is
+    its rest (REST_MARGIN_S either side, as the physics report's skate windows, so a toe tip lowest at
+    push-off counts) and the span [lo, hi] it reaches, to the middle of the swings either side."""
+    on, off = _contacts_extended(path, cols)
+    out = []
+    for i in range(len(on)):
+        lo = 0.5 * (off[i - 1] + on[i]) if i > 0 else on[i] - (off[i] - on[i])
+        hi = 0.5 * (off[i] + on[i + 1]) if i + 1 < len(on) else off[i] + (off[i] - on[i])
+        a, b = max(lo, on[i] - REST_MARGIN_S), min(hi, off[i] + REST_MARGIN_S)
+        out.append((float(on[i]), float(off[i]), float(lo), float(a), float(b), float(hi)))
+    return out
+
+
+def _contact_lows(path: MachinePath, height: np.ndarray) -> np.ndarray:
+    """(T, 2, 3) [m] each foot marker's lowest target height in the rest window of the contact a frame
+    belongs to (_rest_windows), NaN in frames of no whole window inside the output (a contact cut by its
+    edges shows no rest). height: (T, 2, 3) [m] the targets'."""
+    t = path.times
+    out = np.full(height.shape, np.nan)
+    for foot in range(2):
+        cols = np.flatnonzero(path.foot_of_step == foot)
+        if cols.size == 0:
+            continue
+        for _, _, _, a, b, _ in _rest_windows(path, cols):
+            inside = (t >= a) & (t <= b)
+            if a >= t[0] and b <= t[-1] and inside.any():
+                out[inside, foot] = height[inside, foot].min(axis=0)
+    return out
+
+
+def _at_bone_length(fixed: np.ndarray, moved: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """(T, 3) [m] ``moved`` shifted horizontally, away from or toward ``fixed`` (T, 3) [m] along their
+    horizontal line, to ``length`` (T,) [m] from it at its own height (unchanged where it cannot be)."""
+    v = moved - fixed
+    horizontal = [a for a in range(3) if a != UP_AXIS]
+    flat = np.linalg.norm(v[:, horizontal], axis=-1)
+    want = np.sqrt(np.maximum(length**2 - v[:, UP_AXIS] ** 2, 0.0))
+    ok = (flat > 1e-6) & (length > np.abs(v[:, UP_AXIS]))
+    out = moved.copy()
+    along = fixed[:, horizontal] + v[:, horizontal] * (want / np.maximum(flat, 1e-9))[:, None]
+    out[:, horizontal] = np.where(ok[:, None], along, moved[:, horizontal])
     return out
 
 
@@ -411,7 +547,15 @@ def _psi_at(path: MachinePath, times: np.ndarray) -> np.ndarray:
     return np.where(times > t[-1], psi[-1] + (times - t[-1]) * rate, out)
 
 
-def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float, fade: bool = True) -> np.ndarray:
+#: A toe marker (ball, tip) in stance is also held while within these fractions of L of its own lowest target about
+#: its whole contact (_contact_lows): at REST_HOLD of the stance weight at the first, not at all from the
+#: second (_marker_weights).
+REST_BAND_L = (0.005, 0.02)
+REST_HOLD = 0.3
+
+
+def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float, fade: bool = True,
+                    frame_time: float | None = None) -> np.ndarray:
     """(T, 2, 3) foot marker weights: high for markers that bear load, low for the rest.
 
     A foot on the ground is weighted by STANCE_MARKER_WEIGHT, ramped (min-jerk over WEIGHT_RAMP_S) around
@@ -419,6 +563,10 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float, f
     the swing weight at ≥ 0.05 L. So the loaded point is held still while the rest of the foot may pivot
     about it (push-off on the toes when a faster or longer-legged run needs more reach than the
     reference's foot pose gives). markers: (T, 2, 3, 3) targets [m]; leg_length [m].
+    A toe marker that rests above that band (a folded rig's ball, 0.039 L up) is held too while it is at
+    its own rest height (within REST_BAND_L of its lowest target about its contact, _contact_lows; frame_time
+    [s] of the targets), at REST_HOLD of the stance weight (at 1 the IK split the difference between targets
+    that are not quite the foot's shape, each marker's rest its own lowest point). Not the ankle (see below).
     """
     t = path.times
     ramp = np.zeros((len(t), 2))
@@ -444,6 +592,20 @@ def _marker_weights(path: MachinePath, markers: np.ndarray, leg_length: float, f
     height = markers[..., UP_AXIS]  # ground at 0
     lo, hi = 0.02 * leg_length, 0.05 * leg_length
     loaded = min_jerk((hi - height) / (hi - lo))  # 1 at or below lo, 0 at or above hi
+    if frame_time is not None:
+        # about the frame's own whole contact, not a sliding window: a heel rising at push-off that pauses
+        # (dataset-1_walk_normal_001 slowed to 0.5x: its heel target dipped 3 mm 0.4 s after it rose) was
+        # lowest in its window and held as at rest, 33 mm above its rest, and the IK turned the knee to reach
+        # it: the toe tip slid 18 mm; at an output's first frames a heel rising after a contact cut by the
+        # start was lowest in every window there (Bandai dataset-2_walk_active_002 giant: tip slid 6.1 mm)
+        low = _contact_lows(path, height)
+        r_lo, r_hi = REST_BAND_L[0] * leg_length, REST_BAND_L[1] * leg_length
+        near = np.where(np.isfinite(low), (r_hi - (height - low)) / (r_hi - r_lo), 0.0)
+        # not the ankle (as on main): in a run it moves with the ball (_rest_on_floor); held as well, over-determining
+        # the foot, its hold pulled a straight-legged dash_normal_001 (x1.5 in 12 steps) back 13 mm at
+        # lift-off (its tip slid 5.2 mm) and flipped a knee at 1.3x and 120 Hz (a 111 deg joint jump)
+        near[..., 0] = 0.0
+        loaded = np.maximum(loaded, REST_HOLD * min_jerk(near))
     # Around a touchdown every marker of the foot keeps at least LANDING_WEIGHT of the stance weight: a
     # landing foot follows its targets down to the contact point instead of being left by the posture pull
     # a centimetre lower and still sweeping forward (a scuff the report sees at touchdown). Not at lift-off:
@@ -458,3 +620,22 @@ def stance_only(targets: Targets) -> np.ndarray:
     w = targets.marker_weight
     out[w < 0.5 * w.max()] = np.nan
     return out
+
+
+def raised(targets: Targets, path: MachinePath, rise: float) -> tuple[Targets, MachinePath]:
+    """Targets and their machine path raised by rise [m] (in the order ``bend`` returns them).
+
+    The synthesis puts the clip's ground (``ReferenceCycle.ground``: the median of its stances' lowest points)
+    on y = 0, and that ground is ``floor_clearance`` above the clip's floor (a joint centre rests a sole's
+    thickness above the floor), so the output solved on them, raised by it × L, stands on its floor y = 0 as
+    the clip does on its own. Raised before the IK (which is translation-invariant), so the preview (the
+    targets' initial motion) and the result stand on the same floor."""
+    if rise == 0.0:
+        return targets, path
+    up = np.zeros(3)
+    up[UP_AXIS] = rise
+    path = replace(path, com=path.com + up, contacts=path.contacts + up)
+    floor_top = None if targets.floor_top is None else targets.floor_top + rise
+    targets = replace(targets, initial=targets.initial.with_(root_positions=targets.initial.root_positions + up),
+                      com=targets.com + up, markers=targets.markers + up, floor_top=floor_top)
+    return targets, path

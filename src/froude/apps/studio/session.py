@@ -17,7 +17,6 @@ from ... import pipeline
 from ...body.characters import apply_character, list_presets, resolve_character
 from ...errors import FitError, FroudeError
 from ...result import Result
-from ...synthesis.bend import bend
 from .tracks import Track, machine_track, motion_hash, reference_track
 
 MODES = ("scale", "accelerate")
@@ -162,8 +161,8 @@ class Session:
         plan = pipeline.plan_scale(self.prep, spec, speed=params.speed, strides=int(params.strides), **nums)
         retarget, path = plan.retarget, plan.path
         assert path is not None  # the physical method (the studio has no naive preview)
-        targets, path = bend(pipeline.targets_of(self.prep, path, retarget), path, self.prep.turn, retarget.L,
-                             self.prep.origin)  # a turning take: along its path, as the result
+        # along a turning take's path and on its floor, as the result
+        targets, path = pipeline.targets_of(self.prep, path, retarget)
         _require_finite(targets.initial)
         track = machine_track(targets.initial, retarget.body, path)
         return Solved(params, track, None, True, time.perf_counter() - t0, motion_hash(targets.initial),

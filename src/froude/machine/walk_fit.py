@@ -38,8 +38,9 @@ the exact cycle's existence would hang on the last bits); the exact cycle is the
 Each of the two starts is tried without the control's pulses and with them (``PULSE_START``: a push-off pulse
 just past the other foot's touchdown, a weight-acceptance pulse at the clip's first peak, their amplitudes
 fitted by the shape fit); of the four periodic starts the shape fit runs from the two whose shape residual is
-the smallest (``_shape_fit_nearest``), the others only if both fail, and the lowest cost wins. The solver is
-:mod:`froude.machine.gauss_newton`.
+the smallest (``_shape_fit_nearest``), the others only if both fail, and ``choose_fit`` picks between the
+converged ones (the nearest unless another's cost is lower by COST_MARGIN); where every start fails at the
+coarse resolution they all run again at the fine one. The solver is :mod:`froude.machine.gauss_newton`.
 """
 from __future__ import annotations
 

@@ -59,6 +59,7 @@ from .forces import CUTOFF_HZ, ground_force, smooth_com
 from .gauss_newton import constrained_gauss_newton
 from .orbit import rowwise, solve_orbit
 from .walk_model import WalkingMachine
+from .walk_stance import measure_stance
 from .walking import (
     N_PER_STANCE,
     PULSES_OFF,
@@ -185,7 +186,7 @@ class WalkFitResult:
     force over a stance (mean of its complete stances) [BW]; profile_model (N,) the machine's, measured
     through the clip's filter; profile_unfiltered (N,) the machine's exact force. t_ref (M,) times of the
     frames of the complete steps [s], h_ref (M,) their COM height above the ground [m], h_model (M,) the
-    machine's at the phase-matched times [m]. stances: the WalkStance of every contact. t_leg (K,) time
+    machine's at the phase-matched times [m]. stances: the walk_stance.WalkStance of each contact. t_leg (K,) time
     since touchdown [s] and l_leg (K,) leg length [m] (COM → rolling centre of pressure) over the clip's
     first complete stance. steps (S, 3): touchdown, the other foot's liftoff, next touchdown [s].
     """
@@ -527,7 +528,7 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         if lo - td < 4:
             continue
         stances.append(st)
-        geo.append(_stance(st, td, lo, x_fwd, p[:, UP_AXIS], markers, heading, dt))
+        geo.append(measure_stance(st, td, lo, x_fwd, p[:, UP_AXIS], markers, heading, dt))
     # Complete steps: a touchdown (lead) while the other foot's stance (trail) is on, then the trail's
     # liftoff, then the next touchdown (the other foot again).
     steps = []
@@ -688,47 +689,3 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     return WalkFitResult(machine=machine, profile_tau=tau, profile_ref=prof_ref, profile_model=prof_model,
                          profile_unfiltered=prof_raw, t_ref=t_ref, h_ref=h_ref, h_model=h_mod, stances=tuple(geo),
                          t_leg=t_leg - sg.t_touchdown, l_leg=l_leg, steps=np.array([t_td, t_lo, t_nx]).T)
-
-
-@dataclass(frozen=True)
-class WalkStance:
-    """One foot contact of a walk (SI, sagittal; times from the clip's first frame).
-
-    foot 0 left / 1 right; partial: cut by the clip's edge; t_touchdown, t_liftoff [s] (marker events,
-    see module doc); ground [m]; the centre of pressure rolls along the line x_touchdown + roll·τ [m]
-    (least squares of the foot's lowest marker over the stance, τ = 0 … 1); l0: COM distance from the
-    touchdown point at touchdown [m]; theta_touchdown: leg angle from vertical there [rad], + ahead.
-    """
-
-    foot: int
-    partial: bool
-    t_touchdown: float
-    t_liftoff: float
-    ground: float
-    x_touchdown: float
-    roll: float
-    l0: float
-    theta_touchdown: float
-
-    @property
-    def duration(self) -> float:
-        return self.t_liftoff - self.t_touchdown
-
-    def contact_x(self, t):
-        """Centre of pressure [m] (forward) at times t [s]."""
-        return self.x_touchdown + self.roll * (np.asarray(t, float) - self.t_touchdown) / self.duration
-
-
-def _stance(st, td, lo, x_fwd, y_com, markers, heading, dt) -> WalkStance:
-    """Geometry of one marker stance [td, lo] (fractional frames); x_fwd, y_com (F,) COM [m]."""
-    frames = np.arange(int(math.ceil(td)), int(math.floor(lo)) + 1)
-    mk = markers[frames, st.foot]  # (N, 3 markers, 3)
-    low = mk[np.arange(frames.size), np.argmin(mk[..., UP_AXIS], axis=1)] @ heading
-    tau = (frames - td) / (lo - td)
-    roll, x0 = np.polyfit(tau, low, 1)
-    fr = np.arange(x_fwd.size)
-    rx = x0 - np.interp(td, fr, x_fwd)
-    ry = np.interp(td, fr, y_com) - st.ground
-    return WalkStance(foot=int(st.foot), partial=bool(st.partial), t_touchdown=td * dt, t_liftoff=lo * dt,
-                      ground=float(st.ground), x_touchdown=float(x0), roll=float(roll), l0=float(np.hypot(rx, ry)),
-                      theta_touchdown=float(np.arctan2(rx, ry)))

@@ -94,7 +94,7 @@ LARGE_MODULES = {
 }
 #: Functions over 80 lines today (scripts/long_functions.py); issue 27 asks for at most 5. The count may only
 #: go down: lower it when one is split.
-MAX_LONG_FUNCTIONS = 16
+MAX_LONG_FUNCTIONS = 6
 
 
 def test_modules_of_one_idea():

@@ -299,6 +299,28 @@ def test_the_turning_run_is_a_run(run_cli, tmp_path):
 
 
 # ---- every verb on a turn (issue 28 acceptance 5) ------------------------------------------------------
+def test_the_studio_draws_a_turns_reference_as_taken(prepared, tmp_path):
+    """The machines see a turning take straightened; the studio's reference is the take as it was taken: its
+    BVH turns as the clip's file does (the tests' own reader, within 0.5 deg), its contacts lie under its own
+    feet, and the straightened take (what it drew before) does not turn."""
+    from froude.apps.studio.tracks import reference_track
+    from froude.io.bvh import save_bvh
+
+    prep = prepared[TURN]
+    track = reference_track(prep)
+    window_s = 1.0
+    save_bvh(track.motion, tmp_path / "reference.bvh")
+    save_bvh(prep.motion, tmp_path / "straightened.bvh")
+    want = _oracle_heading_deg(clip(TURN), window_s)
+    assert abs(_oracle_heading_deg(tmp_path / "reference.bvh", window_s) - want) <= 0.5
+    assert abs(_oracle_heading_deg(tmp_path / "straightened.bvh", window_s)) <= 0.3 * abs(want)
+    markers = prep.body.com_and_markers(track.motion)[1]  # (F, 2, 3, 3)
+    feet = np.array([markers[(s.start + s.stop - 1) // 2, s.foot].mean(axis=0)
+                     for s in prep.gait.stances])
+    horizontal = np.array([1.0, 1.0, 1.0]) - UP
+    assert np.abs((feet - track.contacts) * horizontal).max() <= 0.15  # a foot's length, not a stride
+
+
 @pytest.mark.browser
 @pytest.mark.timeout(600)
 def test_studio_takes_a_turn(tmp_path):

@@ -126,3 +126,26 @@ def test_cli_filmstrip(tmp_path, capsys):
                               "--labels", "runner", "--quiet"])
     assert code == 0 and err == ""
     assert imageio.v3.imread(out).shape[1] == 800
+
+
+def test_long_clip_name_never_runs_into_the_clock(clips):
+    """A clip name wider than its panel is shortened with an ellipsis, and the title, speed and clock of a panel
+    do not overlap (the clock once sat on the title's line, under a long Bandai name)."""
+    from froude.viz.render import _actors, _VideoScene
+
+    long_name = "dataset-2_walk-turn-left_normal_001_a_long_take_name"
+    scene = _VideoScene(_actors(clips[:2], [long_name, "09_01"], "side"), 480, None)
+    scene.prepare(np.array([0.5]))
+    scene.frame(0)
+    renderer = scene.canvas.get_renderer()
+    for ax, *_rest in scene.panels:
+        texts = [t for t in ax.texts if t.get_text()]
+        boxes = [t.get_window_extent(renderer) for t in texts]
+        panel = ax.get_window_extent(renderer)
+        for i, a in enumerate(boxes):
+            assert a.x1 <= panel.x1 + 0.5, f"{texts[i].get_text()!r} runs out of its panel"
+            for b in boxes[i + 1:]:
+                assert not a.overlaps(b), f"{texts[i].get_text()!r} overlaps another label"
+    title = scene.panels[0][0].texts[0].get_text()
+    assert title.endswith("…") and long_name.startswith(title[:-1])
+    assert scene.panels[1][0].texts[0].get_text() == "09_01"

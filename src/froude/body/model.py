@@ -227,6 +227,173 @@ def load_joint_map(path: str | Path) -> dict[str, str]:
 FK_CHUNK = 16384
 
 
+@dataclass
+class _RestLandmarks:
+    """A skeleton's joints by role in its upright reference pose (rest: (J, 3) world positions [m]; R_ref:
+    (J, 3, 3) world rotations; ends: joint -> its first non-zero end site, world-rotated [m]), and the notes
+    (estimates made) that reading them collects, in the order made."""
+
+    skeleton: Skeleton
+    roles: Mapping[str, int]
+    rest: np.ndarray
+    R_ref: np.ndarray
+    ends: dict
+    notes: list
+
+    def pos(self, role: str) -> np.ndarray:
+        """Rest position (3,) [m] of a role's joint."""
+        return self.rest[self.roles[role]]
+
+    def end_point(self, role: str, end_role: str, fallback_from: str) -> np.ndarray:
+        """Rest position (3,) [m] of an end point: a mapped joint, the joint's end site, or an estimate."""
+        rest, skeleton = self.rest, self.skeleton
+        if end_role in self.roles:
+            return rest[self.roles[end_role]]
+        j = self.roles[role]
+        if j in self.ends:
+            return rest[j] + self.ends[j]
+        kids = skeleton.children(j)
+        if kids:
+            return rest[kids[0]] if np.linalg.norm(skeleton.offsets[kids[0]]) > 0 else rest[j]
+        # estimate: continue the parent bone by half its length
+        direction = rest[j] - self.pos(fallback_from)
+        if f"no end point for '{skeleton.names[j]}': estimated" not in self.notes:
+            self.notes.append(f"no end point for '{skeleton.names[j]}': estimated")
+        return rest[j] + 0.5 * direction
+
+    def mean_leg(self):
+        """Mean over the sides of hip -> knee -> ankle [m] in the reference pose."""
+        pos = self.pos
+        return np.mean([np.linalg.norm(pos(s + "_knee") - pos(s + "_hip"))
+                        + np.linalg.norm(pos(s + "_ankle") - pos(s + "_knee")) for s in SIDES])
+
+
+def _rest_landmarks(skeleton: Skeleton, joint_map: Mapping[str, str] | None) -> _RestLandmarks:
+    """The skeleton's :class:`_RestLandmarks` (roles found by name or joint_map)."""
+    roles = find_roles(skeleton, joint_map)
+    # Built in the upright reference pose: the zero-rotation rest pose for most rigs, a pose read from
+    # the motion for rigs whose rest pose is folded by bind orientations (see Skeleton.reference_pose).
+    rest, R_ref = skeleton.reference_world()
+    # first end site wins; zero-length end sites (some exporters write "OFFSET 0 0 0") mark nothing
+    ends = {j: R_ref[j] @ np.asarray(off) for j, off in reversed(skeleton.end_sites)
+            if np.linalg.norm(off) > 1e-9}
+    return _RestLandmarks(skeleton, roles, rest, R_ref, ends, [])
+
+
+def _segment(name: str, joint: int, prox, dist, key: str, k: int) -> tuple:
+    """(name, joint, rest COM point (3,) [m], de Leva key) of a segment from its proximal to its distal
+    landmark (3,) [m], de Leva's COM fraction for sex index k (0 male, 1 female)."""
+    return (name, joint, prox + DE_LEVA[key][1][k] * (dist - prox), key)
+
+
+def _head_vertex(lm: _RestLandmarks):
+    """(vertex (3,) [m], C7 (3,) [m]): the head+neck segment's ends. Vertex = head end site; C7 ≈ the neck
+    joint (or the head joint)."""
+    roles, skeleton, pos = lm.roles, lm.skeleton, lm.pos
+    c7 = pos("neck") if "neck" in roles else pos("head")
+    head_j = roles["head"]
+    vertex: np.ndarray | None = None
+    if ("head_end" in roles or head_j in lm.ends or "neck" not in roles
+            or any(np.linalg.norm(skeleton.offsets[c]) > 0 for c in skeleton.children(head_j))):
+        vertex = lm.end_point("head", "head_end", "neck" if "neck" in roles else "pelvis")
+    if "neck" in roles and "head_end" not in roles:
+        # de Leva's proportions: C7 -> vertex is 0.285 of the leg (hip -> ankle), along neck -> head. It
+        # stands in when the rig marks no point above the head joint, and when its end site falls short
+        # of it: a nominal bone tip (one Bandai export writes 10 cm end sites, another none, and the
+        # same actor's rig then read 1.42 and 1.49 m), not the top of the head.
+        leg_mean = lm.mean_leg()
+        d = pos("head") - c7
+        d = (d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9
+             else body_up(skeleton, lm.rest, lm.rest[0], lm.rest[0] + np.eye(3)[UP_AXIS]))
+        estimate = c7 + 0.285 * leg_mean * d
+        if vertex is None or (vertex - c7) @ d < (estimate - c7) @ d:
+            lm.notes.append(f"no end point for '{skeleton.names[head_j]}'" if vertex is None else
+                            f"the end site of '{skeleton.names[head_j]}' falls short of the head's extent")
+            lm.notes[-1] += ": the head vertex estimated from the leg length"
+            vertex = estimate
+    assert vertex is not None  # "neck" or "head_end" missing: the end point above
+    return vertex, c7
+
+
+def _spine_path(skeleton: Skeleton, roles: Mapping[str, int]) -> list:
+    """The joints from the pelvis up to the head (indices); joints above the pelvis (a static reference root)
+    carry no mass."""
+    path = []
+    j = roles["head"]
+    while j >= 0:
+        path.append(j)
+        if j == roles["pelvis"]:
+            break
+        j = skeleton.parents[j]
+    return path[::-1]  # pelvis ... head
+
+
+def _trunk_segments(lm: _RestLandmarks, path: list, mid_hip, mid_sh, up, k: int) -> list:
+    """The three trunk parts along mid-hip JC -> mid-shoulder JC (3,) [m], each fixed to the spine joint (of
+    path) below its COM along up (3,); k the sex index."""
+    rest = lm.rest
+    segs = []
+    for key, lo, hi in _TRUNK_PARTS:
+        bottom = mid_hip + lo * (mid_sh - mid_hip)
+        top = mid_hip + hi * (mid_sh - mid_hip)
+        c = top + DE_LEVA[key][1][k] * (bottom - top)  # fractions are measured from the top landmark
+        below = [p for p in path[:-1] if rest[p] @ up <= c @ up + 1e-9] or [path[0]]
+        segs.append((key, below[-1], c, key))
+    return segs
+
+
+def _limb_segments(lm: _RestLandmarks, k: int) -> list:
+    """The arms' and legs' segments (upper arm, forearm, hand, thigh, shank, foot), left side first."""
+    roles, pos = lm.roles, lm.pos
+    segs = []
+    for side in SIDES:
+        s = side + "_"
+        segs.append(_segment(s + "upper_arm", roles[s + "shoulder"], pos(s + "shoulder"), pos(s + "elbow"),
+                             "upper_arm", k))
+        segs.append(_segment(s + "forearm", roles[s + "elbow"], pos(s + "elbow"), pos(s + "wrist"), "forearm", k))
+        hand_end = lm.end_point(s + "wrist", s + "hand_end", s + "elbow")
+        segs.append(_segment(s + "hand", roles[s + "wrist"], pos(s + "wrist"), hand_end, "hand", k))
+        segs.append(_segment(s + "thigh", roles[s + "hip"], pos(s + "hip"), pos(s + "knee"), "thigh", k))
+        segs.append(_segment(s + "shank", roles[s + "knee"], pos(s + "knee"), pos(s + "ankle"), "shank", k))
+        toe_end = lm.end_point(s + "toe", s + "toe_end", s + "ankle")
+        segs.append(_segment(s + "foot", roles[s + "ankle"], pos(s + "ankle"), toe_end, "foot", k))
+    return segs
+
+
+def _mass_fractions(names: tuple, keys: list, k: int, overrides: Mapping[str, float] | None) -> np.ndarray:
+    """(S,) mass fractions of the segments (names, de Leva keys), summing to 1, with overrides fixed and the
+    rest rescaled. FroudeError for an unknown segment or fractions outside [0, 1)."""
+    fractions = np.array([DE_LEVA[key][0][k] for key in keys])
+    fractions = fractions / fractions.sum()  # female table sums to 0.9999
+    if overrides:
+        for name, frac in overrides.items():
+            if name not in names:
+                raise FroudeError(f"unknown segment '{name}' in mass overrides; segments: {', '.join(names)}")
+            if not 0 <= frac < 1:
+                raise FroudeError(f"mass fraction of '{name}' must be in [0, 1), got {frac}")
+        fixed = np.array([n in overrides for n in names])
+        fixed_total = sum(overrides.values())
+        if fixed_total >= 1:
+            raise FroudeError("mass overrides sum to 1 or more")
+        fractions[~fixed] *= (1 - fixed_total) / fractions[~fixed].sum()
+        fractions[fixed] = [overrides[n] for n in np.array(names)[fixed]]
+    return fractions
+
+
+def _foot_markers(lm: _RestLandmarks):
+    """(marker_joint (2, 3) int, marker_local (2, 3, 3) [m]): per side the ankle, toe and toe tip markers, as
+    joint and offset in that joint's frame (the ankle's and toe's at the joint itself)."""
+    roles, R_ref, rest = lm.roles, lm.R_ref, lm.rest
+    marker_joint = np.zeros((2, 3), dtype=np.int64)
+    marker_local = np.zeros((2, 3, 3))
+    for i, side in enumerate(SIDES):
+        s = side + "_"
+        a, t = roles[s + "ankle"], roles[s + "toe"]
+        marker_joint[i] = (a, t, t)
+        marker_local[i, 2] = R_ref[t].T @ (lm.end_point(s + "toe", s + "toe_end", s + "ankle") - rest[t])
+    return marker_joint, marker_local
+
+
 @dataclass(frozen=True, eq=False)
 class BodyModel:
     """Segment masses and COM points of a skeleton, and its foot markers.
@@ -252,8 +419,6 @@ class BodyModel:
     stature: float
     notes: tuple[str, ...] = field(default=())
 
-    # Long because de Leva's segments are placed in table order from one set of role lookups and rest
-    # positions, which every segment uses.
     @classmethod
     def from_skeleton(
         cls,
@@ -277,125 +442,23 @@ class BodyModel:
         if sex not in ("male", "female"):
             raise FroudeError(f"sex must be 'male' or 'female', got '{sex}'")
         k = 0 if sex == "male" else 1
-        roles = find_roles(skeleton, joint_map)
-        # Built in the upright reference pose: the zero-rotation rest pose for most rigs, a pose read from
-        # the motion for rigs whose rest pose is folded by bind orientations (see Skeleton.reference_pose).
-        rest, R_ref = skeleton.reference_world()
-        # first end site wins; zero-length end sites (some exporters write "OFFSET 0 0 0") mark nothing
-        ends = {j: R_ref[j] @ np.asarray(off) for j, off in reversed(skeleton.end_sites)
-                if np.linalg.norm(off) > 1e-9}
-        notes = []
-
-        def pos(role):
-            return rest[roles[role]]
-
-        def end_point(role, end_role, fallback_from):
-            """Rest position of an end point: a mapped joint, the joint's end site, or an estimate."""
-            if end_role in roles:
-                return rest[roles[end_role]]
-            j = roles[role]
-            if j in ends:
-                return rest[j] + ends[j]
-            kids = skeleton.children(j)
-            if kids:
-                return rest[kids[0]] if np.linalg.norm(skeleton.offsets[kids[0]]) > 0 else rest[j]
-            # estimate: continue the parent bone by half its length
-            direction = rest[j] - pos(fallback_from)
-            if f"no end point for '{skeleton.names[j]}': estimated" not in notes:
-                notes.append(f"no end point for '{skeleton.names[j]}': estimated")
-            return rest[j] + 0.5 * direction
-
-        segs = []  # (name, joint, rest COM point, de Leva key)
-
-        def add(name, joint, prox, dist, key):
-            c = prox + DE_LEVA[key][1][k] * (dist - prox)
-            segs.append((name, joint, c, key))
-
-        # Head+neck: vertex -> C7. Vertex = head end site; C7 ≈ the neck joint (or the head joint).
-        c7 = pos("neck") if "neck" in roles else pos("head")
-        head_j = roles["head"]
-        vertex: np.ndarray | None = None
-        if ("head_end" in roles or head_j in ends or "neck" not in roles
-                or any(np.linalg.norm(skeleton.offsets[c]) > 0 for c in skeleton.children(head_j))):
-            vertex = end_point("head", "head_end", "neck" if "neck" in roles else "pelvis")
-        if "neck" in roles and "head_end" not in roles:
-            # de Leva's proportions: C7 -> vertex is 0.285 of the leg (hip -> ankle), along neck -> head. It
-            # stands in when the rig marks no point above the head joint, and when its end site falls short
-            # of it: a nominal bone tip (one Bandai export writes 10 cm end sites, another none, and the
-            # same actor's rig then read 1.42 and 1.49 m), not the top of the head.
-            leg_mean = np.mean([np.linalg.norm(pos(s + "_knee") - pos(s + "_hip"))
-                                + np.linalg.norm(pos(s + "_ankle") - pos(s + "_knee")) for s in SIDES])
-            d = pos("head") - c7
-            d = (d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9
-                 else body_up(skeleton, rest, rest[0], rest[0] + np.eye(3)[UP_AXIS]))
-            estimate = c7 + 0.285 * leg_mean * d
-            if vertex is None or (vertex - c7) @ d < (estimate - c7) @ d:
-                notes.append(f"no end point for '{skeleton.names[head_j]}'" if vertex is None else
-                             f"the end site of '{skeleton.names[head_j]}' falls short of the head's extent")
-                notes[-1] += ": the head vertex estimated from the leg length"
-                vertex = estimate
-        assert vertex is not None  # "neck" or "head_end" missing: the end point above
-        add("head", roles["head"], vertex, c7, "head")
+        lm = _rest_landmarks(skeleton, joint_map)
+        roles, rest, R_ref = lm.roles, lm.rest, lm.R_ref
+        vertex, c7 = _head_vertex(lm)
+        segs = [_segment("head", roles["head"], vertex, c7, "head", k)]
         # Trunk: three parts along mid-hip JC -> mid-shoulder JC, each fixed to the spine joint below it.
-        mid_hip = 0.5 * (pos("left_hip") + pos("right_hip"))
-        mid_sh = 0.5 * (pos("left_shoulder") + pos("right_shoulder"))
+        mid_hip = 0.5 * (lm.pos("left_hip") + lm.pos("right_hip"))
+        mid_sh = 0.5 * (lm.pos("left_shoulder") + lm.pos("right_shoulder"))
         up = body_up(skeleton, rest, mid_hip, mid_sh)
-        path = []
-        j = roles["head"]
-        while j >= 0:
-            path.append(j)
-            if j == roles["pelvis"]:
-                break  # joints above the pelvis (a static reference root) carry no mass
-            j = skeleton.parents[j]
-        path = path[::-1]  # pelvis ... head
-        for key, lo, hi in _TRUNK_PARTS:
-            bottom = mid_hip + lo * (mid_sh - mid_hip)
-            top = mid_hip + hi * (mid_sh - mid_hip)
-            c = top + DE_LEVA[key][1][k] * (bottom - top)  # fractions are measured from the top landmark
-            below = [p for p in path[:-1] if rest[p] @ up <= c @ up + 1e-9] or [path[0]]
-            segs.append((key, below[-1], c, key))
-        for side in SIDES:
-            s = side + "_"
-            add(s + "upper_arm", roles[s + "shoulder"], pos(s + "shoulder"), pos(s + "elbow"), "upper_arm")
-            add(s + "forearm", roles[s + "elbow"], pos(s + "elbow"), pos(s + "wrist"), "forearm")
-            hand_end = end_point(s + "wrist", s + "hand_end", s + "elbow")
-            add(s + "hand", roles[s + "wrist"], pos(s + "wrist"), hand_end, "hand")
-            add(s + "thigh", roles[s + "hip"], pos(s + "hip"), pos(s + "knee"), "thigh")
-            add(s + "shank", roles[s + "knee"], pos(s + "knee"), pos(s + "ankle"), "shank")
-            toe_end = end_point(s + "toe", s + "toe_end", s + "ankle")
-            add(s + "foot", roles[s + "ankle"], pos(s + "ankle"), toe_end, "foot")
-
-        fractions = np.array([DE_LEVA[key][0][k] for _, _, _, key in segs])
-        fractions = fractions / fractions.sum()  # female table sums to 0.9999
+        path = _spine_path(skeleton, roles)
+        segs += _trunk_segments(lm, path, mid_hip, mid_sh, up, k)
+        segs += _limb_segments(lm, k)
         names = tuple(n for n, _, _, _ in segs)
-        if overrides:
-            for name, frac in overrides.items():
-                if name not in names:
-                    raise FroudeError(f"unknown segment '{name}' in mass overrides; segments: {', '.join(names)}")
-                if not 0 <= frac < 1:
-                    raise FroudeError(f"mass fraction of '{name}' must be in [0, 1), got {frac}")
-            fixed = np.array([n in overrides for n in names])
-            fixed_total = sum(overrides.values())
-            if fixed_total >= 1:
-                raise FroudeError("mass overrides sum to 1 or more")
-            fractions[~fixed] *= (1 - fixed_total) / fractions[~fixed].sum()
-            fractions[fixed] = [overrides[n] for n in np.array(names)[fixed]]
+        fractions = _mass_fractions(names, [key for _, _, _, key in segs], k, overrides)
         seg_joint = np.array([j for _, j, _, _ in segs])
         seg_local = np.array([R_ref[j].T @ (c - rest[j]) for _, j, c, _ in segs])
-
-        marker_joint = np.zeros((2, 3), dtype=np.int64)
-        marker_local = np.zeros((2, 3, 3))
-        for i, side in enumerate(SIDES):
-            s = side + "_"
-            a, t = roles[s + "ankle"], roles[s + "toe"]
-            marker_joint[i] = (a, t, t)
-            marker_local[i, 2] = R_ref[t].T @ (end_point(s + "toe", s + "toe_end", s + "ankle") - rest[t])
-
-        leg = [
-            np.linalg.norm(pos(s + "_knee") - pos(s + "_hip")) + np.linalg.norm(pos(s + "_ankle") - pos(s + "_knee"))
-            for s in SIDES
-        ]
-        leg_length = float(np.mean(leg))
+        marker_joint, marker_local = _foot_markers(lm)
+        leg_length = float(lm.mean_leg())
         if skeleton.reference_pose is None:
             trunk = None  # upright rest pose: measured as it stands
         else:  # a pose from the motion: the spine straightened, like the legs (it flexes from frame to frame)
@@ -404,7 +467,7 @@ class BodyModel:
         stature = _stature(roles, rest, up, vertex, marker_local, R_ref, leg_length, trunk)
         return cls(
             skeleton, float(mass), sex, names, seg_joint, seg_local, fractions * mass,
-            marker_joint, marker_local, dict(roles), leg_length, stature, tuple(notes),
+            marker_joint, marker_local, dict(roles), leg_length, stature, tuple(lm.notes),
         )
 
     # ---- evaluation on motions -------------------------------------------------------------------

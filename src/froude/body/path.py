@@ -360,9 +360,10 @@ def straighten(motion: Motion, path: TakePath) -> Motion:
     P_0 + s_i · direction(heading_0): the COM keeps its offset from the path (its sway and lean) in the
     path's own frame, the travel becomes straight at the speed along the path. A foot planted while the
     path turns moves a little in the straightened take (rigid per frame: about a δ²/2 sideways and a δ
-    along for a foot n from the path and an angle δ = Δs/r of turn between it and the COM, 1-4 cm in
-    CMU 16_51's 1.3 m turn, well below the contact test's speed). The inverse, point by point, is
-    ``synthesis.bend``. Returns a new Motion (meta "straightened": the heading change undone [rad]).
+    along for a foot n from the path and an angle δ = Δs/r of turn between it and the COM). In a gentle
+    walk-turn that is centimetres; in CMU 16_51's sharp running turn a planted foot moves 0.3-0.4 m over
+    a stance (measured in the turns3 work, issue 28), which is why that clip's fit refuses it. The inverse,
+    point by point, is ``synthesis.bend``. Returns a new Motion (meta "straightened": the heading change undone [rad]).
     """
     from dataclasses import replace
 
@@ -377,4 +378,37 @@ def straighten(motion: Motion, path: TakePath) -> Motion:
     rot[:, 0] = quat.mul(q, rot[:, 0])
     meta = dict(motion.meta)
     meta["straightened"] = float(dpsi[-1]) if dpsi.size else 0.0
+    return replace(motion, root_positions=root, rotations=rot, meta=meta)
+
+
+def unstraighten_points(x_straight: np.ndarray, path: TakePath) -> np.ndarray:
+    """Points of a take straightened by ``straighten`` put back where the take was: (F, ..., 3) [m], frame i's
+    points moved by the inverse of frame i's rigid move (turned back by its heading gain about the path point,
+    up kept). Exact per frame: a point planted in the take comes back planted."""
+    x = np.asarray(x_straight, float)
+    F = path.heading_rad.shape[0]
+    if x.shape[0] != F:
+        raise ValueError(f"{x.shape[0]} frames of points for a path of {F} frames")
+    dpsi = path.heading_rad - path.heading_rad[0]  # (F,)
+    extra = (1,) * (x.ndim - 2)
+    q = yaw_quat(dpsi).reshape((F, *extra, 4))
+    p_to = (path.p_world_path[0] * (1 - UP) + path.arc_length_m[:, None] * direction_of(path.heading_rad[0]))
+    p_from = path.p_world_path * (1 - UP)
+    rel = x - p_to.reshape((F, *extra, 3))
+    rel[..., UP_AXIS] = x[..., UP_AXIS]
+    out = p_from.reshape((F, *extra, 3)) + quat.rotate(np.broadcast_to(q, rel.shape[:-1] + (4,)), rel)
+    out[..., UP_AXIS] = x[..., UP_AXIS]
+    return out
+
+
+def unstraighten(motion: Motion, path: TakePath) -> Motion:
+    """The inverse of ``straighten``: a straightened take (or anything on its frames) back on the path as
+    taken. Returns a new Motion without the "straightened" meta."""
+    from dataclasses import replace
+
+    dpsi = path.heading_rad - path.heading_rad[0]
+    root = unstraighten_points(motion.root_positions, path)
+    rot = motion.rotations.copy()
+    rot[:, 0] = quat.mul(yaw_quat(dpsi), rot[:, 0])
+    meta = {k: v for k, v in motion.meta.items() if k != "straightened"}
     return replace(motion, root_positions=root, rotations=rot, meta=meta)

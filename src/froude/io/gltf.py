@@ -300,26 +300,9 @@ def _end_node_sites(motion: Motion, gl, joints: list, end_nodes: set, parents: n
     return tuple(out.items())
 
 
-# Long because a foreign glTF is checked step by step (skin, joints, animation, samplers), each check
-# with its own one-line error naming what is missing.
-def load_gltf(path: str | os.PathLike, *, fps: float | None = None, clean: bool = True, joint_map=None,
-              length_scale: float | None = None, up: str | None = None) -> Motion:
-    """Read the first skin's skeleton and the first animation of a .glb/.gltf file as a Motion, read as
-    ``froude.load`` reads a BVH file (SI units, +Y up, the conventions of ``body.conventions.understand``).
-
-    The skeleton's offsets are the joints' rest translations [m] (glTF's units); animated rotations (and the
-    root's translation) become the motion; the transform of the nodes above the skeleton's root (an
-    exporter's armature node: Blender's, with its object's rotation and scale) is applied to the root.
-    fps: sampling rate (default: the file's own for froude files, else the animation's key spacing when it
-    is even, else 30 Hz); channel orders come from froude's extras or default to ZYX rotations. A
-    synthetic pose first frame is dropped as ``load_bvh`` does unless clean=False. Joints' rest rotations
-    (bind orientations) are kept: the body is then measured in a standing frame of the motion. joint_map,
-    length_scale (metres per file unit; default 1: glTF is in metres) and up (default "Y", glTF's) as for
-    ``load_bvh``.
-    Raises FroudeError (one line) for files froude cannot read as a skeletal animation.
-    """
+def _read_document(path: Path):
+    """The parsed glTF document of path (pygltflib's GLTF2) with at least one skin; FroudeError otherwise."""
     pyg = _require_pygltflib()
-    path = Path(path)
     import warnings
 
     try:
@@ -331,6 +314,14 @@ def load_gltf(path: str | os.PathLike, *, fps: float | None = None, clean: bool 
         raise FroudeError(f"{path}: not a readable glTF file ({type(e).__name__}: {first})") from None
     if gl is None or not gl.skins:
         raise FroudeError(f"{path}: no skin (skeleton) in this glTF file")
+    return gl
+
+
+def _skin_tree(gl, path: Path):
+    """The first skin's joint tree: (joints: node of each skin joint k, index: node -> k, parents (K,) skin
+    index of each joint's parent or -1, end_nodes: the chain-end leaves read as end sites, order: the kept
+    joints depth-first with parents first (froude's Skeleton needs parents[j] < j), new: k -> froude index).
+    FroudeError unless the joints form one tree."""
     joints = list(gl.skins[0].joints)
     index = {node: k for k, node in enumerate(joints)}
     parents = np.full(len(joints), -1)
@@ -345,7 +336,6 @@ def load_gltf(path: str | os.PathLike, *, fps: float | None = None, clean: bool 
     has_child[parents[parents >= 0]] = True
     end_nodes = {k for k in range(len(joints))
                  if parents[k] >= 0 and not has_child[k] and is_end_bone(gl.nodes[joints[k]].name or "")}
-    # depth-first order with parents first (froude's Skeleton needs parents[j] < j)
     roots = [k for k in range(len(joints)) if parents[k] < 0]
     if len(roots) != 1:
         raise FroudeError(f"{path}: the skin's joints form {len(roots)} trees; froude needs one skeleton root")
@@ -359,16 +349,24 @@ def load_gltf(path: str | os.PathLike, *, fps: float | None = None, clean: bool 
 
     visit(roots[0])
     new = {k: i for i, k in enumerate(order)}
-    nodes = [gl.nodes[joints[k]] for k in order]
-    J = len(order)
-    par = np.array([-1 if parents[k] < 0 else new[parents[k]] for k in order])
+    return joints, index, parents, end_nodes, order, new
+
+
+def _rest_pose(nodes, path: Path):
+    """(offsets (J, 3) [m], rest rotations (J, 4) glTF (x, y, z, w)) of the joints' nodes; FroudeError for
+    joints with scale or matrix transforms."""
     offsets = np.array([n.translation or [0.0, 0.0, 0.0] for n in nodes], float)
     rest_rot = np.array([n.rotation or [0.0, 0.0, 0.0, 1.0] for n in nodes], float)
     if any(n.matrix for n in nodes) or any(
             n.scale and np.abs(np.array(n.scale, float) - 1.0).max() > SCALE_TOLERANCE for n in nodes):
         raise FroudeError(f"{path}: joints with scale or matrix transforms are not supported")
-    extras = (gl.scenes[gl.scene or 0].extras or {}).get(EXTRAS_KEY, {}) if gl.scenes else {}
-    saved_channels = extras.get("channels")
+    return offsets, rest_rot
+
+
+def _animation_tracks(gl, index: dict, new: dict, path: Path):
+    """(tracks: (froude joint, "rotation" | "translation") -> (key times (k,) [s], values (k, 3 or 4),
+    interpolation), first key time [s], last key time [s]) of the first animation's channels on skin joints.
+    FroudeError without an animation, or for an animated joint scale."""
     if not gl.animations:
         raise FroudeError(f"{path}: no animation in this glTF file")
     anim = gl.animations[0]
@@ -391,61 +389,77 @@ def load_gltf(path: str | os.PathLike, *, fps: float | None = None, clean: bool 
             continue
         tracks[(new[index[node]], ch.target.path)] = (t, v, s.interpolation or "LINEAR")
         t_end, t_start = max(t_end, float(t[-1])), min(t_start, float(t[0]))
-    frame_time, rate_how = _frame_time(tracks, extras, fps)
-    # from the first key (Blender's exporter puts scene frame 1 at 1/fps), not from zero
-    t_start = min(t_start, t_end)
-    n = int(round((t_end - t_start) / frame_time)) + 1
-    times = t_start + np.arange(n) * frame_time
+    return tracks, t_start, t_end
 
-    def sample(key, default):
-        if key not in tracks:
-            return np.broadcast_to(default, (n, len(default))).copy()
-        t, v, interp = tracks[key]
-        if interp == "STEP":
-            return v[np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 1)]
-        return np.stack([np.interp(times, t, v[:, c]) for c in range(v.shape[1])], axis=1)
 
+def _sample_track(tracks: dict, key, default, times):
+    """(n, c) values of track key at times (n,) [s] (STEP held, else linear); default (c,) where the joint has
+    no such track."""
+    n = len(times)
+    if key not in tracks:
+        return np.broadcast_to(default, (n, len(default))).copy()
+    t, v, interp = tracks[key]
+    if interp == "STEP":
+        return v[np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 1)]
+    return np.stack([np.interp(times, t, v[:, c]) for c in range(v.shape[1])], axis=1)
+
+
+def _sampled_pose(tracks: dict, times, offsets, rest_rot):
+    """(rotations (n, J, 4) froude (w, x, y, z), root position (n, 3) [m], joints with animated translation,
+    their translations (n, J, 3) [m] or None) of the tracks at times (n,) [s]."""
     from ..core import quat
 
+    n, J = len(times), len(offsets)
     rot = np.empty((n, J, 4))
     for j in range(J):
-        q = sample((j, "rotation"), rest_rot[j])  # (x, y, z, w), linearly interpolated then normalised
+        q = _sample_track(tracks, (j, "rotation"), rest_rot[j], times)  # (x, y, z, w), linear then normalised
         rot[:, j] = quat.normalize(np.roll(q, 1, axis=-1))
-    root = sample((0, "translation"), offsets[0])
+    root = _sample_track(tracks, (0, "translation"), offsets[0], times)
     moving = [j for j in range(1, J) if (j, "translation") in tracks]
     translations = None
     if moving:
         translations = np.broadcast_to(offsets, (n, J, 3)).copy()
         for j in moving:
-            translations[:, j] = sample((j, "translation"), offsets[j])
-    above = _above_root(gl, joints[order[0]])
-    above_scale = 1.0
-    if not np.allclose(above, np.eye(4), atol=1e-9):
-        lin = above[:3, :3]
-        scale = float(np.cbrt(np.linalg.det(lin)))
-        R = lin / scale
-        if scale <= 0 or np.abs(R @ R.T - np.eye(3)).max() > SCALE_TOLERANCE:
-            raise FroudeError(f"{path}: the skeleton's parent node is sheared or scaled unevenly")
-        root = root @ lin.T + above[:3, 3]
-        rot[:, 0] = quat.mul(quat.from_matrix(R), rot[:, 0])
-        offsets = offsets * scale
-        offsets[0] = root[0]
-        above_scale = scale
-        if translations is not None:
-            translations = translations * scale
+            translations[:, j] = _sample_track(tracks, (j, "translation"), offsets[j], times)
+    return rot, root, moving, translations
+
+
+def _apply_above_root(above, root, rot, offsets, translations, path: Path):
+    """The pose with the transform (4, 4) of the nodes above the skeleton's root applied to its root (an
+    exporter's armature node: rotation and uniform scale): (root (n, 3) [m], rot (n, J, 4), offsets (J, 3)
+    [m], translations, that scale). FroudeError for a sheared or unevenly scaled transform."""
+    from ..core import quat
+
+    if np.allclose(above, np.eye(4), atol=1e-9):
+        return root, rot, offsets, translations, 1.0
+    lin = above[:3, :3]
+    scale = float(np.cbrt(np.linalg.det(lin)))
+    R = lin / scale
+    if scale <= 0 or np.abs(R @ R.T - np.eye(3)).max() > SCALE_TOLERANCE:
+        raise FroudeError(f"{path}: the skeleton's parent node is sheared or scaled unevenly")
+    root = root @ lin.T + above[:3, 3]
+    rot[:, 0] = quat.mul(quat.from_matrix(R), rot[:, 0])
+    offsets = offsets * scale
+    offsets[0] = root[0]
+    if translations is not None:
+        translations = translations * scale
+    return root, rot, offsets, translations, scale
+
+
+def _channels(saved_channels, J: int, moving: list) -> tuple:
+    """The BVH channel names of each of the J joints: froude's saved ones, or ZYX rotations (and positions on
+    the root and the joints with animated translation)."""
     if saved_channels and len(saved_channels) == J:
-        channels = tuple(tuple(c) for c in saved_channels)
-    else:
-        pos = ("Xposition", "Yposition", "Zposition")
-        rotc = ("Zrotation", "Yrotation", "Xrotation")
-        channels = tuple(pos + rotc if j == 0 or j in moving else rotc for j in range(J))
-    ends = tuple((int(j), np.asarray(off, float)) for j, off in extras.get("end_sites", ())) if saved_channels else ()
-    names = tuple(n.name or f"joint{k}" for k, n in enumerate(nodes))
-    skel = Skeleton(names, par, offsets, channels, ends)
-    raw = Motion(skel, root, rot, frame_time, translations)
-    if end_nodes and not ends:
-        raw = raw.with_(skeleton=skel.with_(end_sites=_end_node_sites(raw, gl, joints, end_nodes, parents, new,
-                                                                     above_scale)))
+        return tuple(tuple(c) for c in saved_channels)
+    pos = ("Xposition", "Yposition", "Zposition")
+    rotc = ("Zrotation", "Yrotation", "Xrotation")
+    return tuple(pos + rotc if j == 0 or j in moving else rotc for j in range(J))
+
+
+def _understood(raw: Motion, path: Path, clean: bool, joint_map, length_scale, up, rate_note: str) -> Motion:
+    """raw read as ``load_bvh`` reads a file: a synthetic pose first frame dropped (with clean), then
+    ``body.conventions.understand`` (SI, +Y up), with the meta saying what was done (rate_note: how the frame
+    rate was found)."""
     from ..body.conventions import understand
     from .bvh import synthetic_pose_frame
 
@@ -461,6 +475,52 @@ def load_gltf(path: str | os.PathLike, *, fps: float | None = None, clean: bool 
         raise FroudeError(f"{path}: {e}") from None
     units = "metres (glTF)" if length_scale is None else conv["units"]
     meta = {"source": str(path), "units": units, "length_scale": conv["length_scale"], "up_axis": conv["up_axis"],
-            "conventions": conv["notes"] + (f"frame rate {1 / frame_time:.6g} Hz ({rate_how})",),
+            "conventions": conv["notes"] + (rate_note,),
             "cleaning": tuple(cleaning)}
     return motion.with_(meta=meta)
+
+
+def load_gltf(path: str | os.PathLike, *, fps: float | None = None, clean: bool = True, joint_map=None,
+              length_scale: float | None = None, up: str | None = None) -> Motion:
+    """Read the first skin's skeleton and the first animation of a .glb/.gltf file as a Motion, read as
+    ``froude.load`` reads a BVH file (SI units, +Y up, the conventions of ``body.conventions.understand``).
+
+    The skeleton's offsets are the joints' rest translations [m] (glTF's units); animated rotations (and the
+    root's translation) become the motion; the transform of the nodes above the skeleton's root (an
+    exporter's armature node: Blender's, with its object's rotation and scale) is applied to the root.
+    fps: sampling rate (default: the file's own for froude files, else the animation's key spacing when it
+    is even, else 30 Hz); channel orders come from froude's extras or default to ZYX rotations. A
+    synthetic pose first frame is dropped as ``load_bvh`` does unless clean=False. Joints' rest rotations
+    (bind orientations) are kept: the body is then measured in a standing frame of the motion. joint_map,
+    length_scale (metres per file unit; default 1: glTF is in metres) and up (default "Y", glTF's) as for
+    ``load_bvh``.
+    Raises FroudeError (one line) for files froude cannot read as a skeletal animation.
+    """
+    path = Path(path)
+    gl = _read_document(path)
+    joints, index, parents, end_nodes, order, new = _skin_tree(gl, path)
+    nodes = [gl.nodes[joints[k]] for k in order]
+    J = len(order)
+    par = np.array([-1 if parents[k] < 0 else new[parents[k]] for k in order])
+    offsets, rest_rot = _rest_pose(nodes, path)
+    extras = (gl.scenes[gl.scene or 0].extras or {}).get(EXTRAS_KEY, {}) if gl.scenes else {}
+    saved_channels = extras.get("channels")
+    tracks, t_start, t_end = _animation_tracks(gl, index, new, path)
+    frame_time, rate_how = _frame_time(tracks, extras, fps)
+    # from the first key (Blender's exporter puts scene frame 1 at 1/fps), not from zero
+    t_start = min(t_start, t_end)
+    n = int(round((t_end - t_start) / frame_time)) + 1
+    times = t_start + np.arange(n) * frame_time
+    rot, root, moving, translations = _sampled_pose(tracks, times, offsets, rest_rot)
+    root, rot, offsets, translations, above_scale = _apply_above_root(
+        _above_root(gl, joints[order[0]]), root, rot, offsets, translations, path)
+    channels = _channels(saved_channels, J, moving)
+    ends = tuple((int(j), np.asarray(off, float)) for j, off in extras.get("end_sites", ())) if saved_channels else ()
+    names = tuple(n.name or f"joint{k}" for k, n in enumerate(nodes))
+    skel = Skeleton(names, par, offsets, channels, ends)
+    raw = Motion(skel, root, rot, frame_time, translations)
+    if end_nodes and not ends:
+        raw = raw.with_(skeleton=skel.with_(end_sites=_end_node_sites(raw, gl, joints, end_nodes, parents, new,
+                                                                     above_scale)))
+    rate_note = f"frame rate {1 / frame_time:.6g} Hz ({rate_how})"
+    return _understood(raw, path, clean, joint_map, length_scale, up, rate_note)

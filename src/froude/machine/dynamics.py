@@ -250,60 +250,158 @@ def _partial_step(px, py, vx, vy, ax1, ay1, s, tau0, invTc, K, a1, b, c):
     return pxn, pyn, vxn, vyn, g, gdot
 
 
-# Long because the batched RK4 loop with its event detection stays one body, line for line the twin of
-# _integrate_stance_scalar (the two must agree to 1e-12), with everything in locals (hot loop).
-def _integrate_stance(px, py, vx, vy, K, a, b, c, Tc, n_per_stance, max_stance):
-    """Integrate stance for N rows from touchdown to liftoff (or failure).
+def _rk4_node(px, py, vx, vy, ax1, ay1, h, tau0, htau, K, a1, b, c, arm):
+    """One classical RK4 step of size h (N,) [√(l0/g)] from the node (px, py, vx, vy) (N,) [l0], [√(g l0)] with
+    its acceleration (ax1, ay1) [g], written for x'' = f(t, x) (identical result, fewer operations); tau0 (N,)
+    the node's time / T_c, htau = h / T_c; arm: None (all armed) or (N,) bool. Returns the new node
+    (pxn, pyn, vxn, vyn) and l_d there (lde) [l0]."""
+    hh = 0.5 * h
+    h2 = h * h
+    tm = tau0 + 0.5 * htau
+    te = tau0 + htau
+    ldm = _desired_length(tm, a1, b, c)
+    lde = _desired_length(te, a1, b, c)
+    x2 = hh * vx
+    x2 += px
+    y2 = hh * vy
+    y2 += py
+    ax2, ay2, _ = _accel(x2, y2, ldm, K, arm)
+    q = 0.25 * h2
+    t3 = q * ax1
+    t3 += x2
+    u3 = q * ay1
+    u3 += y2
+    ax3, ay3, _ = _accel(t3, u3, ldm, K, arm)
+    xe = h * vx
+    xe += px
+    ye = h * vy
+    ye += py
+    q = 0.5 * h2
+    t4 = q * ax2
+    t4 += xe
+    u4 = q * ay2
+    u4 += ye
+    ax4, ay4, _ = _accel(t4, u4, lde, K, arm)
+    q = h2 * (1.0 / 6.0)
+    sx = ax1 + ax2
+    sx += ax3
+    pxn = q * sx
+    pxn += xe
+    sy = ay1 + ay2
+    sy += ay3
+    pyn = q * sy
+    pyn += ye
+    sx += ax2
+    sx += ax3
+    sx += ax4
+    sx *= h * (1.0 / 6.0)
+    vxn = sx
+    vxn += vx
+    sy += ay2
+    sy += ay3
+    sy += ay4
+    sy *= h * (1.0 / 6.0)
+    vyn = sy
+    vyn += vy
+    return pxn, pyn, vxn, vyn, lde
 
-    px, py: (N,) COM position relative to the contact [l0]; vx, vy: (N,) velocity; K, a, b, c,
-    Tc: (N,) control. Returns dict of (N,) arrays: t [√(l0/g)] stance duration, px, py, vx, vy at
-    liftoff, fmax [m g], reason (int8; OK / COLLAPSE / STALL / NO_LIFTOFF).
-    """
-    N = px.shape[0]
+
+def _liftoff(L, g1, gn, h, node, ctl, k: int):
+    """Liftoff of the rows L (N,) bool whose leg force ends within the step from node k: Newton on the partial
+    step size s ∈ (0, h]: g(node + s) = 0. g1, gn (N,) l_d − l at the step's ends; node = (px, py, vx, vy,
+    ax1, ay1) (N,) each; ctl = (tau0, invTc, K, a1, b, c) (N,) each. Returns (t (n_L,) the stance time
+    [√(l0/g)], px, py, vx, vy (n_L,) at liftoff)."""
+    g0 = np.maximum(g1[L], 0.0)
+    hL = h[L]
+    den = g0 - gn[L]
+    s = np.where(den > 0.0, hL * g0 / np.where(den > 0.0, den, 1.0), hL)
+    px, py, vx, vy, ax1, ay1 = (x[L] for x in node)
+    tau0, invTc, K, a1, b, c = (x[L] for x in ctl)
+    for _ in range(8):
+        qx, qy, wx, wy, gs, gd = _partial_step(px, py, vx, vy, ax1, ay1, s, tau0, invTc, K, a1, b, c)
+        ds = np.where(gd < 0.0, gs / gd, 0.0)
+        s = np.clip(s - ds, 0.0, hL)
+        if np.all(np.abs(ds) <= 1e-13):
+            break
+    qx, qy, wx, wy, gs, gd = _partial_step(px, py, vx, vy, ax1, ay1, s, tau0, invTc, K, a1, b, c)
+    return k * hL + s, qx, qy, wx, wy
+
+
+def _refined_peak(fm, fb, fa):
+    """Peak force [m g] per row: the vertex of the parabola through three equally spaced nodes (fb, fm, fa),
+    only where both neighbours exist and the max is a strict interior one; else the node's fm."""
+    den = fb - 2.0 * fm + fa
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d = np.where(den < 0.0, 0.5 * (fb - fa) / den, 0.0)
+        refined = fm - 0.25 * (fb - fa) * d
+    return np.where(np.isfinite(refined) & (np.abs(d) <= 1.0), refined, fm)
+
+
+def _finish(out: dict, rows, t, qx, qy, wx, wy, reason, peak) -> None:
+    """Write the liftoff (or failure) of rows into the (N,) arrays of out."""
+    out["t"][rows] = t
+    out["px"][rows] = qx
+    out["py"][rows] = qy
+    out["vx"][rows] = wx
+    out["vy"][rows] = wy
+    out["reason"][rows] = reason
+    out["fmax"][rows] = peak
+
+
+def _end_failed(finish, alive, pyn, vxn) -> None:
+    """End the rows still in stance (alive (N,) bool) whose new node has collapsed (COM height pyn ≤
+    MIN_COM_HEIGHT [l0]) or stalled (vxn ≤ 0), by finish(rows, t, px, py, vx, vy, reason) with NaN states;
+    the stalls after the collapses, so that a row ends once."""
+    b1 = alive & (pyn <= MIN_COM_HEIGHT)
+    if b1.any():
+        finish(b1, np.nan, np.nan, np.nan, np.nan, np.nan, COLLAPSE)
+    b1 = alive & (vxn <= 0.0)
+    if b1.any():
+        finish(b1, np.nan, np.nan, np.nan, np.nan, np.nan, STALL)
+
+
+def _stance_steps(K, Tc, n_per_stance, max_stance):
+    """(h [√(l0/g)], 1/T_c, h/T_c, the most steps before NO_LIFTOFF), each (N,): n_per_stance RK4 steps per
+    1/√(1/T_c² + K/π²), a time below both the nominal stance T_c and the spring's half period π/√K."""
     h = 1.0 / (n_per_stance * np.sqrt(1.0 / (Tc * Tc) + K * (1.0 / math.pi ** 2)))
     invTc = 1.0 / Tc
     htau = h * invTc
-    kmax = np.ceil(max_stance * Tc / h)
-    a1 = 1.0 + a
+    return h, invTc, htau, np.ceil(max_stance * Tc / h)
 
-    out_t = np.full(N, np.nan)
-    out_px = np.full(N, np.nan)
-    out_py = np.full(N, np.nan)
-    out_vx = np.full(N, np.nan)
-    out_vy = np.full(N, np.nan)
-    out_f = np.full(N, np.nan)
-    out_reason = np.full(N, NO_LIFTOFF, dtype=np.int8)
 
-    idx = np.arange(N)
+def _touchdown_accel(px, py, a1, K):
+    """(ax, ay) [g], g = max(l_d − l, 0) [l0] and armed (N,) bool at touchdown: a leg already compressed is
+    armed; the others push only once compressed (their force clamped at ≥ 0 until then)."""
     ax1, ay1, g1 = _accel(px, py, a1, K, None)
     armed = g1 > 0.0
     g1 = np.maximum(g1, 0.0)
     if not armed.all():
         ax1, ay1, _ = _accel(px, py, a1, K, armed)
+    return ax1, ay1, g1, armed
+
+
+def _integrate_stance(px, py, vx, vy, K, a, b, c, Tc, n_per_stance, max_stance):
+    """Integrate stance for N rows from touchdown to liftoff (or failure).
+
+    px, py: (N,) COM position relative to the contact [l0]; vx, vy: (N,) velocity; K, a, b, c,
+    Tc: (N,) control. Returns dict of (N,) arrays: t [√(l0/g)] stance duration, px, py, vx, vy at
+    liftoff, fmax [m g], reason (int8; OK / COLLAPSE / STALL / NO_LIFTOFF). The loop is the twin of
+    _integrate_stance_scalar's (the two must agree to 1e-12).
+    """
+    N = px.shape[0]
+    h, invTc, htau, kmax = _stance_steps(K, Tc, n_per_stance, max_stance)
+    a1 = 1.0 + a
+    out = {key: np.full(N, np.nan) for key in ("t", "px", "py", "vx", "vy", "fmax")}
+    out["reason"] = np.full(N, NO_LIFTOFF, dtype=np.int8)
+    idx = np.arange(N)
+    ax1, ay1, g1, armed = _touchdown_accel(px, py, a1, K)
     alive = np.ones(N, bool)
     # Peak-force tracking: value at the max node and its two neighbours (parabolic refinement).
     f_prev = K * g1
-    fmax = f_prev.copy()
-    f_before = np.full(N, np.nan)
-    f_after = np.full(N, np.nan)
-    just_max = np.ones(N, bool)
+    fmax, f_before, f_after, just_max = f_prev.copy(), np.full(N, np.nan), np.full(N, np.nan), np.ones(N, bool)
 
     def finish(sel, t, qx, qy, wx, wy, reason):
-        rows = idx[sel]
-        out_t[rows] = t
-        out_px[rows] = qx
-        out_py[rows] = qy
-        out_vx[rows] = wx
-        out_vy[rows] = wy
-        out_reason[rows] = reason
-        fm, fb, fa = fmax[sel], f_before[sel], f_after[sel]
-        # Vertex of the parabola through three equally spaced nodes; only where both
-        # neighbours exist and the max is a strict interior one.
-        den = fb - 2.0 * fm + fa
-        with np.errstate(invalid="ignore", divide="ignore"):
-            d = np.where(den < 0.0, 0.5 * (fb - fa) / den, 0.0)
-            refined = fm - 0.25 * (fb - fa) * d
-        out_f[rows] = np.where(np.isfinite(refined) & (np.abs(d) <= 1.0), refined, fm)
+        _finish(out, idx[sel], t, qx, qy, wx, wy, reason, _refined_peak(fmax[sel], f_before[sel], f_after[sel]))
         alive[sel] = False
 
     kmin_max = kmax.min() if N else 0.0
@@ -311,57 +409,9 @@ def _integrate_stance(px, py, vx, vy, K, a, b, c, Tc, n_per_stance, max_stance):
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         while idx.size:
             all_armed = bool(armed.all())
-            arm = None if all_armed else armed
-            hh = 0.5 * h
-            h2 = h * h
             tau0 = k * htau
-            tm = tau0 + 0.5 * htau
-            te = tau0 + htau
-            ldm = _desired_length(tm, a1, b, c)
-            lde = _desired_length(te, a1, b, c)
-            # Classical RK4 written for x'' = f(t, x) (identical result, fewer operations).
-            x2 = hh * vx
-            x2 += px
-            y2 = hh * vy
-            y2 += py
-            ax2, ay2, _ = _accel(x2, y2, ldm, K, arm)
-            q = 0.25 * h2
-            t3 = q * ax1
-            t3 += x2
-            u3 = q * ay1
-            u3 += y2
-            ax3, ay3, _ = _accel(t3, u3, ldm, K, arm)
-            xe = h * vx
-            xe += px
-            ye = h * vy
-            ye += py
-            q = 0.5 * h2
-            t4 = q * ax2
-            t4 += xe
-            u4 = q * ay2
-            u4 += ye
-            ax4, ay4, _ = _accel(t4, u4, lde, K, arm)
-            q = h2 * (1.0 / 6.0)
-            sx = ax1 + ax2
-            sx += ax3
-            pxn = q * sx
-            pxn += xe
-            sy = ay1 + ay2
-            sy += ay3
-            pyn = q * sy
-            pyn += ye
-            sx += ax2
-            sx += ax3
-            sx += ax4
-            sx *= h * (1.0 / 6.0)
-            vxn = sx
-            vxn += vx
-            sy += ay2
-            sy += ay3
-            sy += ay4
-            sy *= h * (1.0 / 6.0)
-            vyn = sy
-            vyn += vy
+            pxn, pyn, vxn, vyn, lde = _rk4_node(px, py, vx, vy, ax1, ay1, h, tau0, htau, K, a1, b, c,
+                                                None if all_armed else armed)
             # Acceleration at the new node: stage 1 of the next step, and the event function.
             ax1n, ay1n, gn = _accel(pxn, pyn, lde, K, None)
 
@@ -369,35 +419,15 @@ def _integrate_stance(px, py, vx, vy, K, a, b, c, Tc, n_per_stance, max_stance):
             lift &= armed
             lift &= alive
             if lift.any():
-                # Newton on the partial step size s ∈ (0, h]: g(node + s) = 0.
-                L = lift
-                g0 = np.maximum(g1[L], 0.0)
-                hL = h[L]
-                den = g0 - gn[L]
-                s = np.where(den > 0.0, hL * g0 / np.where(den > 0.0, den, 1.0), hL)
-                args = (px[L], py[L], vx[L], vy[L], ax1[L], ay1[L])
-                ctl = (tau0[L], invTc[L], K[L], a1[L], b[L], c[L])
-                for _ in range(8):
-                    qx, qy, wx, wy, gs, gd = _partial_step(*args, s, *ctl)
-                    ds = np.where(gd < 0.0, gs / gd, 0.0)
-                    s = np.clip(s - ds, 0.0, hL)
-                    if np.all(np.abs(ds) <= 1e-13):
-                        break
-                qx, qy, wx, wy, gs, gd = _partial_step(*args, s, *ctl)
-                finish(L, k * hL + s, qx, qy, wx, wy, OK)
-
+                t_lo, qx, qy, wx, wy = _liftoff(lift, g1, gn, h, (px, py, vx, vy, ax1, ay1),
+                                                (tau0, invTc, K, a1, b, c), k)
+                finish(lift, t_lo, qx, qy, wx, wy, OK)
             armed |= gn > 0.0
-            # Failures (only rows still in stance).
             # Failures (only rows still in stance); one combined test first, it rarely fires.
             bad = pyn <= MIN_COM_HEIGHT
             bad |= vxn <= 0.0
             if bad.any():
-                b1 = alive & (pyn <= MIN_COM_HEIGHT)
-                if b1.any():
-                    finish(b1, np.nan, np.nan, np.nan, np.nan, np.nan, COLLAPSE)
-                b1 = alive & (vxn <= 0.0)
-                if b1.any():
-                    finish(b1, np.nan, np.nan, np.nan, np.nan, np.nan, STALL)
+                _end_failed(finish, alive, pyn, vxn)
             if k + 1 >= kmin_max:
                 b1 = alive & (k + 1 >= kmax)
                 if b1.any():
@@ -422,23 +452,77 @@ def _integrate_stance(px, py, vx, vy, K, a, b, c, Tc, n_per_stance, max_stance):
                 break
             if n_alive < 0.75 * idx.size:
                 # Compact: drop finished rows so later steps only pay for live ones.
-                keep = alive
-                idx = idx[keep]
-                px, py, vx, vy = px[keep], py[keep], vx[keep], vy[keep]
-                ax1, ay1, g1 = ax1[keep], ay1[keep], g1[keep]
-                K, a1, b, c = K[keep], a1[keep], b[keep], c[keep]
-                h, htau, invTc, kmax = h[keep], htau[keep], invTc[keep], kmax[keep]
-                armed = armed[keep]
-                f_prev, fmax, f_before, f_after = f_prev[keep], fmax[keep], f_before[keep], f_after[keep]
-                just_max = just_max[keep]
+                (idx, px, py, vx, vy, ax1, ay1, g1, K, a1, b, c, h, htau, invTc, kmax, armed, f_prev, fmax,
+                 f_before, f_after, just_max) = (x[alive] for x in (
+                    idx, px, py, vx, vy, ax1, ay1, g1, K, a1, b, c, h, htau, invTc, kmax, armed, f_prev, fmax,
+                    f_before, f_after, just_max))
                 alive = np.ones(idx.size, bool)
                 kmin_max = kmax.min()
-    return {"t": out_t, "px": out_px, "py": out_py, "vx": out_vx, "vy": out_vy, "fmax": out_f,
-            "reason": out_reason}
+    return out
 
 
-# Long because it is the plain-float twin of _integrate_stance, kept line for line comparable with it
-# (hot loop: function calls per RK4 stage would cost more than the stage).
+def _stance_steps_scalar(K, Tc, n_per_stance, max_stance):
+    """Plain-float twin of :func:`_stance_steps`: (h [√(l0/g)], 1/T_c, h/T_c, the most steps (int))."""
+    h = 1.0 / (n_per_stance * math.sqrt(1.0 / (Tc * Tc) + K * (1.0 / math.pi ** 2)))
+    invTc = 1.0 / Tc
+    return h, invTc, h * invTc, math.ceil(max_stance * Tc / h)
+
+
+def _partial_step_scalar(acc, px, py, vx, vy, ax1, ay1, s, tau0, invTc, a1, b, c):
+    """Plain-float twin of :func:`_partial_step` (one RK4 step of size s, armed), acc the row's
+    acceleration (x, y, l_d, armed) -> (ax, ay, g). Returns (px, py, vx, vy, g, dg/dt) at its end."""
+    hs = 0.5 * s
+    s2 = s * s
+    tm = tau0 + hs * invTc
+    te = tau0 + s * invTc
+    ldm = a1 + tm * (b + c * tm)
+    lde = a1 + te * (b + c * te)
+    x2 = px + hs * vx
+    y2 = py + hs * vy
+    ax2, ay2, _ = acc(x2, y2, ldm, True)
+    ax3, ay3, _ = acc(x2 + 0.25 * s2 * ax1, y2 + 0.25 * s2 * ay1, ldm, True)
+    xe = px + s * vx
+    ye = py + s * vy
+    ax4, ay4, _ = acc(xe + 0.5 * s2 * ax2, ye + 0.5 * s2 * ay2, lde, True)
+    s6 = s / 6.0
+    pxn = xe + s * s6 * (ax1 + ax2 + ax3)
+    pyn = ye + s * s6 * (ay1 + ay2 + ay3)
+    vxn = vx + s6 * (ax1 + 2.0 * (ax2 + ax3) + ax4)
+    vyn = vy + s6 * (ay1 + 2.0 * (ay2 + ay3) + ay4)
+    l = math.sqrt(pxn * pxn + pyn * pyn)
+    return pxn, pyn, vxn, vyn, lde - l, (b + 2.0 * c * te) * invTc - (pxn * vxn + pyn * vyn) / l
+
+
+def _liftoff_scalar(acc, node, g1, gn, h, k, tau0, invTc, a1, b, c):
+    """Plain-float twin of :func:`_liftoff` for one row: Newton on the partial step size s ∈ (0, h] from node
+    k = (px, py, vx, vy, ax1, ay1). Returns (t [√(l0/g)], px, py, vx, vy at liftoff, its node (t, px, py,
+    vx, vy, ax, ay))."""
+    px, py, vx, vy, ax1, ay1 = node
+    g0 = max(g1, 0.0)
+    s = h * g0 / (g0 - gn) if g0 - gn > 0.0 else h
+    for _ in range(8):
+        qx, qy, wx, wy, gs, gd = _partial_step_scalar(acc, px, py, vx, vy, ax1, ay1, s, tau0, invTc, a1, b, c)
+        ds = gs / gd if gd < 0.0 else 0.0
+        s = min(max(s - ds, 0.0), h)
+        if abs(ds) <= 1e-13:
+            break
+    qx, qy, wx, wy, gs, gd = _partial_step_scalar(acc, px, py, vx, vy, ax1, ay1, s, tau0, invTc, a1, b, c)
+    t_lo = k * h + s
+    tl = t_lo * invTc
+    axl, ayl, _ = acc(qx, qy, a1 + tl * (b + c * tl), True)
+    return t_lo, qx, qy, wx, wy, (t_lo, qx, qy, wx, wy, axl, ayl)
+
+
+def _refined_peak_scalar(fmax, f_before, f_after):
+    """Plain-float twin of :func:`_refined_peak` for one row [m g]."""
+    den = f_before - 2.0 * fmax + f_after
+    if den < 0.0:
+        d = 0.5 * (f_before - f_after) / den
+        if abs(d) <= 1.0:
+            return fmax - 0.25 * (f_before - f_after) * d
+    return fmax
+
+
 def _integrate_stance_scalar(px, py, vx, vy, K, a, b, c, Tc, n_per_stance, max_stance,
                              record=False):
     """Single-row twin of :func:`_integrate_stance` in plain floats (no NumPy per-call overhead:
@@ -449,10 +533,7 @@ def _integrate_stance_scalar(px, py, vx, vy, K, a, b, c, Tc, n_per_stance, max_s
     tuples from touchdown to the liftoff node inclusive.
     """
     sqrt = math.sqrt
-    h = 1.0 / (n_per_stance * sqrt(1.0 / (Tc * Tc) + K * (1.0 / math.pi ** 2)))
-    invTc = 1.0 / Tc
-    htau = h * invTc
-    kmax = math.ceil(max_stance * Tc / h)
+    h, invTc, htau, kmax = _stance_steps_scalar(K, Tc, n_per_stance, max_stance)
     a1 = 1.0 + a
 
     def acc(x, y, ld, armed):
@@ -463,44 +544,17 @@ def _integrate_stance_scalar(px, py, vx, vy, K, a, b, c, Tc, n_per_stance, max_s
         fl = K * g / l
         return fl * x, fl * y - 1.0, g
 
-    def partial(px, py, vx, vy, ax1, ay1, s, tau0):
-        hs = 0.5 * s
-        s2 = s * s
-        tm = tau0 + hs * invTc
-        te = tau0 + s * invTc
-        ldm = a1 + tm * (b + c * tm)
-        lde = a1 + te * (b + c * te)
-        x2 = px + hs * vx
-        y2 = py + hs * vy
-        ax2, ay2, _ = acc(x2, y2, ldm, True)
-        ax3, ay3, _ = acc(x2 + 0.25 * s2 * ax1, y2 + 0.25 * s2 * ay1, ldm, True)
-        xe = px + s * vx
-        ye = py + s * vy
-        ax4, ay4, _ = acc(xe + 0.5 * s2 * ax2, ye + 0.5 * s2 * ay2, lde, True)
-        s6 = s / 6.0
-        pxn = xe + s * s6 * (ax1 + ax2 + ax3)
-        pyn = ye + s * s6 * (ay1 + ay2 + ay3)
-        vxn = vx + s6 * (ax1 + 2.0 * (ax2 + ax3) + ax4)
-        vyn = vy + s6 * (ay1 + 2.0 * (ay2 + ay3) + ay4)
-        l = sqrt(pxn * pxn + pyn * pyn)
-        return pxn, pyn, vxn, vyn, lde - l, (b + 2.0 * c * te) * invTc - (pxn * vxn + pyn * vyn) / l
-
     ax1, ay1, g1 = acc(px, py, a1, True)
     armed = g1 > 0.0
     if not armed:
         g1 = 0.0
         ax1, ay1, _ = acc(px, py, a1, False)
     fmax = f_prev = K * g1
-    f_before = f_after = math.nan
-    just_max = True
+    f_before, f_after, just_max = math.nan, math.nan, True
     nodes = [(0.0, px, py, vx, vy, ax1, ay1)]  # kept only with ``record``
-    nan = math.nan
-    out = {"t": nan, "px": nan, "py": nan, "vx": nan, "vy": nan, "fmax": nan, "reason": NO_LIFTOFF}
+    out = dict.fromkeys(("t", "px", "py", "vx", "vy", "fmax"), math.nan) | {"reason": NO_LIFTOFF}
     k = 0
-    q4 = 0.25 * h * h
-    q2 = 0.5 * h * h
-    q6 = h * h / 6.0
-    h6 = h / 6.0
+    q4, q2, q6, h6 = 0.25 * h * h, 0.5 * h * h, h * h / 6.0, h / 6.0
     while True:
         tau0 = k * htau
         tm = tau0 + 0.5 * htau
@@ -520,37 +574,16 @@ def _integrate_stance_scalar(px, py, vx, vy, K, a, b, c, Tc, n_per_stance, max_s
         vyn = vy + h6 * (ay1 + 2.0 * (ay2 + ay3) + ay4)
         ax1n, ay1n, gn = acc(pxn, pyn, lde, True)
         if armed and gn <= 0.0:
-            g0 = max(g1, 0.0)
-            s = h * g0 / (g0 - gn) if g0 - gn > 0.0 else h
-            for _ in range(8):
-                qx, qy, wx, wy, gs, gd = partial(px, py, vx, vy, ax1, ay1, s, tau0)
-                ds = gs / gd if gd < 0.0 else 0.0
-                s = min(max(s - ds, 0.0), h)
-                if abs(ds) <= 1e-13:
-                    break
-            qx, qy, wx, wy, gs, gd = partial(px, py, vx, vy, ax1, ay1, s, tau0)
-            den = f_before - 2.0 * fmax + f_after
-            fpk = fmax
-            if den < 0.0:
-                d = 0.5 * (f_before - f_after) / den
-                if abs(d) <= 1.0:
-                    fpk = fmax - 0.25 * (f_before - f_after) * d
-            out.update(t=k * h + s, px=qx, py=qy, vx=wx, vy=wy, fmax=fpk, reason=OK)
+            t_lo, qx, qy, wx, wy, node = _liftoff_scalar(acc, (px, py, vx, vy, ax1, ay1), g1, gn, h, k, tau0,
+                                                         invTc, a1, b, c)
+            out.update(t=t_lo, px=qx, py=qy, vx=wx, vy=wy, fmax=_refined_peak_scalar(fmax, f_before, f_after),
+                       reason=OK)
             if record:
-                t_lo = k * h + s
-                tl = t_lo * invTc
-                axl, ayl, _ = acc(qx, qy, a1 + tl * (b + c * tl), True)
-                nodes.append((t_lo, qx, qy, wx, wy, axl, ayl))
+                nodes.append(node)
             break
         armed = armed or gn > 0.0
-        if pyn <= MIN_COM_HEIGHT:
-            out["reason"] = COLLAPSE
-            break
-        if vxn <= 0.0:
-            out["reason"] = STALL
-            break
-        if k + 1 >= kmax:
-            out["reason"] = NO_LIFTOFF
+        if pyn <= MIN_COM_HEIGHT or vxn <= 0.0 or k + 1 >= kmax:
+            out["reason"] = COLLAPSE if pyn <= MIN_COM_HEIGHT else STALL if vxn <= 0.0 else NO_LIFTOFF
             break
         fn = K * max(gn, 0.0)
         if just_max:
@@ -718,36 +751,28 @@ def _hermite(t0, t1, y0, d0, y1, d1, t):
             + (-2 * s3 + 3 * s2) * y1 + (s3 - s2) * hh * d1)
 
 
-# Long because stance nodes and flight parabolas are sampled in one loop over steps, which keeps the
-# sample order and the apex continuity between steps in one place.
-def simulate(U, H, theta0, control, dt, *, n_steps=None, n_per_stance=N_PER_STANCE,
-             max_stance=MAX_STANCE_FACTOR, times=None):
-    """Dense trajectory of the machine over a sequence of steps, for synthesis.
+@dataclass(frozen=True)
+class _StepEvents:
+    """The events of n simulated steps (dimensionless): apexes (n+1,) t [√(l0/g)], U [√(g l0)], H, x [l0];
+    per step (n,) touchdown and liftoff times, contact x, peak force [m g], and its stance's RK4 nodes
+    (M, 7): t, px, py, vx, vy, ax, ay in the run's frame (x from the start)."""
 
-    U, H:     starting apex state (scalars) [√(g l0)], [l0]; the run starts at x = 0, t = 0
-    theta0:   touchdown angle [rad], a scalar (then ``n_steps`` is required) or a sequence (n,)
-    control:  a :class:`Control` (all steps) or a sequence of n Controls (per step)
-    dt:       sample spacing [√(l0/g)]
-    times:    optional explicit sample times (S,) in [0, t_apex[-1]] [√(l0/g)] instead of k·dt
-              (e.g. one stride sampled at output frame times modulo the stride, to tile a periodic gait)
+    t_apex: np.ndarray
+    U_apex: np.ndarray
+    H_apex: np.ndarray
+    x_apex: np.ndarray
+    t_touchdown: np.ndarray
+    t_liftoff: np.ndarray
+    contact_x: np.ndarray
+    peak_force: np.ndarray
+    stance_nodes: list
 
-    Returns a :class:`Trajectory`. Stance samples use cubic Hermite interpolation of the same RK4
-    nodes that :func:`step` uses (so apex states agree with :func:`step` exactly); flight
-    samples are exact parabolas. Raises PlanError naming the step and reason if a step is invalid.
-    """
-    th = np.atleast_1d(np.asarray(theta0, float))
-    if th.size == 1 and n_steps is not None:
-        th = np.full(int(n_steps), th[0])
+
+def _step_events(U, H, th, controls, n_per_stance, max_stance) -> _StepEvents:
+    """The steps from apex (U, H) at x = 0, t = 0 with touchdown angles th (n,) [rad] and controls (n
+    Controls), through the plain-float integrator (the nodes :func:`step` uses). Raises PlanError naming the
+    step and reason if a step is invalid."""
     n = th.size
-    if isinstance(control, Control):
-        controls = (control,) * n
-    else:
-        controls = tuple(control)
-        if len(controls) != n:
-            raise PlanError(f"got {len(controls)} controls for {n} steps")
-    if not dt > 0:
-        raise PlanError(f"dt must be > 0, got {dt}")
-
     t_apex = np.zeros(n + 1)
     U_ap = np.zeros(n + 1)
     H_ap = np.zeros(n + 1)
@@ -788,35 +813,33 @@ def simulate(U, H, theta0, control, dt, *, n_steps=None, n_per_stance=N_PER_STAN
         H_ap[i + 1] = float(res["py"]) + 0.5 * vy * vy
         t_apex[i + 1] = t_lo[i] + vy
         x_ap[i + 1] = xc[i] + float(res["px"]) + U_ap[i + 1] * vy
+    return _StepEvents(t_apex, U_ap, H_ap, x_ap, t_td, t_lo, xc, fpk, stance_nodes)
 
-    if times is None:
-        S = int(math.floor(t_apex[-1] / dt + 1e-9)) + 1
-        t = np.arange(S) * dt
-    else:
-        t = np.clip(np.asarray(times, float), 0.0, t_apex[-1])
-        S = t.size
-    pos = np.zeros((S, 2))
-    vel = np.zeros((S, 2))
-    force = np.zeros((S, 2))
-    contact = np.full((S, 2), np.nan)
-    stance = np.zeros(S, bool)
-    sidx = np.clip(np.searchsorted(t_apex, t, side="right") - 1, 0, n - 1)
-    # Flight before touchdown of step i (from apex i), after liftoff of step i (to apex i+1).
-    pre = t < t_td[sidx]
-    post = t > t_lo[sidx]
+
+def _flight_samples(ev: _StepEvents, t, sidx, pos, vel):
+    """Fill pos, vel (S, 2) [l0], [√(g l0)] at the flight samples (exact parabolas): before touchdown of
+    step i (from apex i) and after its liftoff (to apex i+1); t (S,) [√(l0/g)], sidx (S,) each sample's
+    step. Returns the stance samples (S,) bool."""
+    pre = t < ev.t_touchdown[sidx]
+    post = t > ev.t_liftoff[sidx]
     for mask, which in ((pre, 0), (post, 1)):
         j = sidx[mask]
-        ta = t_apex[j + which]
+        ta = ev.t_apex[j + which]
         dtt = t[mask] - ta
-        pos[mask, 0] = x_ap[j + which] + U_ap[j + which] * dtt
-        pos[mask, 1] = H_ap[j + which] - 0.5 * dtt * dtt
-        vel[mask, 0] = U_ap[j + which]
+        pos[mask, 0] = ev.x_apex[j + which] + ev.U_apex[j + which] * dtt
+        pos[mask, 1] = ev.H_apex[j + which] - 0.5 * dtt * dtt
+        vel[mask, 0] = ev.U_apex[j + which]
         vel[mask, 1] = -dtt
-    st = ~pre & ~post
-    stance[st] = True
+    return ~pre & ~post
+
+
+def _stance_samples(ev: _StepEvents, controls, t, sidx, st, pos, vel, force, contact) -> None:
+    """Fill pos, vel, force (S, 2) and contact (S, 2) at the stance samples st (S,) bool: cubic Hermite
+    interpolation of each step's RK4 nodes, and the force evaluated from the model at the interpolated
+    position (exact eq. 2), not interpolated: f = K (l_d − l) along the leg [m g]."""
     for i in np.unique(sidx[st]):
         m = st & (sidx == i)
-        arr = stance_nodes[i]
+        arr = ev.stance_nodes[i]
         tq = t[m]
         k = np.clip(np.searchsorted(arr[:, 0], tq, side="right") - 1, 0, arr.shape[0] - 2)
         n0, n1 = arr[k], arr[k + 1]
@@ -825,17 +848,61 @@ def simulate(U, H, theta0, control, dt, *, n_steps=None, n_per_stance=N_PER_STAN
                                  n1[:, 3 + d], tq)
             vel[m, d] = _hermite(n0[:, 0], n1[:, 0], n0[:, 3 + d], n0[:, 5 + d], n1[:, 3 + d],
                                  n1[:, 5 + d], tq)
-        # The force is evaluated from the model at the interpolated position (exact eq. 2),
-        # not interpolated: f = K (l_d − l) along the leg.
         ctl = controls[i]
-        rel = pos[m] - np.array([xc[i], 0.0])
+        xc = ev.contact_x[i]
+        rel = pos[m] - np.array([xc, 0.0])
         l = np.linalg.norm(rel, axis=1)
-        tau = (tq - t_td[i]) / ctl.T_c
+        tau = (tq - ev.t_touchdown[i]) / ctl.T_c
         g = 1.0 + ctl.a + tau * (ctl.b + ctl.c * tau) - l
         f = ctl.K * np.maximum(g, 0.0)
         force[m] = (f / l)[:, None] * rel
-        contact[m] = (xc[i], 0.0)
+        contact[m] = (xc, 0.0)
+
+
+def simulate(U, H, theta0, control, dt, *, n_steps=None, n_per_stance=N_PER_STANCE,
+             max_stance=MAX_STANCE_FACTOR, times=None):
+    """Dense trajectory of the machine over a sequence of steps, for synthesis.
+
+    U, H:     starting apex state (scalars) [√(g l0)], [l0]; the run starts at x = 0, t = 0
+    theta0:   touchdown angle [rad], a scalar (then ``n_steps`` is required) or a sequence (n,)
+    control:  a :class:`Control` (all steps) or a sequence of n Controls (per step)
+    dt:       sample spacing [√(l0/g)]
+    times:    optional explicit sample times (S,) in [0, t_apex[-1]] [√(l0/g)] instead of k·dt
+              (e.g. one stride sampled at output frame times modulo the stride, to tile a periodic gait)
+
+    Returns a :class:`Trajectory`. Stance samples use cubic Hermite interpolation of the same RK4
+    nodes that :func:`step` uses (so apex states agree with :func:`step` exactly); flight
+    samples are exact parabolas. Raises PlanError naming the step and reason if a step is invalid.
+    """
+    th = np.atleast_1d(np.asarray(theta0, float))
+    if th.size == 1 and n_steps is not None:
+        th = np.full(int(n_steps), th[0])
+    n = th.size
+    if isinstance(control, Control):
+        controls = (control,) * n
+    else:
+        controls = tuple(control)
+        if len(controls) != n:
+            raise PlanError(f"got {len(controls)} controls for {n} steps")
+    if not dt > 0:
+        raise PlanError(f"dt must be > 0, got {dt}")
+    ev = _step_events(U, H, th, controls, n_per_stance, max_stance)
+    if times is None:
+        S = int(math.floor(ev.t_apex[-1] / dt + 1e-9)) + 1
+        t = np.arange(S) * dt
+    else:
+        t = np.clip(np.asarray(times, float), 0.0, ev.t_apex[-1])
+        S = t.size
+    pos = np.zeros((S, 2))
+    vel = np.zeros((S, 2))
+    force = np.zeros((S, 2))
+    contact = np.full((S, 2), np.nan)
+    stance = np.zeros(S, bool)
+    sidx = np.clip(np.searchsorted(ev.t_apex, t, side="right") - 1, 0, n - 1)
+    st = _flight_samples(ev, t, sidx, pos, vel)
+    stance[st] = True
+    _stance_samples(ev, controls, t, sidx, st, pos, vel, force, contact)
     return Trajectory(t=t, pos=pos, vel=vel, force=force, stance=stance, contact=contact,
-                      step_index=sidx, t_apex=t_apex, U_apex=U_ap, H_apex=H_ap, x_apex=x_ap,
-                      t_touchdown=t_td, t_liftoff=t_lo, contact_x=xc, theta0=th,
-                      peak_force=fpk, controls=controls)
+                      step_index=sidx, t_apex=ev.t_apex, U_apex=ev.U_apex, H_apex=ev.H_apex, x_apex=ev.x_apex,
+                      t_touchdown=ev.t_touchdown, t_liftoff=ev.t_liftoff, contact_x=ev.contact_x, theta0=th,
+                      peak_force=ev.peak_force, controls=controls)

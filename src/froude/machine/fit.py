@@ -244,23 +244,10 @@ def _upsampled(motion: Motion, body: BodyModel, fps: float) -> tuple[Motion, np.
     return out, CubicSpline(t_src, com, axis=0)(t), CubicSpline(t_src, markers, axis=0)(t)
 
 
-# Long because the §4 fit is one sequential pass (events → stance geometry → control → priors → cycle →
-# reference comparisons) whose many intermediates all end up in FitResult; split, they would travel
-# between the pieces as a dozen loose arrays.
-def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: float = 70.0, *,
-                         cutoff_hz: float = CUTOFF_HZ, n_per_stance: int = N_PER_STANCE,
-                         source: str | None = None) -> FitResult:
-    """Fit the simple running machine to a running motion, with everything needed to report on it.
-
-    motion: the reference (SI); body: its BodyModel (built from the skeleton with ``mass`` if None);
-    mass: body mass [kg]; cutoff_hz: COM low-pass cutoff [Hz]; n_per_stance: simulator resolution.
-    Raises NotARunningMotion (walks, jumps in place, < 2 full stances) or FitError.
-    """
-    src = source or str(motion.meta.get("source") or "motion")
-    if body is None:
-        body = BodyModel.from_skeleton(motion.skeleton, mass=mass)
-    mass = body.total_mass
-    mg = mass * GRAVITY
+def _analysis_motion(motion: Motion, body: BodyModel, src: str):
+    """(motion, com (F, 3) [m], markers (F, 2, 3, 3) [m], gait, summary) that the fit measures: the clip, or
+    it upsampled to ANALYSIS_FPS when slower; the summary carries the clip's own mean speed and cadence.
+    Raises NotARunningMotion for a walk, a jump in place or fewer than 2 full stances."""
     # The clip's own figures (what ``info`` prints) set the cycle's cadence and speed.
     clip_summary = summarize(motion, body)
     require_running(clip_summary, src)
@@ -280,18 +267,15 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
             f"{src}: only {sum(not st.partial for st in gait.stances)} complete stance phase(s) "
             f"(of {len(gait.stances)} contacts); "
             "the fit needs two consecutive full stances (one step) and a stride of events")
-    dt = motion.frame_time
-    F = motion.n_frames
-    times = np.arange(F) * dt
-    p, v, acc = smooth_com(com, dt, cutoff_hz)
-    f = ground_force(acc, mass)
-    fy_bw = f[:, UP_AXIS] / mg
-    heading, _, lateral = heading_frame(summary.heading)
+    return motion, com, markers, gait, summary
 
-    # Lateral COM line (least squares over the clip): sway and foot offsets are measured from it.
-    lat = p @ lateral
-    line = np.polyfit(times, lat, 1)
 
+def _stance_geometries(gait, p, f, fy_bw, markers, heading, lateral, line, dt: float, src: str):
+    """(geo, stances): the StanceGeometry (force-refined events) of every contact with something to measure,
+    and its Stance. p, f (F, 3): filtered COM [m] and ground force [N]; fy_bw (F,) vertical force [body
+    weights]; heading, lateral (3,) unit axes; line: the lateral COM line (polyfit of [m] over [s]); dt [s].
+    Raises NotARunningMotion when no stance is seen whole in the force."""
+    F = p.shape[0]
     geo = []
     stances = []
     contact_s = [(st.t_off - st.t_on) * dt for st in gait.stances if not st.partial]
@@ -320,25 +304,19 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         if lo_c > td_c and (td_c, lo_c) != (td, lo):
             sg = replace(sg, t_touchdown=td_c * dt, t_liftoff=lo_c * dt)
         geo.append(sg)
-    full = [sg for sg in geo if not sg.partial]
-    if not full:
+    if not any(not sg.partial for sg in geo):
         # Full stances by the markers whose force events both fall near the clip's edges (where the COM
         # filter's extension holds the force up) are measured as cut: nothing is left to fit the control to.
         raise NotARunningMotion(
             f"{src}: no stance with both its touchdown and liftoff seen in the ground force inside the clip "
             f"(of {len(gait.stances)} contacts; near the clip's edges the filtered force does not show them); "
             "the fit needs two consecutive full stances")
+    return geo, stances
 
-    # Per-stance and pooled control fits (dimensionless).
-    fits = []
-    for sg in geo:
-        fits.append(None if sg.partial else fit_stance_control(sg.tau, sg.l / sg.l0, sg.f_leg / mg))
-    pooled = fit_stance_control(np.concatenate([s.tau for s in full]),
-                                np.concatenate([s.l / s.l0 for s in full]),
-                                np.concatenate([s.f_leg / mg for s in full]))
 
-    # Measured figures.
-    ev = _events(geo, stances, F)
+def _step_times(geo, stances, full, summary, F: int, src: str):
+    """(flights [(liftoff, touchdown) s], stance time [s], measured flight time [s], the cycle's flight time
+    [s]) of the clip. Raises NotARunningMotion without a complete flight."""
     flights = [(geo[i].t_liftoff, geo[i + 1].t_touchdown) for i in range(len(geo) - 1)
                if stances[i].stop < F and stances[i + 1].start > 0]
     if not flights:
@@ -354,63 +332,51 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     flight_time = step_period_s - stance_time
     if not flight_time > 0.2 * stance_time:
         flight_time = flight_time_measured  # contacts too few to trust the period: keep the measured flight
-    win = _stride_window(ev)
-    if win is None:
-        raise NotARunningMotion(f"{src}: no complete stride (touchdown, liftoff, touchdown, liftoff, touchdown "
-                                "or the same from a liftoff) inside the clip")
-    e = np.array([t for t, _, _ in win])
-    kinds = tuple(k for _, k, _ in win)
-    x_fwd = p @ heading
-    stride_speed = float((np.interp(e[4], times, x_fwd) - np.interp(e[0], times, x_fwd)) / (e[4] - e[0]))
-    # The machine runs at the clip's mean speed (``info``'s: first to last frame), not one stride's: on a
-    # take whose speed changes the two differ, and the speed factor must refer to what ``info`` printed.
-    mean_speed = float(summary.mean_speed)
+    return flights, stance_time, flight_time_measured, flight_time
 
-    def ground_at(t):
-        """Ground height under the runner at times t: the stance's during stance, interpolated in flight."""
-        tk = np.array([0.5 * (s.t_touchdown + s.t_liftoff) for s in geo])
-        gk = np.array([s.ground for s in geo])
-        g_t = np.interp(t, tk, gk)
-        for s in geo:
-            g_t = np.where((t >= s.t_touchdown) & (t <= s.t_liftoff), s.ground, g_t)
-        return g_t
 
+def _ground_at(geo, t):
+    """Ground height [m] under the runner at times t [s] (any shape): the stance's during stance, interpolated
+    in flight between the stances' mid-times."""
+    tk = np.array([0.5 * (s.t_touchdown + s.t_liftoff) for s in geo])
+    gk = np.array([s.ground for s in geo])
+    g_t = np.interp(t, tk, gk)
+    for s in geo:
+        g_t = np.where((t >= s.t_touchdown) & (t <= s.t_liftoff), s.ground, g_t)
+    return g_t
+
+
+def _flight_apexes(flights, times, p, v, heading, geo):
+    """([apex height above the ground [m]], [mean forward speed [m/s]]) of each flight with ≥ 2 frames;
+    times (F,) [s], p, v (F, 3) filtered COM [m], [m/s]."""
     apex_h, apex_u = [], []
     for a, b in flights:
         m = (times >= a) & (times <= b)
         if m.sum() >= 2:
-            apex_h.append(float(np.max(p[m, UP_AXIS] - ground_at(times[m]))))
+            apex_h.append(float(np.max(p[m, UP_AXIS] - _ground_at(geo, times[m]))))
             apex_u.append(float(np.mean(v[m] @ heading)))
+    return apex_h, apex_u
+
+
+def _residual_flight_mask(gait, geo, F: int):
+    """(F,) bool: the frames of the flight residual: marker flights less a guard of RESIDUAL_GUARD_FRAMES at
+    each end, where the zero-lag filter necessarily spreads the landing impact (its smoothing half-width),
+    and outside every force stance."""
     in_stance = np.zeros(F, bool)
     for s in geo:
         in_stance[s.frames] = True
-    # Flight frames for the residual: marker flights less a guard of RESIDUAL_GUARD_FRAMES at each end,
-    # where the zero-lag filter necessarily spreads the landing impact (its smoothing half-width)
     marker_flight = np.zeros(F, bool)
     for a, b in gait.flights:
         marker_flight[a + RESIDUAL_GUARD_FRAMES : b - RESIDUAL_GUARD_FRAMES] = True
-    flight_mask = marker_flight & ~in_stance
-    residual_bw = flight_residual(f, mass, flight_mask)
-    shares = force_shares(full)
+    return marker_flight & ~in_stance
 
-    # Priors (dimensionless, l0 = mean touchdown leg length of the full stances).
-    l0 = float(np.mean([s.l0 for s in full]))
-    T = time_unit(l0)
-    V = speed_unit(l0)
-    theta0 = float(np.mean([s.theta_touchdown for s in full]))
-    U0 = (np.mean(apex_u) if apex_u else summary.mean_speed) / V
-    H0 = (np.mean(apex_h) if apex_h else l0) / l0
-    H0 = max(H0, math.cos(theta0) + 1e-3)
-    z0 = np.array([U0, H0, theta0, pooled.K, pooled.a, pooled.b, pooled.c])
-    T_c = stance_time / T
-    z, row, iters, res = _cycle_search(z0, T_c, (stance_time / T, flight_time / T, mean_speed / V), n_per_stance)
-    U, H, th, K, a, b, c = map(float, z)
-    ctl = Control(K=K, a=a, b=b, c=c, T_c=T_c)
+
+def _machine_com_height(U, H, th, ctl, row, kinds, e, times, dt, T, l0, n_per_stance):
+    """The machine's COM height over the clip's stride, phase-matched segment by segment (stance→stance,
+    flight→flight): (trajectory, machine event times (5,) [√(l0/g)] since the stride's first event, the
+    stride's frame times t_ref (S,) [s], h_machine (S,) [m]). e (5,) the stride's event times [s]; T [s]."""
     t_fall, t_st, t_rise = float(row["t_fall"]), float(row["t_stance"]), float(row["t_rise"])
     step_time = t_fall + t_st + t_rise
-    periodicity = float(max(abs(row["U_next"] - U), abs(row["H_next"] - H)))
-
-    # Machine COM height over the stride, phase-matched segment by segment (stance→stance, flight→flight).
     traj = simulate(U, H, th, ctl, dt / T / 2.0, n_steps=1, n_per_stance=n_per_stance)
     m_td = t_fall  # machine touchdown time within its step (from the apex)
     seg_m = np.array([0.0, t_st, t_st + (t_rise + t_fall), 2 * t_st + (t_rise + t_fall), 2 * (step_time)])
@@ -422,29 +388,28 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     s_m = np.interp(t_ref, e, seg_m)  # machine time since the stride's first event
     t_sim = (m_td + s_m) % step_time
     h_mach = np.interp(t_sim, traj.t, traj.pos[:, 1]) * l0
-    h_ref = p[sel, UP_AXIS] - ground_at(t_ref)
-    com_rms = float(np.sqrt(np.mean((h_mach - h_ref) ** 2)))
+    return traj, seg_m, sel, t_ref, h_mach
 
-    # Lateral sway over the stride (uniform phase) and lateral foot offsets.
-    phase = np.arange(SWAY_SAMPLES) / SWAY_SAMPLES
-    t_sw = e[0] + phase * (e[4] - e[0])
-    sway = np.interp(t_sw, times, lat) - np.polyval(line, t_sw)
-    foot_off = np.array([np.mean([s.lateral_offset for s in geo if s.foot == k] or [np.nan]) for k in (0, 1)])
 
-    def stance_dict(sg, ft):
-        d = {"foot": ("left", "right")[sg.foot], "partial": sg.partial, "t_touchdown_s": sg.t_touchdown,
-             "t_liftoff_s": sg.t_liftoff, "duration_s": sg.duration, "l0_m": sg.l0,
-             "theta_touchdown_rad": sg.theta_touchdown, "theta_liftoff_rad": sg.theta_liftoff,
-             "com_drop_m": sg.com_drop, "peak_vertical_force_bw": sg.peak_vertical_force / mg,
-             "contact_m": sg.p_world_contact, "ground_m": sg.ground, "lateral_offset_m": sg.lateral_offset,
-             "fit": None, "fit_free": None}
-        if ft is not None:
-            d["fit"] = {"K": ft.K, "a": ft.a, "b": ft.b, "c": ft.c, "r2": ft.r2, "rms_bw": ft.rms}
-            d["fit_free"] = {"K": ft.K_free, "a": ft.a_free, "b": ft.b_free, "c": ft.c_free, "r2": ft.r2_free}
-        return d
+def _stance_dict(sg, ft, mg: float) -> dict:
+    """The report's record of one stance: its geometry (SI) and, when fitted, its control fit (dimensionless);
+    mg the body weight [N]."""
+    d = {"foot": ("left", "right")[sg.foot], "partial": sg.partial, "t_touchdown_s": sg.t_touchdown,
+         "t_liftoff_s": sg.t_liftoff, "duration_s": sg.duration, "l0_m": sg.l0,
+         "theta_touchdown_rad": sg.theta_touchdown, "theta_liftoff_rad": sg.theta_liftoff,
+         "com_drop_m": sg.com_drop, "peak_vertical_force_bw": sg.peak_vertical_force / mg,
+         "contact_m": sg.p_world_contact, "ground_m": sg.ground, "lateral_offset_m": sg.lateral_offset,
+         "fit": None, "fit_free": None}
+    if ft is not None:
+        d["fit"] = {"K": ft.K, "a": ft.a, "b": ft.b, "c": ft.c, "r2": ft.r2, "rms_bw": ft.rms}
+        d["fit_free"] = {"K": ft.K_free, "a": ft.a_free, "b": ft.b_free, "c": ft.c_free, "r2": ft.r2_free}
+    return d
 
-    stride_feet = [("left", "right")[geo[i].foot] for _, _, i in win]
-    reference = {
+
+def _reference_dict(stance_time, flight_time, mean_speed, stride_speed, flight_time_measured, apex_h, apex_u,
+                    dt, kinds, e, stride_feet, residual_bw, shares, pooled, cutoff_hz) -> dict:
+    """The report's record of the clip's measured figures (SI: s, m/s, m; forces in body weights)."""
+    return {
         "stance_time_s": stance_time, "flight_time_s": flight_time, "mean_speed_m_s": mean_speed,
         "step_time_s": stance_time + flight_time, "stride_speed_m_s": stride_speed,
         "flight_time_contacts_s": flight_time_measured,
@@ -459,12 +424,125 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         "filter": {"kind": "butterworth forward-backward, quadratic edge extension", "cutoff_hz": cutoff_hz,
                    "event_threshold_bw": EVENT_THRESHOLD_BW},
     }
-    quality = {
+
+
+def _stride(ev, x_fwd, times, src: str):
+    """(window [(t [s], kind, stance index)], e (5,) its event times [s], kinds (5,), the stride's mean forward
+    speed [m/s]) of the clip's first whole stride; x_fwd (F,) the forward COM [m] at times (F,) [s].
+    Raises NotARunningMotion without one."""
+    win = _stride_window(ev)
+    if win is None:
+        raise NotARunningMotion(f"{src}: no complete stride (touchdown, liftoff, touchdown, liftoff, touchdown "
+                                "or the same from a liftoff) inside the clip")
+    e = np.array([t for t, _, _ in win])
+    kinds = tuple(k for _, k, _ in win)
+    stride_speed = float((np.interp(e[4], times, x_fwd) - np.interp(e[0], times, x_fwd)) / (e[4] - e[0]))
+    return win, e, kinds, stride_speed
+
+
+def _fit_cycle(full, pooled, apex_h, apex_u, summary, stance_time, flight_time, mean_speed, n_per_stance):
+    """The periodic cycle nearest the clip's figures, searched from the measured priors (dimensionless, l0 =
+    the mean touchdown leg length of the full stances): (l0 [m], T [s], V [m/s] the units, z (7,) = U, H,
+    θ0, K, a, b, c, the cycle's step row, iterations). Times in [s], speeds in [m/s], apexes as measured."""
+    l0 = float(np.mean([s.l0 for s in full]))
+    T = time_unit(l0)
+    V = speed_unit(l0)
+    theta0 = float(np.mean([s.theta_touchdown for s in full]))
+    U0 = (np.mean(apex_u) if apex_u else summary.mean_speed) / V
+    H0 = (np.mean(apex_h) if apex_h else l0) / l0
+    H0 = max(H0, math.cos(theta0) + 1e-3)
+    z0 = np.array([U0, H0, theta0, pooled.K, pooled.a, pooled.b, pooled.c])
+    T_c = stance_time / T
+    z, row, iters, _ = _cycle_search(z0, T_c, (stance_time / T, flight_time / T, mean_speed / V), n_per_stance)
+    return l0, T, V, z, row, iters
+
+
+def _lateral_sway(e, times, lat, line):
+    """(phase (SWAY_SAMPLES,) uniform over the stride [0, 1), sway there [m] off the lateral COM line);
+    e (5,) the stride's event times [s], times (F,) [s], lat (F,) the lateral COM [m], line its polyfit."""
+    phase = np.arange(SWAY_SAMPLES) / SWAY_SAMPLES
+    t_sw = e[0] + phase * (e[4] - e[0])
+    return phase, np.interp(t_sw, times, lat) - np.polyval(line, t_sw)
+
+
+def _quality(com_rms, row, T, V, stance_time, flight_time, mean_speed) -> dict:
+    """The fit's quality figures: the COM height RMS [m] and the cycle's relative errors in stance time,
+    flight time and mean speed against the clip's ([s], [m/s]; T [s], V [m/s] the units)."""
+    t_fall, t_st, t_rise = float(row["t_fall"]), float(row["t_stance"]), float(row["t_rise"])
+    step_time = t_fall + t_st + t_rise
+    return {
         "com_rms_m": com_rms,
         "stance_time_error": t_st * T / stance_time - 1.0,
         "flight_time_error": (t_rise + t_fall) * T / flight_time - 1.0,
         "mean_speed_error": float(row["apex_dx"]) / step_time * V / mean_speed - 1.0,
     }
+
+
+def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: float = 70.0, *,
+                         cutoff_hz: float = CUTOFF_HZ, n_per_stance: int = N_PER_STANCE,
+                         source: str | None = None) -> FitResult:
+    """Fit the simple running machine to a running motion, with everything needed to report on it.
+
+    motion: the reference (SI); body: its BodyModel (built from the skeleton with ``mass`` if None);
+    mass: body mass [kg]; cutoff_hz: COM low-pass cutoff [Hz]; n_per_stance: simulator resolution.
+    Raises NotARunningMotion (walks, jumps in place, < 2 full stances) or FitError.
+    """
+    src = source or str(motion.meta.get("source") or "motion")
+    if body is None:
+        body = BodyModel.from_skeleton(motion.skeleton, mass=mass)
+    mass = body.total_mass
+    mg = mass * GRAVITY
+    motion, com, markers, gait, summary = _analysis_motion(motion, body, src)
+    dt = motion.frame_time
+    F = motion.n_frames
+    times = np.arange(F) * dt
+    p, v, acc = smooth_com(com, dt, cutoff_hz)
+    f = ground_force(acc, mass)
+    heading, _, lateral = heading_frame(summary.heading)
+    # Lateral COM line (least squares over the clip): sway and foot offsets are measured from it.
+    lat = p @ lateral
+    line = np.polyfit(times, lat, 1)
+    geo, stances = _stance_geometries(gait, p, f, f[:, UP_AXIS] / mg, markers, heading, lateral, line, dt, src)
+    full = [sg for sg in geo if not sg.partial]
+    # Per-stance and pooled control fits (dimensionless).
+    fits = [None if sg.partial else fit_stance_control(sg.tau, sg.l / sg.l0, sg.f_leg / mg) for sg in geo]
+    pooled = fit_stance_control(np.concatenate([s.tau for s in full]),
+                                np.concatenate([s.l / s.l0 for s in full]),
+                                np.concatenate([s.f_leg / mg for s in full]))
+
+    # Measured figures.
+    ev = _events(geo, stances, F)
+    flights, stance_time, flight_time_measured, flight_time = _step_times(geo, stances, full, summary, F, src)
+    win, e, kinds, stride_speed = _stride(ev, p @ heading, times, src)
+    # The machine runs at the clip's mean speed (``info``'s: first to last frame), not one stride's: on a
+    # take whose speed changes the two differ, and the speed factor must refer to what ``info`` printed.
+    mean_speed = float(summary.mean_speed)
+    apex_h, apex_u = _flight_apexes(flights, times, p, v, heading, geo)
+    residual_bw = flight_residual(f, mass, _residual_flight_mask(gait, geo, F))
+    shares = force_shares(full)
+
+    l0, T, V, z, row, iters = _fit_cycle(full, pooled, apex_h, apex_u, summary, stance_time, flight_time,
+                                         mean_speed, n_per_stance)
+    U, H, th, K, a, b, c = map(float, z)
+    T_c = stance_time / T
+    ctl = Control(K=K, a=a, b=b, c=c, T_c=T_c)
+    t_fall, t_st, t_rise = float(row["t_fall"]), float(row["t_stance"]), float(row["t_rise"])
+    step_time = t_fall + t_st + t_rise
+    periodicity = float(max(abs(row["U_next"] - U), abs(row["H_next"] - H)))
+
+    traj, seg_m, sel, t_ref, h_mach = _machine_com_height(U, H, th, ctl, row, kinds, e, times, dt, T, l0,
+                                                          n_per_stance)
+    h_ref = p[sel, UP_AXIS] - _ground_at(geo, t_ref)
+    com_rms = float(np.sqrt(np.mean((h_mach - h_ref) ** 2)))
+
+    # Lateral sway over the stride (uniform phase) and lateral foot offsets.
+    phase, sway = _lateral_sway(e, times, lat, line)
+    foot_off = np.array([np.mean([s.lateral_offset for s in geo if s.foot == k] or [np.nan]) for k in (0, 1)])
+
+    stride_feet = [("left", "right")[geo[i].foot] for _, _, i in win]
+    reference = _reference_dict(stance_time, flight_time, mean_speed, stride_speed, flight_time_measured, apex_h,
+                                apex_u, dt, kinds, e, stride_feet, residual_bw, shares, pooled, cutoff_hz)
+    quality = _quality(com_rms, row, T, V, stance_time, flight_time, mean_speed)
     machine = SimpleMachine(
         U=U, H=H, theta0=th, K=K, a=a, b=b, c=c, T_c=T_c, t_stance=t_st, t_flight=t_rise + t_fall,
         t_fall=t_fall, t_rise=t_rise, step_length=float(row["apex_dx"]), step_time=step_time,
@@ -472,8 +550,9 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         periodicity=periodicity, iterations=iters, mass=mass, l0=l0, g=GRAVITY, source=src,
         heading=heading, lateral=lateral, up=np.eye(3)[UP_AXIS], ground=float(gait.ground),
         lateral_foot_offset=foot_off, lateral_sway=sway, lateral_sway_phase=phase,
-        reference=reference, stances=tuple(stance_dict(sg, ft) for sg, ft in zip(geo, fits)), quality=quality,
+        reference=reference, stances=tuple(_stance_dict(sg, ft, mg) for sg, ft in zip(geo, fits)), quality=quality,
     )
     return FitResult(machine=machine, times=times, p_world_com=p, f_world=f, stances=tuple(geo),
                      stance_fits=tuple(fits), pooled=pooled, stride_events=e, stride_kinds=kinds,
                      machine_event_times=seg_m * T, t_ref=t_ref, h_ref=h_ref, h_machine=h_mach, traj=traj)
+

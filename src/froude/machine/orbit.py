@@ -181,10 +181,47 @@ def _damped_point(z_prev, R_prev, J, s, free, k, lo, hi):
     return z if lo is None and hi is None else np.clip(z, lo, hi)
 
 
-# Long because the coarse Newton, the fine chord, the rejected-step retries (halving or damping) and the
-# fall-back to the best point share the iterate, its predecessor, its residual and the Jacobian; split apart
-# they would pass all of them around. The pieces that stand alone are helpers (_fd_steps, _jacobian,
-# _min_norm_point, _damped_point).
+def _scaled_box(z0, s, free, lo, hi):
+    """The box (lo, hi) in the scaled coordinates y = (z − z0)/s of the free unknowns: two (nf,) arrays (±inf
+    where a side is None), or None without bounds. z0, s (d,); free (nf,) indices; lo, hi (d,) or None."""
+    if lo is None and hi is None:
+        return None
+    return tuple((np.full(free.size, sign * np.inf) if b is None else (b[free] - z0[free]) / s[free])
+                 for b, sign in ((lo, -1.0), (hi, 1.0)))
+
+
+def _candidates(z, with_jac: bool, h, free, hi):
+    """The candidates of one evaluate call, (1, d): z alone, or (nf + 1, d): z and its forward-difference
+    points (one free unknown each, steps by :func:`_fd_steps`)."""
+    Z = np.repeat(z[None, :], free.size + 1 if with_jac else 1, axis=0)
+    if with_jac:
+        Z[1 + np.arange(free.size), free] += _fd_steps(z, h, free, hi)
+    return Z
+
+
+def _newton_point(z, z0, s, free, J, R0, y_box, lo, hi):
+    """The next iterate (d,): the minimum-norm Newton point of the linearised residual R0 + J Δz (within the
+    scaled box y_box), in the scaled coordinates y = (z − z0)/s of the free unknowns; J (r, nf)."""
+    Js = J * s[free][None, :]
+    y = (z[free] - z0[free]) / s[free]
+    y_new = _min_norm_point(Js, Js @ y - R0, y_box)
+    z = z.copy()
+    z[free] = z0[free] + s[free] * y_new
+    if y_box is not None:
+        z = np.clip(z, lo, hi)  # (the point is in the box; this only removes rounding)
+    return z
+
+
+def _best_or_raise(best, accept, stalled: bool, nrm: float, nrm_prev: float, max_iter: int, what: str):
+    """The best fine-resolution point (residual, z, rows, R) when the search ended above its tolerance but
+    within ``accept``; else FitError saying whether it stalled (after its halvings) or ran out of calls."""
+    if accept is not None and best[0] <= accept:
+        return best
+    if stalled:
+        raise FitError(f"no periodic {what} found: the search stalled at residual {nrm_prev:.2g}")
+    raise FitError(f"no periodic {what} found within {max_iter} simulator calls (residual {nrm:.2g})")
+
+
 def solve_orbit(evaluate, z0, s, h, *, lo=None, hi=None, tol=1e-10, max_iter=30,
                 resolutions=(16, N_PER_STANCE), switch=1e-7, chord=True, batched=True, max_halvings=None,
                 damped=False, accept=None, what="running cycle", reasons=REASONS):
@@ -216,12 +253,8 @@ def solve_orbit(evaluate, z0, s, h, *, lo=None, hi=None, tol=1e-10, max_iter=30,
     lo = None if lo is None else np.asarray(lo, float)
     hi = None if hi is None else np.asarray(hi, float)
     free = np.flatnonzero(s > 0)
-    nf = free.size
     z = z0.copy() if lo is None and hi is None else np.clip(z0, lo, hi)
-    y_box = None  # the box in the scaled coordinates of the free unknowns
-    if lo is not None or hi is not None:
-        y_box = tuple((np.full(nf, sign * np.inf) if b is None else (b[free] - z0[free]) / s[free])
-                      for b, sign in ((lo, -1.0), (hi, 1.0)))
+    y_box = _scaled_box(z0, s, free, lo, hi)
     z_prev, nrm_prev, J, R_prev = None, np.inf, None, None
     calls = halvings = 0
     fine = False
@@ -232,10 +265,7 @@ def solve_orbit(evaluate, z0, s, h, *, lo=None, hi=None, tol=1e-10, max_iter=30,
         n = resolutions[1] if fine else resolutions[0]
         need_jac = not (fine and chord) or J is None
         with_jac = need_jac and batched
-        Z = np.repeat(z[None, :], nf + 1 if with_jac else 1, axis=0)
-        if with_jac:
-            Z[1 + np.arange(nf), free] += _fd_steps(z, h, free, hi)
-        R, r = evaluate(Z, n)
+        R, r = evaluate(_candidates(z, with_jac, h, free, hi), n)
         calls += 1
         nrm = float(np.max(np.abs(R[0]))) if r.valid[0] else np.inf
         if fine and nrm < best[0]:
@@ -265,20 +295,11 @@ def solve_orbit(evaluate, z0, s, h, *, lo=None, hi=None, tol=1e-10, max_iter=30,
             J, c = _jacobian(evaluate, z, R[0], given, free, h, hi, n, what, reasons)
             calls += c
         z_prev, nrm_prev, R_prev = z, nrm, R[0]
-        Js = J * s[free][None, :]
-        y = (z[free] - z0[free]) / s[free]
-        y_new = _min_norm_point(Js, Js @ y - R[0], y_box)
-        z = z.copy()
-        z[free] = z0[free] + s[free] * y_new
-        if y_box is not None:
-            z = np.clip(z, lo, hi)  # (the point is in the box; this only removes rounding)
-    if not (fine and nrm <= tol) and accept is not None and best[0] <= accept:
-        nrm, z, r, R0 = best
-        return z, r, calls, R0
+        z = _newton_point(z, z0, s, free, J, R[0], y_box, lo, hi)
     if not (fine and nrm <= tol):
-        if max_halvings is not None and halvings >= max_halvings:
-            raise FitError(f"no periodic {what} found: the search stalled at residual {nrm_prev:.2g}")
-        raise FitError(f"no periodic {what} found within {max_iter} simulator calls (residual {nrm:.2g})")
+        stalled = max_halvings is not None and halvings >= max_halvings
+        _, z, r, R0 = _best_or_raise(best, accept, stalled, nrm, nrm_prev, max_iter, what)
+        return z, r, calls, R0
     assert R is not None  # converged, so evaluated at least once
     return z, r, calls, R[0]
 

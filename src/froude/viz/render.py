@@ -68,6 +68,16 @@ def _imageio():
     return iio2, iio3
 
 
+def _fit_width(text, max_px: float, renderer) -> None:
+    """Shorten a matplotlib Text's string with an ellipsis until it is at most ``max_px`` pixels wide (a long
+    clip name in a narrow panel); a string that fits is left as it is."""
+    full = text.get_text()
+    keep = len(full)
+    while keep > 1 and text.get_window_extent(renderer).width > max_px:
+        keep -= 1
+        text.set_text(full[:keep].rstrip() + "…")
+
+
 # ---- video -----------------------------------------------------------------------------------------
 class _VideoScene:
     """One figure with a panel per motion; ``frame(t)`` updates the artists and returns the RGB image."""
@@ -101,12 +111,15 @@ class _VideoScene:
             xr = (self_follow[:, 0].min() - self.span_x, self_follow[:, 0].max() + self.span_x)
             _ground_artists(ax, act, xr, ticks=True)
             fa = _FigureArtists(ax, act, self.px_per_m, z0=10)
-            ax.text(0.03, 0.96, act.label, transform=ax.transAxes, ha="left", va="top", fontsize=font,
-                    color=_TEXT, weight="bold", zorder=50)
-            ax.text(0.03, 0.96 - 1.5 * font * _DPI / 72 / self.height, f"{act.speed:.2f} m/s",
+            title = ax.text(0.03, 0.96, act.label, transform=ax.transAxes, ha="left", va="top", fontsize=font,
+                            color=_TEXT, weight="bold", zorder=50)
+            _fit_width(title, 0.94 * panel_w, self.canvas.get_renderer())
+            # the clock shares the speed's line, so a long clip name never runs into it
+            second_line = 0.96 - 1.5 * font * _DPI / 72 / self.height
+            ax.text(0.03, second_line, f"{act.speed:.2f} m/s",
                     transform=ax.transAxes, ha="left", va="top", fontsize=0.85 * font, color="#555555", zorder=50)
-            clock = ax.text(0.97, 0.96, "", transform=ax.transAxes, ha="right", va="top", fontsize=0.85 * font,
-                            color="#777777", zorder=50, family="monospace")
+            clock = ax.text(0.97, second_line, "", transform=ax.transAxes, ha="right", va="top",
+                            fontsize=0.85 * font, color="#777777", zorder=50, family="monospace")
             if i > 0:  # a thin divider between panels
                 ax.plot([0, 0], [0, 1], transform=ax.transAxes, color="#cccccc", lw=1.0, zorder=60)
             self.panels.append((ax, act, fa, self_follow, clock))

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ...body.path import unstraighten, unstraighten_points
 from ...constants import GRAVITY, UP_AXIS
 from ...core.kinematics import fk_soa, to_soa
 from ...core.motion import Motion
@@ -304,13 +305,20 @@ def machine_track(motion: Motion, body, path, body_com: np.ndarray | None = None
 
 
 def reference_track(prep) -> Track:
-    """The reference clip with its own COM, detected contacts and legs; loops with its displacement."""
+    """The reference clip with its own COM, detected contacts and legs; loops with its displacement.
+
+    A turning take is drawn as it was taken, along its curve (the machines saw it straightened:
+    ``body.path.straighten``; results are bent back onto the curve, so the reference is too)."""
     motion = prep.motion
     F = motion.n_frames
     com = np.asarray(prep.com, float)
     contact = np.full((F, 2, 3), np.nan)
     for s in prep.gait.stances:  # loop over contacts, not frames
         contact[s.start:s.stop, s.foot] = s.contact_point
+    if prep.turn is not None:
+        motion = unstraighten(motion, prep.turn)
+        com = unstraighten_points(com, prep.turn)
+        contact = unstraighten_points(contact, prep.turn)
     # per loop, move on by the clip's horizontal COM displacement (plus one frame of travel)
     shift = com[-1] - com[0]
     if F > 1:
@@ -319,7 +327,7 @@ def reference_track(prep) -> Track:
     stances = prep.gait.stances
     track = Track(
         frame_time=float(motion.frame_time), motion=motion, com=com, legs=spring_legs(com, contact),
-        contacts=np.array([s.contact_point for s in stances]).reshape(-1, 3),
+        contacts=np.array([contact[(s.start + s.stop - 1) // 2, s.foot] for s in stances]).reshape(-1, 3),
         contact_foot=np.array([s.foot for s in stances], int),
         trail=trail_segments(com, _trail_stride(motion.frame_time)),
         force_t=np.zeros(0), force_bw=np.zeros(0), body_com=com, loop_shift=shift, body=prep.body,

@@ -9,7 +9,7 @@ re-solved at s × its mean speed with the law's step frequency and stance time, 
 free), at speed factors s_1 … s_n that move from 1 to the goal's s_n on the policy's profile (ease or even).
 Change step k runs with the control (K, a, c, T_c) of the cycle at s_k; the touchdown angles θ0 and changes
 δb of each cycle's b (≤ 0.08 l0) are solved together by the §5.3 planner's multiple shooting on the exact
-simulator (``planner.shooting._optimise_change`` with per-step controls): apex k+1 has cycle k's apex speed
+simulator (``planner.change._optimise_change`` with per-step controls): apex k+1 has cycle k's apex speed
 exactly and the last apex is the goal cycle's fixed point (U, H); softly, the apex heights stay near the
 cycles' and each step lasts its cycle's step time. A step cannot pin its apex height too: from a slower apex
 the faster cycle's height would need a touchdown above the apex (measured on 09_01 to x1.3: the nearest
@@ -30,12 +30,12 @@ import numpy as np
 
 from froude.errors import FitError, PlanError
 from froude.machine.dynamics import step
+from froude.machine.planner.change import _optimise_change
 from froude.machine.planner.policy import CHANGE, HOLD, LEAD, SpeedPlan, _ease, _finish, _new_out, _record, _run
 from froude.machine.planner.shooting import (
     DEFAULT_COMFORT,
     Comfort,
     _as_cycle,
-    _optimise_change,
     _step_ok,
     _StepFail,
     _theta_of,
@@ -78,7 +78,7 @@ def plan_law_change(start, cycles, *, policy: str = "ease", lead_steps: int = 0,
     start: the start cycle (the fitted machine: U, H, theta0, control); cycles: the n cycles the n change
     steps run with, in order (the law's at ``law_factors``; the last one is the goal and the hold steps keep
     it). Change step k uses cycle k's control (K, a, c, T_c) with its own touchdown angle and b (within
-    b_band of cycle k's), solved together by the planner's multiple shooting (``shooting._optimise_change``)
+    b_band of cycle k's), solved together by the planner's multiple shooting (``change._optimise_change``)
     so that apex k+1 has cycle k's speed U exactly, the last apex is the goal's fixed point (U, H) and the
     apex heights on the way stay near the cycles' (a step cannot also pin its height: from a slower apex the
     touchdown would have to be above it). Returns a SpeedPlan (mode "law"; ``controls`` per step carry each

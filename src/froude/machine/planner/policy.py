@@ -13,12 +13,12 @@ import numpy as np
 from froude.errors import PlanError
 from froude.machine.dynamics import Trajectory, fall_time, simulate, step
 from froude.machine.orbit import LimitCycle, cycle_record
+from froude.machine.planner.change import _optimise_change
 from froude.machine.planner.shooting import (
     DEFAULT_COMFORT,
     Comfort,
     _as_cycle,
     _bounds,
-    _optimise_change,
     _orbit_problems,
     _solve_step,
     _step_ok,

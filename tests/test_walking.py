@@ -295,9 +295,10 @@ def test_constrained_gauss_newton_ends_at_the_minimum_whatever_the_last_bits():
 
 def test_shape_fit_runs_from_the_nearest_starts_and_falls_back(monkeypatch):
     """The walking fit's shape fits (``_shape_fit_nearest``) run from the NEAREST_STARTS (2) candidates whose
-    shape residual is the smallest, the lowest end cost wins, a farther start is not fitted while one of
-    them succeeds, and a failed fit's reason is kept. Toy problems stand in for the machine (a linear
-    residual, one linear constraint y0 = y1), and the exact cycle search after the fit is a recorder."""
+    shape residual is the smallest, a farther one's end cost wins when lower by more than COST_MARGIN, a
+    farther start is not fitted while one of them succeeds, and a failed fit's reason is kept. Toy problems
+    stand in for the machine (a linear residual, one linear constraint y0 = y1), and the exact cycle search
+    after the fit is a recorder."""
     from froude.machine import walk_fit
 
     assert walk_fit.NEAREST_STARTS == 2
@@ -328,3 +329,36 @@ def test_shape_fit_runs_from_the_nearest_starts_and_falls_back(monkeypatch):
                                             0.0, (1, 1, 1), 120, errors)
     assert z0 == "near" and "b" in fitted and fitted.count("f") == 1
     assert len(errors) == 1 and "valid steps" in errors[0]
+
+
+def test_choice_between_fits_does_not_hang_on_the_last_bits():
+    """``walk_fit.choose_fit`` (issue 26): the nearest start's converged fit is kept unless a farther one's
+    cost is lower by more than COST_MARGIN; costs perturbed far above rounding (1e-6 relative, 1e4 times
+    what the solver's tolerance moves a converged cost) never change the choice, and two fits at the same
+    minimum keep the nearest."""
+    from froude.machine.walk_fit import COST_MARGIN, choose_fit
+
+    assert COST_MARGIN >= 1e-3  # far above rounding (1e-12) and what STEP_TOL leaves in a cost (1e-8)
+    cases = [([2.602, 2.602], 0), ([2.602, 2.602 * (1 - 1e-9)], 0), ([0.205, 0.162], 1), ([0.343, 1.2], 0),
+             ([1.0], 0), ([1.0, 0.995, 0.5], 2), ([1.0, 0.5, 0.5], 1)]
+    rng = np.random.default_rng(26)
+    for costs, want in cases:
+        order = choose_fit(costs)
+        assert order[0] == want and sorted(order) == list(range(len(costs))), (costs, order)
+        for _ in range(50):
+            noisy = [c * (1 + 1e-6 * rng.standard_normal()) for c in costs]
+            assert choose_fit(noisy)[0] == want, (costs, noisy)
+    assert choose_fit([]) == []
+
+
+def test_a_fit_still_converging_at_its_budget_goes_on():
+    """``gauss_newton.still_converging``: a steady linear contraction is let finish, a fit whose steps
+    grow again (02_01's nearest start cycles 0.03 → 5 → 20 …) or contract too slowly to reach the
+    tolerance is not."""
+    from froude.machine.gauss_newton import STEP_TOL, still_converging
+
+    assert still_converging([0.23 * 0.8 ** k for k in range(8)], STEP_TOL, 100)
+    assert not still_converging([0.23 * 0.8 ** k for k in range(8)], STEP_TOL, 5)
+    assert not still_converging([0.22, 0.12, 0.068, 0.063, 0.062, 0.061, 0.033, 2.7], STEP_TOL, 100)
+    assert not still_converging([0.2 * 0.99 ** k for k in range(8)], STEP_TOL, 100)
+    assert not still_converging([0.1, 0.05], STEP_TOL, 100)

@@ -38,8 +38,9 @@ the exact cycle's existence would hang on the last bits); the exact cycle is the
 Each of the two starts is tried without the control's pulses and with them (``PULSE_START``: a push-off pulse
 just past the other foot's touchdown, a weight-acceptance pulse at the clip's first peak, their amplitudes
 fitted by the shape fit); of the four periodic starts the shape fit runs from the two whose shape residual is
-the smallest (``_shape_fit_nearest``), the others only if both fail, and the lowest cost wins. The solver is
-:mod:`froude.machine.gauss_newton`.
+the smallest (``_shape_fit_nearest``), the others only if both fail, and ``choose_fit`` picks between the
+converged ones (the nearest unless another's cost is lower by COST_MARGIN); where every start fails at the
+coarse resolution they all run again at the fine one. The solver is :mod:`froude.machine.gauss_newton`.
 """
 from __future__ import annotations
 
@@ -58,6 +59,7 @@ from .forces import CUTOFF_HZ, ground_force, smooth_com
 from .gauss_newton import constrained_gauss_newton
 from .orbit import rowwise, solve_orbit
 from .walk_model import WalkingMachine
+from .walk_stance import measure_stance
 from .walking import (
     N_PER_STANCE,
     PULSES_OFF,
@@ -184,7 +186,7 @@ class WalkFitResult:
     force over a stance (mean of its complete stances) [BW]; profile_model (N,) the machine's, measured
     through the clip's filter; profile_unfiltered (N,) the machine's exact force. t_ref (M,) times of the
     frames of the complete steps [s], h_ref (M,) their COM height above the ground [m], h_model (M,) the
-    machine's at the phase-matched times [m]. stances: the WalkStance of every contact. t_leg (K,) time
+    machine's at the phase-matched times [m]. stances: the walk_stance.WalkStance of each contact. t_leg (K,) time
     since touchdown [s] and l_leg (K,) leg length [m] (COM → rolling centre of pressure) over the clip's
     first complete stance. steps (S, 3): touchdown, the other foot's liftoff, next touchdown [s].
     """
@@ -315,6 +317,11 @@ MIN_CLEARANCE = 0.01
 CLEARANCE_WEIGHT = 100.0
 #: Simulator resolution of the shape fit (the exact cycle is found after it at N_PER_STANCE).
 SHAPE_N_PER_STANCE = 120
+#: The starts' cycle searches and shape fits run at SHAPE_N_PER_STANCE, a speed choice (half the
+#: simulator's work); where every start fails there (a cycle whose leg nearly unloads in single support, or a
+#: pulse of 0.04 of a stance over 5 steps, is resolved only finer) they run again at the exact cycle's own
+#: resolution (``fit_walking_detailed``'s n_per_stance, N_PER_STANCE). A reason of resolution, not of a clip:
+#: the Bandai walk_active_002 (a brisk walk, 1.43 m/s) found no start at 120 and fits at 240 (docs/walking.md).
 #: Samples of the step-phase COM height profile (double support, then single support).
 COM_SAMPLES = (8, 24)
 
@@ -414,11 +421,37 @@ def _shape_problem(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, tim
 #: How many of the periodic starts, nearest the clip's shape first, the walking fit runs the shape fit from
 #: (``_shape_fit_nearest``); further ones only while none has succeeded.
 NEAREST_STARTS = 2
+#: How much lower [relative] a farther start's converged shape cost must be than the nearest's to be chosen
+#: (``choose_fit``). A converged cost is the minimum's to within ½ H STEP_TOL² (about 1e-8 of it; rounding
+#: moves it by 1e-12): 1 % is a million times that, so the choice does not hang on the last bits, and far
+#: below the differences between distinct minima seen (a Bandai turn: 0.162 against 0.205, 21 %).
+COST_MARGIN = 0.01
+
+
+def choose_fit(costs) -> list[int]:
+    """The order in which the walking fit tries its shape fits' ends (the first whose exact cycle is found wins).
+
+    costs: the shape costs of the fits in the order of their starts' nearness to the clip (nearest first),
+    only converged fits (``constrained_gauss_newton`` returns no other). The nearest is chosen, and a farther
+    one replaces the choice only where its cost is lower than the chosen one's by more than COST_MARGIN
+    (relative), in order of nearness. Two starts that reach the same minimum (parameters within the solver's
+    tolerance) have the same cost to 1e-8 and the nearest is kept; distinct minima are told apart only by a
+    margin far above what rounding moves a cost. The rest follow by nearness (the fallbacks when an exact
+    cycle search fails).
+    """
+    order = list(range(len(costs)))
+    if not order:
+        return order
+    first = 0
+    for k in order[1:]:
+        if costs[k] < (1.0 - COST_MARGIN) * costs[first]:
+            first = k
+    return [first] + [k for k in order if k != first]
 
 
 def _shape_fit_nearest(candidates, T_c, roll, targets, n_per_stance, errors):
     """The shape fits from the NEAREST_STARTS candidate starts nearest the clip, then the exact periodic cycle
-    from the end with the lowest cost.
+    from the end that ``choose_fit`` puts first.
 
     candidates: [((evaluate, to_z, n) of ``_shape_problem``, cycle-search evaluations, prior z0 (17,))], one per
     start. Every start is a periodic cycle meeting the same targets; Gauss-Newton goes downhill from where
@@ -427,9 +460,8 @@ def _shape_fit_nearest(candidates, T_c, roll, targets, n_per_stance, errors):
     it can fail; the reasons are appended to ``errors``). Not only the nearest: the cost has several local
     minima, and the nearest start need not lead to the lowest (a Bandai turn, 27 Nov: start residuals 5.6
     and 16.7 ended at costs 0.205 and 0.162, and the output of the first missed the skate bar where the
-    second's met it). Before, all four starts were fitted and the lowest end cost won; on every walk checked
-    (07_01, 02_01, the Bandai walk, the elderly locomotion walk, that turn) the two nearest include that
-    winner. Returns (z (17,), shape cost, WalkStep, evaluations, z0) or None.
+    second's met it). A fit that does not converge is discarded (its end is not a minimum). Returns (z (17,),
+    shape cost, WalkStep, evaluations, z0) or None.
     """
     ranked: list[tuple] = []
     for (evaluate, to_z, n), it1, z0 in candidates:
@@ -448,8 +480,9 @@ def _shape_fit_nearest(candidates, T_c, roll, targets, n_per_stance, errors):
         except FitError as e:
             errors.append(str(e))
             continue
-        fits.append((cost, k, to_z(y), it1, z0))
-    for cost, _, z2, it1, z0 in sorted(fits, key=lambda f: f[:2]):
+        fits.append((cost, to_z(y), it1, z0))
+    for i in choose_fit([f[0] for f in fits]):
+        cost, z2, it1, z0 = fits[i]
         try:
             z, w, it2, _ = _cycle_search(z2, T_c, roll, targets, n_per_stance)
         except FitError as e:
@@ -495,7 +528,7 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         if lo - td < 4:
             continue
         stances.append(st)
-        geo.append(_stance(st, td, lo, x_fwd, p[:, UP_AXIS], markers, heading, dt))
+        geo.append(measure_stance(st, td, lo, x_fwd, p[:, UP_AXIS], markers, heading, dt))
     # Complete steps: a touchdown (lead) while the other foot's stance (trail) is on, then the trail's
     # liftoff, then the next touchdown (the other foot again).
     steps = []
@@ -571,18 +604,23 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
                  PULSE_START["q"], lm_ref["tau_peak1"], PULSE_START["w_q"])
     errors: list[str] = []
     pulses_off = tuple(PULSES_OFF[k] for k in PULSE_VARS)
-    candidates = []
-    for ctl0 in starts:
-        for pulses, free in ((pulses_off, ()), (pulses_on, ("p", "q"))):
-            z0 = np.array([u0, v0, d0, step_time / T, th0, *ctl0, 1.0, 0.0, *pulses])
-            try:
-                z1, _, it1, _ = _cycle_search(z0, T_c, roll, targets, SHAPE_N_PER_STANCE)
-            except FitError as e:
-                errors.append(str(e))
-                continue
-            problem = _shape_problem(z1, T_c, roll, targets, tau, prof_ref, h_ref_step, dt, T, tau_landmarks, free)
-            candidates.append((problem, it1, z0))
-    best = _shape_fit_nearest(candidates, T_c, roll, targets, n_per_stance, errors)
+    best = None
+    for n_shape in dict.fromkeys((SHAPE_N_PER_STANCE, n_per_stance)):  # the fine one only where all failed
+        candidates = []
+        for ctl0 in starts:
+            for pulses, free in ((pulses_off, ()), (pulses_on, ("p", "q"))):
+                z0 = np.array([u0, v0, d0, step_time / T, th0, *ctl0, 1.0, 0.0, *pulses])
+                try:
+                    z1, _, it1, _ = _cycle_search(z0, T_c, roll, targets, n_shape)
+                except FitError as e:
+                    errors.append(str(e))
+                    continue
+                problem = _shape_problem(z1, T_c, roll, targets, tau, prof_ref, h_ref_step, dt, T, tau_landmarks,
+                                         free, n_per_stance=n_shape)
+                candidates.append((problem, it1, z0))
+        best = _shape_fit_nearest(candidates, T_c, roll, targets, n_per_stance, errors)
+        if best is not None:
+            break
     if best is None:  # what the clip is (the gait's decision, as info says it), then why it is refused
         raise FitError(f"{src}: {summary.kind} that the walking machine cannot follow: {errors[-1]}")
     z, cost, w, iters, z0 = best
@@ -651,47 +689,3 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     return WalkFitResult(machine=machine, profile_tau=tau, profile_ref=prof_ref, profile_model=prof_model,
                          profile_unfiltered=prof_raw, t_ref=t_ref, h_ref=h_ref, h_model=h_mod, stances=tuple(geo),
                          t_leg=t_leg - sg.t_touchdown, l_leg=l_leg, steps=np.array([t_td, t_lo, t_nx]).T)
-
-
-@dataclass(frozen=True)
-class WalkStance:
-    """One foot contact of a walk (SI, sagittal; times from the clip's first frame).
-
-    foot 0 left / 1 right; partial: cut by the clip's edge; t_touchdown, t_liftoff [s] (marker events,
-    see module doc); ground [m]; the centre of pressure rolls along the line x_touchdown + roll·τ [m]
-    (least squares of the foot's lowest marker over the stance, τ = 0 … 1); l0: COM distance from the
-    touchdown point at touchdown [m]; theta_touchdown: leg angle from vertical there [rad], + ahead.
-    """
-
-    foot: int
-    partial: bool
-    t_touchdown: float
-    t_liftoff: float
-    ground: float
-    x_touchdown: float
-    roll: float
-    l0: float
-    theta_touchdown: float
-
-    @property
-    def duration(self) -> float:
-        return self.t_liftoff - self.t_touchdown
-
-    def contact_x(self, t):
-        """Centre of pressure [m] (forward) at times t [s]."""
-        return self.x_touchdown + self.roll * (np.asarray(t, float) - self.t_touchdown) / self.duration
-
-
-def _stance(st, td, lo, x_fwd, y_com, markers, heading, dt) -> WalkStance:
-    """Geometry of one marker stance [td, lo] (fractional frames); x_fwd, y_com (F,) COM [m]."""
-    frames = np.arange(int(math.ceil(td)), int(math.floor(lo)) + 1)
-    mk = markers[frames, st.foot]  # (N, 3 markers, 3)
-    low = mk[np.arange(frames.size), np.argmin(mk[..., UP_AXIS], axis=1)] @ heading
-    tau = (frames - td) / (lo - td)
-    roll, x0 = np.polyfit(tau, low, 1)
-    fr = np.arange(x_fwd.size)
-    rx = x0 - np.interp(td, fr, x_fwd)
-    ry = np.interp(td, fr, y_com) - st.ground
-    return WalkStance(foot=int(st.foot), partial=bool(st.partial), t_touchdown=td * dt, t_liftoff=lo * dt,
-                      ground=float(st.ground), x_touchdown=float(x0), roll=float(roll), l0=float(np.hypot(rx, ry)),
-                      theta_touchdown=float(np.arctan2(rx, ry)))

@@ -411,13 +411,18 @@ def test_worker_killed_mid_write_then_rerun(tmp_path, run_cli):
         workers = _group_workers(proc.pid)
         assert len(workers) == 2, workers
         killed_mid_write(out / "09_03" / "child_x1_2str.bvh")  # what a worker killed inside a write leaves
+        # The run removes orphans once every task has ended. A task still unfinished now means that removal is
+        # still to come; on a loaded machine the last tasks can end while the orphan is being made (a
+        # whole-suite run once saw it left), and then only the rerun below can be held to removing it.
+        made_while_running = len(list(out.rglob("*.done.json"))) < 12
         os.kill(workers[0], signal.SIGKILL)
         _, err = proc.communicate(timeout=300)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
     assert proc.returncode in (0, 1), err  # a task whose worker died may fail (KilledWorker); the rerun redoes it
-    assert leftovers(out) == []
+    if made_while_running:
+        assert leftovers(out) == []
 
     def check_index():
         done = {str(m.relative_to(out)).replace(".done.json", ".bvh") for m in out.rglob("*.done.json")}

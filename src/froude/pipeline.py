@@ -25,7 +25,7 @@ from .body.take import modelled_part, running_take, select_range
 from .core.motion import Motion
 from .errors import FitError, FroudeError
 from .machine import is_walking
-from .metrics import physics_report, source_rest_heights
+from .metrics import BARS, physics_report, source_rest_heights
 from .naive import naive_clip
 from .prepared import Prepared
 from .result import Result, report_path, write_result
@@ -266,7 +266,8 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
         motion = tile_stride(one, 2.0 * m.step_time * m.time_unit, dense_fps, targets, path.times, stride,
                              retarget.body)
     else:
-        ik = correct(targets, retarget.body, repair_rounds=WALK_REPAIR_ROUNDS if is_walking(prep.machine) else 1)
+        ik = correct(targets, retarget.body, repair_rounds=WALK_REPAIR_ROUNDS if is_walking(prep.machine) else 1,
+                     joint_jump_bar_deg=BARS["joint_jump_ratio"] * prep.cycle.max_joint_jump_deg)
         if not ik.ok:
             bad = np.flatnonzero(ik.failed)
             notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]

@@ -33,10 +33,10 @@ from ..constants import GRAVITY
 from ..errors import FitError
 from ..io.atomic import atomic_write_text
 from ..io.jsonable import dumps
-from . import is_walking  # re-exported: its home is the package (no walking code imported)
+from .units import speed_unit, time_unit
 from .walking import PULSES_OFF, ControlPulses, WalkControl, WalkState
 
-__all__ = ["WALK_SCHEMA", "WalkingMachine", "is_walking", "load_walking_machine"]
+__all__ = ["WALK_SCHEMA", "WalkingMachine", "load_walking_machine"]
 
 WALK_SCHEMA = "froude.walking/1"
 _CYCLE = ("u", "v", "d", "s", "l_td", "roll", "K", "a", "b", "c", "e", "p", "tau_p", "w_p", "q", "tau_q", "w_q", "T_c",
@@ -99,12 +99,12 @@ class WalkingMachine(ControlPulses):
     @property
     def time_unit(self) -> float:
         """√(l0/g) [s]."""
-        return math.sqrt(self.l0 / self.g)
+        return time_unit(self.l0, self.g)
 
     @property
     def speed_unit(self) -> float:
         """√(g l0) [m/s]."""
-        return math.sqrt(self.g * self.l0)
+        return speed_unit(self.l0, self.g)
 
     @property
     def control(self) -> WalkControl:

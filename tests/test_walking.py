@@ -332,10 +332,7 @@ def test_line_search_from_the_last_step_takes_the_step_a_search_from_one_takes()
 
     dy = np.array([1.0, -2.0])
     for lam_max in (1.0, 0.3, 0.05, 0.004):
-        calls = []
-
         def evaluate(y, lam_max=lam_max):
-            calls.append(1)
             return np.array([float(np.max(np.abs(y)) / 2.0 > lam_max)]), np.zeros(1)
 
         def merit(y, r, c):

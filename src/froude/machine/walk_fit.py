@@ -52,10 +52,10 @@ import numpy as np
 from ..body.com_force import acceleration_response, force_landmarks
 from ..body.gait import detect_gait, summarize, walks
 from ..body.model import BodyModel
-from ..constants import GRAVITY, UP_AXIS, heading_frame
+from ..constants import GRAVITY, UP_AXIS
 from ..core.motion import Motion
 from ..errors import FitError, NotAWalkingMotion
-from .forces import CUTOFF_HZ, ground_force, smooth_com
+from .forces import CUTOFF_HZ, clip_com
 from .gauss_newton import constrained_gauss_newton
 from .orbit import rowwise, solve_orbit
 from .walk_model import WalkingMachine
@@ -522,10 +522,8 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         raise NotAWalkingMotion(f"{src}: {summary.kind}, not a walk: {summary.reason}")
     dt = motion.frame_time
     F = motion.n_frames
-    times = np.arange(F) * dt
-    p, v, acc = smooth_com(com, dt, cutoff_hz)
-    f = ground_force(acc, mass)
-    heading, _, lateral = heading_frame(summary.heading)
+    cc = clip_com(com, dt, mass, summary.heading, cutoff_hz)
+    times, p, v, f, heading, lateral = cc.times, cc.p, cc.v, cc.f, cc.heading, cc.lateral
 
     x_fwd = p @ heading
     geo, stances = [], []

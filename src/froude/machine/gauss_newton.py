@@ -44,8 +44,9 @@ def constrained_gauss_newton(evaluate, n, w_prior, *, start=None, what="the shap
     the constraints' Newton step of least norm and, in their null space, the Gauss-Newton step of the
     cost. Far from the minimum a step must lower the merit ½‖r‖² + ½ w²‖y‖² + MERIT_PENALTY ‖c‖₁, first as
     it is, then with a second-order correction onto the constraints (which curve: a long step violates
-    them by O(step²), the Maratos effect), else it is halved (up to 12 times). A step shorter than
-    LOCAL_STEP is taken whole: there Gauss-Newton contracts, and a merit test would compare costs
+    them by O(step²), the Maratos effect), else it is halved (up to 12 times; the largest such λ is
+    searched from the last iteration's, ``_descent_step``). A step shorter than LOCAL_STEP is taken whole:
+    there Gauss-Newton contracts, and a merit test would compare costs
     that differ in their last bits (where the old trust-region fit stopped). Converged when the full
     step's largest component is below step_tol: the end point is then the constrained minimum to that
     tolerance, whatever path led there.

@@ -135,8 +135,8 @@ class Report:
         # the output's path against the clip's (``path_report``): a turn lost is a bar missed
         fails += list(self.extras.get("path_vs_clip", {}).get("misses", []))
         g_err = abs(self.flight_gravity_m_s2 - GRAVITY) / GRAVITY
-        # a walk has no flight: its machine is the walking one and the bar does not apply
-        if self.extras.get("machine") != "walking" and not g_err <= BARS["flight_gravity_rel_tol"]:
+        # an output of a kind without flight (a walk: ``kinds.MotionKind.has_flight``) has none to measure
+        if self.extras.get("flights", True) and not g_err <= BARS["flight_gravity_rel_tol"]:
             fails.append(f"flight gravity {self.flight_gravity_m_s2:.2f} m/s^2 (9.81 +- 3%)")
         if not np.isnan(self.com_tracking_rms_mm):
             if not self.com_tracking_rms_mm <= BARS["com_tracking_rms_mm"]:

@@ -13,12 +13,12 @@ from .core.motion import Motion
 from .errors import FroudeError
 from .machine.units import similarity
 from .metrics import physics_report
-from .result import Result
+from .result import Output
 from .synthesis.cycle import ReferenceCycle, sample_cycle
 
 
 def naive_cycle(cyc: ReferenceCycle, retarget: Retarget, speed: float, n_steps: int, fps: float,
-                origin: np.ndarray, meta: dict, notes, modelled: str, input_in_place: bool) -> Result:
+                origin: np.ndarray, meta: dict, notes, modelled: str, input_in_place: bool) -> Output:
     """What engines do with a run's stride cycle: joint angles copied, root translation × L, timing
     unchanged (× 1/s for speed). origin: (3,) [m] the reference COM's start (put on the floor); meta: the
     output's provenance; modelled / input_in_place: the clip's words for the report."""
@@ -37,24 +37,21 @@ def naive_cycle(cyc: ReferenceCycle, retarget: Retarget, speed: float, n_steps: 
     root = com + (L * data["root_from_com"]) @ cyc.frame
     motion = Motion(retarget.skeleton, root, rot, 1.0 / fps, None, dict(meta))
     res = _naive_result(motion, retarget, speed, list(notes), modelled, input_in_place, cyc.max_joint_jump_deg)
-    report = res.report
-    assert report is not None  # _naive_result always reports
-    report.extras["machine"] = "walking" if cyc.order == "walking" else "running"  # which bars apply
     return res
 
 
 def _naive_result(motion: Motion, retarget: Retarget, speed: float, notes: list, modelled: str,
-                  input_in_place: bool, reference_jump_deg: float) -> Result:
+                  input_in_place: bool, reference_jump_deg: float) -> Output:
     """The naive output with its physics report."""
     report = physics_report(motion, retarget.body, reference_max_joint_jump_deg=reference_jump_deg)
     report.extras.update({"character": retarget.character.name, "L": retarget.L, "M": retarget.M,
                           "speed_factor": speed, "method": "naive", "notes": list(notes), "modelled": modelled,
                           "input_in_place": input_in_place})
-    return Result(motion, report, None, None, retarget, "naive", speed, tuple(notes))
+    return Output(motion, report, None, None, retarget, "naive", speed, tuple(notes))
 
 
 def naive_clip(motion: Motion, character=None, *, speed: float = 1.0, target_speed: float | None = None,
-               fps: float | None = None, performer_mass: float = 70.0, **character_numbers) -> Result:
+               fps: float | None = None, performer_mass: float = 70.0, **character_numbers) -> Output:
     """The naive baseline for any clip that loads, running or not (no fit, no cycle): what engines do with
     a clip as it is: joint angles copied, the root's motion × L about the first frame's point on the floor,
     played s times faster (and as long as the clip). ``scale(..., method="naive")`` repeats a stride cycle
@@ -81,7 +78,7 @@ def naive_clip(motion: Motion, character=None, *, speed: float = 1.0, target_spe
 
 
 def naive_take(motion: Motion, body: BodyModel, retarget: Retarget, speed: float, fps: float, notes,
-               modelled: str, meta: dict | None = None) -> Result:
+               modelled: str, meta: dict | None = None) -> Output:
     """What engines do with a take as it is: joint angles copied, the root's motion × L about the first
     frame's COM on the floor, played ``speed`` times faster at fps [1/s], as long as the take (its path,
     a turn included, scaled by L). body: the take's; meta: the output's provenance (default: the take's)."""

@@ -18,25 +18,24 @@ from pathlib import Path
 import numpy as np
 
 from .body.characters import Retarget
-from .body.gait import detect_gait, require_running, summarize, walks
+from .body.gait import detect_gait, summarize
 from .body.model import BodyModel
 from .body.path import is_straight, straighten, take_path, turn_note, unstraighten
 from .body.take import modelled_part, running_take, select_range
 from .core.motion import Motion
 from .errors import FitError, FroudeError
-from .machine import is_walking
+from .kinds import choose_kind
 from .metrics import physics_report, source_rest_heights
 from .naive import naive_clip
 from .prepared import Prepared
-from .result import Result, report_path, write_result
-from .speed_change import check_human_speed, output_steps, plan_run_speed_change, speed_range_notes
+from .result import Output, report_path, write_result
+from .speed_change import output_steps, speed_range_notes
 from .speed_goal import scale_factor
 from .synthesis.bend import bend
-from .synthesis.cycle import extract_cycle, fit_events
 from .synthesis.targets import build_targets, raised, stance_only
 from .synthesis.timewarp import MachinePath, machine_path
 
-__all__ = ["PERIODIC_MIN_STRIDES", "Prepared", "Result", "ScalePlan", "accelerate", "add_report", "finish",
+__all__ = ["Output", "PERIODIC_MIN_STRIDES", "Prepared", "ScalePlan", "accelerate", "add_report", "finish",
            "naive_clip", "plan_scale", "prepare", "report_path", "scale", "targets_of", "write_result"]
 
 
@@ -48,7 +47,6 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     strides); the whole take by default. running_only: refuse a walk (NotARunningMotion) before fitting.
     """
     from .io.bvh import load_bvh
-    from .machine.fit import fit_machine_detailed
 
     if isinstance(clip, Motion):
         motion, source = clip, str(clip.meta.get("source", "motion"))
@@ -68,15 +66,9 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
         gait = detect_gait(motion, body, markers, com)
         take_notes = list(take_notes) + [turn_note(turn)]
     summary = summarize(motion, body, com, gait)
+    kind = choose_kind(summary, source, running_only)  # body.gait's one decision chooses the machine
     try:
-        if walks(summary) and not running_only:  # a motion's kind chooses its machine (body.gait decides it)
-            from .synthesis.walking import fit_walk
-
-            fit, cycle = fit_walk(motion, body, com, markers, gait, source, mass)
-        else:
-            require_running(summary, source)
-            fit = fit_machine_detailed(motion, body, mass=mass, source=Path(source).name)
-            cycle = extract_cycle(motion, body, gait, com, markers, events=fit_events(fit.machine, motion))
+        fit, cycle = kind.fit(motion, body, com, markers, gait, source, mass)
     except FitError as e:
         if turn is None:
             raise
@@ -87,7 +79,7 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     modelled, note = modelled_part(motion, summary, com, gait)
     return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source, fit,
                     modelled=modelled, notes=tuple(take_notes) + ((note,) if note else ()), clip_path=clip_path,
-                    turn=turn)
+                    turn=turn, kind=kind)
 
 
 @dataclass(frozen=True, eq=False)
@@ -105,9 +97,9 @@ class ScalePlan:
     notes: tuple
     method: str
     periodic: tuple | None
-    naive: Result | None = None
+    naive: Output | None = None
 
-    def finish(self, report: bool = True) -> Result:
+    def finish(self, report: bool = True) -> Output:
         if self.naive is not None:
             return self.naive
         assert self.path is not None  # a physical plan has its machine path
@@ -115,7 +107,7 @@ class ScalePlan:
                       periodic=self.periodic, report=report)
 
 
-def scale(prep: Prepared, character=None, *, report: bool = True, **options) -> Result:
+def scale(prep: Prepared, character=None, *, report: bool = True, **options) -> Output:
     """§5.1, §5.2, §6: the reference run on another character, at another speed, for any number of strides.
 
     character: preset name, YAML/BVH path or Character (None: the reference's own body);
@@ -171,28 +163,17 @@ def plan_scale(
         else:
             res = naive_cycle(prep.cycle, retarget, speed, n_steps, fps, prep.origin, prep.output_meta, notes,
                               prep.modelled, bool(prep.motion.meta.get("in_place")))
+        assert res.report is not None  # a naive output always has its report
+        res.report.extras.update(machine=prep.kind.name, flights=prep.kind.has_flight)  # which bars apply
         return ScalePlan(prep, None, retarget, speed, tuple(notes), "naive", None, naive=res)
     if method != "physical":
         raise FroudeError(f"unknown method '{method}' (physical or naive)")
     if speed_model not in ("auto", "law", "stretch"):
         raise FroudeError(f"unknown speed model '{speed_model}' (law or stretch)")
-    if is_walking(prep.machine):  # a motion's kind chooses its machine
-        from .synthesis.walking import walk_scale_path
-
-        path, method = walk_scale_path(prep, retarget, speed, n_steps=n_steps, fps=fps)
-        return ScalePlan(prep, path, retarget, speed, tuple(notes), method, None)
-    if not unlimited:
-        check_human_speed(prep, retarget, speed, m_scaled.mean_speed * m_scaled.speed_unit)
-    if speed_model != "stretch" and abs(speed - 1.0) > 1e-9:
-        machine = prep.machine_at_speed(speed)
-        stretch = 1.0
-        method = "physical (cycle re-solved at the new speed, human speed law)"
-    else:
-        machine, stretch = prep.machine, speed
-        method = "physical"
-    path = machine_path(prep.cycle, machine.scaled(retarget.L, retarget.M), retarget.L, prep.origin,
-                        stretch=stretch, n_steps=n_steps, fps=fps)
-    return ScalePlan(prep, path, retarget, speed, tuple(notes), method, (machine, stretch, fps))
+    path, method, periodic = prep.kind.scale_path(prep, retarget, speed, n_steps=n_steps, fps=fps,
+                                                  speed_model=speed_model, unlimited=unlimited,
+                                                  base_m_s=m_scaled.mean_speed * m_scaled.speed_unit)
+    return ScalePlan(prep, path, retarget, speed, tuple(notes), method, periodic)
 
 
 def accelerate(
@@ -212,7 +193,7 @@ def accelerate(
     unlimited: bool = False,
     speed_model: str = "law",
     **character_numbers,
-) -> Result:
+) -> Output:
     """§5.3 + §6: speed up or slow down to ``to_speed`` [m/s] or ``to_factor`` × the start speed (apex speeds).
 
     steps: the change takes this many steps (a step = one stance and the flight after it), or
@@ -224,16 +205,10 @@ def accelerate(
         a runner's do; "planner": the paper's §5.3 planner (fitted K, a, c, T_c kept; θ0, δb per step; energy).
     policy: the profile of the change's speeds ("ease" or "even"), for both models.
     Walks keep their own planner (``synthesis.walking.plan_walk_speed_change``): the law is the runners'.
+    The motion's kind plans the change (``kinds.MotionKind.speed_change``).
     """
-    if is_walking(prep.machine):  # a motion's kind chooses its machine
-        from .synthesis.walking import plan_walk_speed_change
-
-        rt = prep.retarget(character, **character_numbers)
-        path, walk_plan = plan_walk_speed_change(prep, rt, to_speed=to_speed, to_factor=to_factor, steps=steps,
-                                                 within=within, lead_steps=lead_steps, hold_steps=hold_steps, fps=fps)
-        return finish(prep, path, rt, 1.0, list(prep.notes), "physical", report=report, extras={"plan": walk_plan})
     retarget = prep.retarget(character, **character_numbers)
-    path, plan, notes, extras = plan_run_speed_change(
+    path, plan, notes, extras = prep.kind.speed_change(
         prep, retarget, to_speed=to_speed, to_factor=to_factor, steps=steps, within=within, lead_steps=lead_steps,
         hold_steps=hold_steps, fps=fps, energy=energy, policy=policy, unlimited=unlimited, speed_model=speed_model)
     return finish(prep, path, retarget, 1.0, notes, "physical", plan=plan, report=report, extras=extras)
@@ -253,14 +228,14 @@ def targets_of(prep: Prepared, path: MachinePath, retarget: Retarget):
 
 
 def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, notes, method: str, plan=None,
-           periodic=None, report: bool = True, extras: dict | None = None) -> Result:
+           periodic=None, report: bool = True, extras: dict | None = None) -> Output:
     """Targets → IK → report: the common tail of scale and accelerate.
 
     periodic: (machine, stretch, fps) when the path is the steady cycle repeated: long outputs then solve
     the IK of one stride only, sampled PERIODIC_OVERSAMPLE times finer, and tile it (the result is
     periodic too; ``ik.correct.tile_stride``).
     """
-    from .ik.correct import WALK_REPAIR_ROUNDS, correct, tile_stride
+    from .ik.correct import correct, tile_stride
 
     targets, path = targets_of(prep, path, retarget)
     n_strides = len(path.foot_of_step) / 2
@@ -274,16 +249,16 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
         motion = tile_stride(one, 2.0 * m.step_time * m.time_unit, dense_fps, targets, path.times, stride,
                              retarget.body)
     else:
-        ik = correct(targets, retarget.body, repair_rounds=WALK_REPAIR_ROUNDS if is_walking(prep.machine) else 1)
+        ik = correct(targets, retarget.body, repair_rounds=prep.kind.repair_rounds)
         if not ik.ok:
             bad = np.flatnonzero(ik.failed)
             notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]
         motion = ik.motion
-    res = Result(motion, None, path, targets, retarget, method, speed, tuple(notes), plan, dict(extras or {}))
+    res = Output(motion, None, path, targets, retarget, method, speed, tuple(notes), plan, dict(extras or {}))
     return add_report(prep, res) if report else res
 
 
-def add_report(prep: Prepared, res: Result) -> Result:
+def add_report(prep: Prepared, res: Output) -> Output:
     """The result with its physics report (docs/architecture.md) computed: tracking against the machine, the loaded
     foot targets and the time-warped reference pose. (Separate so that a viewer can show the motion first.)
     """
@@ -300,9 +275,6 @@ def add_report(prep: Prepared, res: Result) -> Result:
                           "speed_factor": res.speed_factor, "method": res.method, "notes": list(res.notes),
                           "machine_apex_speed_m_s": res.path.apex_speed.tolist(), "modelled": prep.modelled,
                           "input_in_place": bool(prep.motion.meta.get("in_place")),
-                          **res.extras})
-    if is_walking(prep.machine):
-        from .walk_report import walking_extras
-
-        report.extras.update(walking_extras(prep, res, report))
+                          "machine": prep.kind.name, "flights": prep.kind.has_flight, **res.extras})
+    report.extras.update(prep.kind.report_extras(prep, res, report))
     return _replace(res, report=report)

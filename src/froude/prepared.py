@@ -63,6 +63,9 @@ class Prepared:
     #: onto it (``synthesis.bend``); None for a straight take, modelled as it is.
     clip_path: TakePath | None = None
     turn: TakePath | None = None
+    #: The kind of locomotion and its machine (``kinds.MotionKind``): every verb asks it, not the machine's
+    #: type. ``pipeline.prepare`` sets it (``kinds.choose_kind``).
+    kind: Any = None
     #: What is built on demand for this clip and remembered (see Memo).
     memo: Memo = field(default_factory=lambda: Memo(), repr=False)
 
@@ -93,21 +96,10 @@ class Prepared:
         return float(froude_cadence(1.0 / (m.step_time * m.time_unit), self.body.stature))
 
     def machine_at_speed(self, speed: float):
-        """The machine re-solved at ``speed`` × the clip's speed: a run by the human speed law
-        (``machine.speed.machine_at_speed``), a walk by its walking cycle (``machine.walk_speed``);
+        """The machine re-solved at ``speed`` × the clip's speed by its kind (a run by the human speed law,
+        ``machine.speed.machine_at_speed``; a walk by its walking cycle, ``machine.walk_speed``);
         remembered per speed factor."""
-        from .machine import is_walking
-        from .machine.speed import machine_at_speed
-        from .machine.walk_speed import walking_machines_at_speeds
-
-        key = float(speed)
-        hit = self.memo.faster_machines.get(key)
-        if hit is None:
-            if is_walking(self.machine):
-                walk: Any = self.machine  # a WalkingMachine (the fit of a walk)
-                return walking_machines_at_speeds(walk, [key], self.memo.faster_machines)[key]
-            hit = self.memo.faster_machines[key] = machine_at_speed(self.machine, key, self.law_cadence)
-        return hit
+        return self.kind.machine_at_speed(self, float(speed), self.memo.faster_machines)
 
     def human_top(self, retarget: Retarget):
         """``machine.speed_law.human_top_factor`` of a run for one character: the fastest speed factor whose

@@ -12,13 +12,14 @@ from .body.characters import Retarget
 from .constants import UP_AXIS
 from .core.motion import Motion
 from .errors import FroudeError
+from .kinds import kind_named
 from .metrics import Report, write_report
 from .synthesis.targets import Targets
 from .synthesis.timewarp import MachinePath
 
 
 @dataclass(frozen=True, eq=False)
-class Result:
+class Output:
     """An output motion with its machine path, targets and physics report."""
 
     motion: Motion
@@ -60,11 +61,7 @@ class Result:
             from .path_report import path_rows
 
             rows += path_rows(r.extras["path_vs_clip"])
-        if r.extras.get("machine") == "walking":
-            from .walk_report import walking_rows
-
-            rows += walking_rows(r)
-        return rows
+        return rows + kind_named(r.extras.get("machine")).summary_rows(r)
 
 
 def _rest_row(r: Report) -> str:
@@ -92,7 +89,7 @@ def report_path(out_path) -> Path:
     return p.with_name(p.stem + ".report.json")
 
 
-def in_place_motion(result: Result) -> Motion:
+def in_place_motion(result: Output) -> Motion:
     """The output with its root travel removed (a treadmill-like loop for engines that move the character
     themselves): the root is moved back by the COM's forward progression, taken straight between the
     machine's touchdowns (constant for a steady output, step by step for an acceleration), so the body
@@ -107,7 +104,7 @@ def in_place_motion(result: Result) -> Motion:
     return _replace(motion, root_positions=motion.root_positions - np.outer(travel - travel[0], fwd))
 
 
-def _travel_direction(motion: Motion, result: Result) -> np.ndarray:
+def _travel_direction(motion: Motion, result: Output) -> np.ndarray:
     com = result.retarget.body.com(motion)
     d = com[-1] - com[0]
     d[UP_AXIS] = 0.0
@@ -115,7 +112,7 @@ def _travel_direction(motion: Motion, result: Result) -> np.ndarray:
     return d / n if n > 0 else np.eye(3)[0]
 
 
-def write_result(result: Result, out_path, data=None, in_place: bool | None = None,
+def write_result(result: Output, out_path, data=None, in_place: bool | None = None,
                  **bvh_options) -> tuple[Path, ...]:
     """Write OUT (.bvh, .glb or .gltf: ``froude.api.save`` decides by suffix) and OUT.report.json, and
     the per-frame table to ``data`` (.csv/.parquet/.npz) when given: all or none. Returns the paths.

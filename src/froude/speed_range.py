@@ -121,12 +121,11 @@ def reachable_speed_range(prep: Prepared, character=None, *, stop=None, unlimite
     hit = prep.memo.speed_ranges.get(key)
     if hit is not None:
         return hit
-    from .machine import is_walking
-
     rt = prep.retarget(character, **character_numbers)
     m = prep.machine.scaled(rt.L, rt.M)
     base = m.mean_speed * m.speed_unit
-    human_top = None if unlimited or is_walking(prep.machine) else prep.human_top(rt).factor
+    top = None if unlimited else prep.kind.human_top(prep, rt)
+    human_top = None if top is None else top.factor
     search = (SPEED_SEARCH_RANGE[0],
               SPEED_SEARCH_RANGE[1] if human_top is None else max(1.0, min(SPEED_SEARCH_RANGE[1], human_top)))
     probes = []

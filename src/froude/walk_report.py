@@ -96,7 +96,7 @@ def walking_extras(prep, res, report) -> dict:
     f_clip = 1.0 / float(prep.machine.reference["step_time_s"])
     f_out = float(report.step_frequency_hz)
     expected, naive = _expected_and_naive_cadence(prep, res, f_clip, L, s)
-    return {"machine": "walking", "walking": {**out, "clip": clip},
+    return {"walking": {**out, "clip": clip},
             "cadence": {"clip_step_frequency_hz": f_clip, "step_frequency_hz": f_out,
                         "expected_step_frequency_hz": expected, "naive_step_frequency_hz": naive,
                         "naive_error": naive / expected - 1.0, "clip_froude_U": float(prep.summary.froude)}}

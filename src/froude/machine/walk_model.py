@@ -33,10 +33,9 @@ from ..constants import GRAVITY
 from ..errors import FitError
 from ..io.atomic import atomic_write_text
 from ..io.jsonable import dumps
-from . import is_walking  # re-exported: its home is the package (no walking code imported)
 from .walking import PULSES_OFF, ControlPulses, WalkControl, WalkState
 
-__all__ = ["WALK_SCHEMA", "WalkingMachine", "is_walking", "load_walking_machine"]
+__all__ = ["WALK_SCHEMA", "WalkingMachine", "load_walking_machine"]
 
 WALK_SCHEMA = "froude.walking/1"
 _CYCLE = ("u", "v", "d", "s", "l_td", "roll", "K", "a", "b", "c", "e", "p", "tau_p", "w_p", "q", "tau_q", "w_q", "T_c",

@@ -13,7 +13,7 @@ def plan_plot_paths(path) -> list[Path]:
 def plot_plan(result, path) -> list[Path]:
     """Write PATH (the per-step speed profile) and PATH-table.png (U′ over (U, θ0) at the cycle's H).
 
-    result: a pipeline Result from ``accelerate`` (its ``plan`` and the prepared machine's control).
+    result: a pipeline Output from ``accelerate`` (its ``plan`` and the prepared machine's control).
     """
     from ..machine.table import grid_around, load_or_build_table
     from .table_plot import plot_speed_profile, plot_table

@@ -107,7 +107,7 @@ def _worker_name() -> str:
 
 
 def result_figures(res) -> dict:
-    """The index's physics figures of a pipeline Result (report key figures, character, bars)."""
+    """The index's physics figures of a pipeline Output (report key figures, character, bars)."""
     r = res.report
     fails = r.check_bars()
     return {

@@ -82,7 +82,6 @@ def run(args) -> int:
     guard_outputs([out, plot], [args.clip])
 
     from ...body.model import BodyModel
-    from ...machine.fit import fit_machine_detailed
 
     # the load's notes are said once the fit succeeded: a clip that cannot be fitted is one error line
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, True, args.joint_map, args.up)
@@ -91,31 +90,30 @@ def run(args) -> int:
 
         motion = select_range(motion, args.range, Path(args.clip).name)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
-    from ...body.gait import require_running, summarize, walks
+    from ...body.gait import summarize
     from ...body.take import running_take
+    from ...kinds import choose_kind
 
     # the take as ``prepare`` analyses it (a loop unrolled, an in-place take given its travel) and the one
-    # decision of body.gait about what it is: the same as ``info`` says and ``scale`` models
+    # decision of body.gait about what it is: the same as ``info`` says and ``scale`` models (in place or
+    # unknown is refused in info's words, before a fit)
     motion, notes = running_take(motion, body)
-    summary = summarize(motion, body)
-    if walks(summary):  # walking or grounded running gets the walking machine
-        return _run_walk(args, motion, body, out, plot)
-    require_running(summary, Path(args.clip).name)  # in place, unknown: refused in info's words, before a fit
+    kind = choose_kind(summarize(motion, body), Path(args.clip).name)
+    res = kind.fit_detailed(motion, body, mass=args.mass, source=Path(args.clip).name)
     for note in notes:
         say(f"note: {note}", args.quiet)
-    res = fit_machine_detailed(motion, body, source=Path(args.clip).name)
-    from ...viz.fit_plot import plot_fit
-
-    return _write_fit(args, motion, res, out, plot, plot_fit, fit_table(res))
+    table, plot_fn = FIT_OUTPUTS[kind.name]
+    return _write_fit(args, motion, res, out, plot, plot_fn, table(res))
 
 
 def _write_fit(args, motion, res, out, plot, plot_fn, table: str) -> int:
-    """The machine file (and plot) of a fit, written together; then the table and what was written."""
+    """The machine file (and plot) of a fit, written together; then the table and what was written.
+    plot_fn: loads the plot function (called only when a plot is asked for)."""
     from ...io.atomic import atomic_group
 
     with atomic_group():
         if plot:
-            plot_fn(res, plot, title=Path(args.clip).name)
+            plot_fn()(res, plot, title=Path(args.clip).name)
         res.machine.save(out)
     say_loaded(motion, args.clip, args.quiet)
     print(table)
@@ -162,9 +160,18 @@ def walk_table(res) -> str:
     return "\n".join(lines)
 
 
-def _run_walk(args, motion, body, out, plot) -> int:
-    from ...machine.walk_fit import fit_walking_detailed
+def _plot_run_fit():
+    from ...viz.fit_plot import plot_fit
+
+    return plot_fit
+
+
+def _plot_walk_fit():
     from ...viz.walk_plot import plot_walk_fit
 
-    res = fit_walking_detailed(motion, body, source=Path(args.clip).name)
-    return _write_fit(args, motion, res, out, plot, plot_walk_fit, walk_table(res))
+    return plot_walk_fit
+
+
+#: What ``froude fit`` prints and plots for each kind of motion (``kinds.MotionKind.name``): the table of
+#: the fit result and the plot function's loader (matplotlib is imported only when a plot is written).
+FIT_OUTPUTS = {"running": (fit_table, _plot_run_fit), "walking": (walk_table, _plot_walk_fit)}

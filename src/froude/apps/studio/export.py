@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ...errors import FroudeError
-from ...result import Result
+from ...result import Output
 from .session import with_report
 
 if TYPE_CHECKING:  # a part of Tab: its methods use the attributes Tab.__init__ sets
@@ -32,7 +32,7 @@ class _Export(_TabPart):
             client.send_file_download(name, data, save_immediately=True)
 
     @property
-    def _good_result(self) -> Result:
+    def _good_result(self) -> Output:
         """The last good result's output (a good result is a solved one, never an IK-free preview)."""
         assert self.good.result is not None
         return self.good.result

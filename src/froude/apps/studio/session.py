@@ -16,7 +16,7 @@ import numpy as np
 from ... import pipeline
 from ...body.characters import apply_character, list_presets, resolve_character
 from ...errors import FitError, FroudeError
-from ...result import Result
+from ...result import Output
 from .tracks import Track, machine_track, motion_hash, reference_track
 
 MODES = ("scale", "accelerate")
@@ -121,7 +121,7 @@ class Solved:
 
     params: Params
     track: Track
-    result: Result | None
+    result: Output | None
     preview: bool
     seconds: float
     hash: str
@@ -204,16 +204,11 @@ class Session:
 
     def _scale_message(self, params: Params, err: FroudeError) -> str:
         """The machine's refusal of a speed in the user's terms (m/s, ×) with the fix."""
-        from ...machine import is_walking
-
-        if is_walking(self.prep.machine):  # the walking machine says it in m/s already (walk-run transition)
-            return str(err).splitlines()[0]
         spec, nums = params.character_args()
         rt = self.prep.retarget(spec, **nums)
         m = self.prep.machine.scaled(rt.L, rt.M)
         v = params.speed * m.mean_speed * m.speed_unit
-        return (f"{params.character} cannot run at ×{params.speed:g} ({v:.2f} m/s) on this clip: the simple "
-                f"machine has no running cycle there; pick a speed nearer ×1")
+        return self.prep.kind.speed_refusal(params.character, params.speed, v, err)
 
     def _accelerate_message(self, params: Params, err: FroudeError) -> str:
         """The refusal's first line: the pipeline already says it in m/s, × and steps (``plan_refusal``)."""

@@ -18,7 +18,7 @@ from conftest import BANDAI_WALKS, MOCAP, WALKING, clip, clip_params
 CHARACTERS = ("child", "troll", "giant")
 
 #: Outputs that miss a bar or the double-support share today (none: every walk and character meets them since
-#: the rolling foot lands and leaves at its held stance's level, synthesis.cycle._contact_level, and a walk's
+#: the rolling foot lands and leaves at its held stance's level, synthesis.feet._contact_level, and a walk's
 #: targets are raised only beyond the pose's own reach, synthesis.targets._lift_out_of_reach), measured with
 #: `python docs/make_walk_table.py`. An entry (name, character): reason marks that case as a strict xfail.
 KNOWN_MISSES: dict[tuple[str, str], str] = {}

@@ -94,7 +94,8 @@ class Running:
         return fit_machine_detailed(motion, body, mass=mass, source=source)
 
     def fit(self, motion, body, com, markers, gait, source: str, mass: float):
-        from .synthesis.cycle import extract_cycle, fit_events
+        from .synthesis.cycle import extract_cycle
+        from .synthesis.phases import fit_events
 
         fit = self.fit_detailed(motion, body, mass=mass, source=Path(source).name)
         return fit, extract_cycle(motion, body, gait, com, markers, events=fit_events(fit.machine, motion))

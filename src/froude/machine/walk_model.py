@@ -33,6 +33,7 @@ from ..constants import GRAVITY
 from ..errors import FitError
 from ..io.atomic import atomic_write_text
 from ..io.jsonable import dumps
+from .units import speed_unit, time_unit
 from .walking import PULSES_OFF, ControlPulses, WalkControl, WalkState
 
 __all__ = ["WALK_SCHEMA", "WalkingMachine", "load_walking_machine"]
@@ -98,12 +99,12 @@ class WalkingMachine(ControlPulses):
     @property
     def time_unit(self) -> float:
         """√(l0/g) [s]."""
-        return math.sqrt(self.l0 / self.g)
+        return time_unit(self.l0, self.g)
 
     @property
     def speed_unit(self) -> float:
         """√(g l0) [m/s]."""
-        return math.sqrt(self.g * self.l0)
+        return speed_unit(self.l0, self.g)
 
     @property
     def control(self) -> WalkControl:

@@ -11,7 +11,8 @@ from ..body.characters import Retarget
 from ..body.model import BodyModel
 from ..constants import UP_AXIS
 from ..core.motion import Motion
-from .cycle import ReferenceCycle, min_jerk, sample_cycle, swing_anchor
+from .cycle import ReferenceCycle, sample_cycle
+from .feet import min_jerk, swing_anchor
 from .timewarp import MachinePath
 
 #: IK weights [1/m²] for a reference-sized body (scaled by (reference leg / target leg)² for others);
@@ -205,7 +206,7 @@ def _rest_on_floor(markers: np.ndarray, path: MachinePath, rest: np.ndarray, toe
             # is steep, and put back so it moved 10-20 mm horizontally for a few mm of height (CMU 09_05 and
             # 09_06 as giants: their held heels turned the feet, the stricter skate 11-43 mm). Not in a walk
             # (toe_bone False): CMU 07_01 as a troll, its stricter skate 2.84 mm without, 8.18 mm with (its foot
-            # rolls over one pivot at a time, cycle._remove_sliding_rolling, ball and tip pass each other's height
+            # rolls over one pivot at a time, feet.remove_sliding_rolling, ball and tip pass each other's height
             # and which of them is put back switches there: the likely cause, not yet shown)
             bone = np.linalg.norm(markers[:, foot, 1] - markers[:, foot, 2], axis=-1)  # (T,) [m]
             tip_low = (out[:, foot, 2, UP_AXIS] <= out[:, foot, 1, UP_AXIS])[:, None]  # the lower one holds

@@ -19,7 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import UP_AXIS
-from .cycle import FootEvent, min_jerk, sample_cycle
+from .cycle import sample_cycle
+from .feet import min_jerk
+from .phases import FootEvent
 
 __all__ = ["StepPlan", "contact_from_com", "fit_walk", "plan_walk_speed_change", "soften_swing_weights", "steps_path",
            "walk_machine_path", "walking_events"]

@@ -273,14 +273,12 @@ def test_the_output_leans_into_the_turn_and_its_force_closes(prepared):
 
 
 def test_a_lost_turn_is_a_missed_bar_said_in_degrees(prepared):
-    """Never silently straight: an output of a turning clip that walks straight (here the naive retarget
-    of the straightened take, which copies the cycle) misses a bar that says so in degrees."""
+    """Never silently straight: an output of a turning clip that walks straight (here the take straightened
+    along its path, which the machines see) misses a bar that says so in degrees."""
     from froude.metrics import physics_report
 
     prep = prepared[TURN]
-    naive = pipeline.scale(prep, "child", method="naive")
-    rep = physics_report(naive.motion, naive.retarget.body, reference_path=prep.path,
-                         reference_leg_length=prep.body.leg_length)
+    rep = physics_report(prep.motion, prep.body, reference_path=prep.path, reference_leg_length=prep.body.leg_length)
     miss = [f for f in rep.check_bars() if f.startswith("the output turns")]
     assert len(miss) == 1 and "where the clip turns +95 deg" in miss[0], rep.check_bars()
     assert abs(rep.extras["path_vs_clip"]["heading_change_deg"]["output"]) < 3.0
@@ -331,6 +329,37 @@ def test_the_studio_draws_a_turns_reference_as_taken(prepared, tmp_path):
                      for s in prep.gait.stances])
     horizontal = np.array([1.0, 1.0, 1.0]) - UP
     assert np.abs((feet - track.contacts) * horizontal).max() <= 0.15  # a foot's length, not a stride
+
+
+def test_the_naive_retarget_of_a_turn_turns(prepared, tmp_path):
+    """The studio's naive comparison (engines' way) of a turning take plays the take as taken, so it turns as
+    the clip's file does (the tests' own reader, within 3 deg), scaled by L; it repeated the straightened
+    stride cycle before and walked straight (-2.0 deg against the file's +94.1). The same for
+    ``scale(..., method="naive")``."""
+    pytest.importorskip("viser")
+    from test_studio import _free_port
+
+    from froude.apps.studio.app import Studio
+    from froude.io.bvh import save_bvh
+
+    prep = prepared[TURN]
+    window_s = 1.0
+    want = _oracle_heading_deg(clip(TURN), window_s)
+    studio = Studio(prep, port=_free_port())
+    try:
+        tab = studio.open_tab()
+        tab._solve_naive()
+        assert tab.naive is not None and tab.naive.result.method == "naive"
+        save_bvh(tab.naive.result.motion, tmp_path / "naive.bvh")
+        assert abs(_oracle_heading_deg(tmp_path / "naive.bvh", window_s) - want) <= 3.0
+        assert any("plays the take as it was taken" in n for n in tab.naive.result.notes)
+    finally:
+        studio.stop()
+    child = pipeline.scale(prep, "child", method="naive", speed=1.2)
+    save_bvh(child.motion, tmp_path / "child.bvh")
+    assert abs(_oracle_heading_deg(tmp_path / "child.bvh", window_s / 1.2) - want) <= 3.0
+    # the whole take, played 1.2 times faster
+    assert abs(child.motion.duration - prep.motion.duration / 1.2) <= child.motion.frame_time
 
 
 @pytest.mark.browser

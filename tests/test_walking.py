@@ -293,6 +293,57 @@ def test_constrained_gauss_newton_ends_at_the_minimum_whatever_the_last_bits():
     assert max(np.max(np.abs(e - y)) for e in ends[1:]) < 1e-9
 
 
+def test_simulator_accelerations_are_the_legs_forces_to_the_bit():
+    """The simulator's inner loop (``_Machine.accel_fn``: legs and pulses unrolled for the usual case, the
+    control's constants bound once) is the sum of its legs' forces as ``_Machine.leg`` computes them, to the
+    last bit, with and without pulses, one leg and two, armed and slack; and the nodes' accelerations of a
+    recorded step (over arrays) agree to rounding."""
+    from froude.machine.walking import _leg_force, _Machine, record_step
+
+    rng = np.random.default_rng(5)
+    legs = [(-0.35, -1.7), (0.42, 0.0)]
+    for pulses in ({}, {"p": 0.04, "tau_p": 0.84, "w_p": 0.04, "q": 0.03, "tau_q": 0.15, "w_q": 0.075}):
+        ctl = WalkControl(K=24.0, a=-0.01, b=-0.1, c=0.04, T_c=1.9, e=0.05, **pulses)
+        mc = _Machine(ctl, 120, roll=0.05)
+        for use, armed in ((legs, [True, True]), (legs, [True, False]), (legs[1:], [True]), (legs[1:], [False])):
+            acc = mc.accel_fn(use, armed)
+            for x, y, t in zip(rng.uniform(-0.3, 0.5, 40), rng.uniform(0.8, 1.0, 40), rng.uniform(0.0, 1.9, 40)):
+                ax, ay = 0.0, -1.0
+                for (xc, t0), arm in zip(use, armed):
+                    f, _, ux, uy = mc.leg(x, y, t, xc, t0, arm)
+                    ax += f * ux
+                    ay += f * uy
+                assert acc(x, y, t) == (ax, ay)
+                f, ux, uy = _leg_force(mc, np.array([x]), np.array([y]), np.array([t]), *use[-1])
+                assert abs(f[0] - max(mc.leg(x, y, t, *use[-1], True)[0], 0.0)) < 1e-12
+    rec = record_step(WalkState(0.524, -0.0125, 0.367, 1.711), 0.4356, ctl, roll=0.05, l_td=0.988)
+    assert rec.step.valid
+    nodes = rec._nodes
+    for k in range(0, len(nodes), 7):
+        tk, x, y = nodes[k, :3]
+        act = rec._legs if tk <= rec._t_lo else rec._legs[1:]
+        assert np.allclose(rec._acc[k], mc.accel(x, y, tk, act, [False] * len(act)), rtol=0, atol=1e-13)
+
+
+def test_line_search_from_the_last_step_takes_the_step_a_search_from_one_takes():
+    """``gauss_newton._descent_step`` starts at twice the last iteration's λ: where the accepted λ form an
+    interval (0, λ_max] it takes the largest 2^-k in it, whatever its start, and says which."""
+    from froude.machine.gauss_newton import _descent_step
+
+    dy = np.array([1.0, -2.0])
+    for lam_max in (1.0, 0.3, 0.05, 0.004):
+        def evaluate(y, lam_max=lam_max):
+            return np.array([float(np.max(np.abs(y)) / 2.0 > lam_max)]), np.zeros(1)
+
+        def merit(y, r, c):
+            return float(r[0])
+
+        want = 2.0 ** math.floor(math.log2(lam_max))
+        for hint in (1.0, 0.5, 0.125, 1 / 64, 1 / 1024):
+            y, _, lam = _descent_step(evaluate, merit, np.zeros(2), dy, 0.0, np.zeros((2, 1)), False, lam_hint=hint)
+            assert lam == want and np.allclose(y, want * dy)
+
+
 def test_shape_fit_runs_from_the_nearest_starts_and_falls_back(monkeypatch):
     """The walking fit's shape fits (``_shape_fit_nearest``) run from the NEAREST_STARTS (2) candidates whose
     shape residual is the smallest, a farther one's end cost wins when lower by more than COST_MARGIN, a

@@ -55,11 +55,11 @@ def naive_clip(motion: Motion, character=None, *, speed: float = 1.0, target_spe
     """The naive baseline for any clip that loads, running or not (no fit, no cycle): what engines do with
     a clip as it is: joint angles copied, the root's motion × L about the first frame's point on the floor,
     played s times faster (and as long as the clip). ``scale(..., method="naive")`` repeats a stride cycle
-    instead when the clip is a run; this is its fallback for walks, jumps and clips the fit refuses.
+    instead when the clip is a straight take the fit models (a turning one it plays as taken, ``naive_take``);
+    this is its fallback for jumps and clips the fit refuses.
     target_speed [m/s] is turned into a factor of the clip's own scaled mean speed; performer_mass [kg]:
     the reference performer's (the character's own mass is a character number, ``mass=``).
     """
-    from .metrics import max_joint_jump_deg
 
     body = BodyModel.from_skeleton(motion.skeleton, mass=performer_mass)
     retarget = apply_character(resolve_character(character, **character_numbers), body)
@@ -72,15 +72,26 @@ def naive_clip(motion: Motion, character=None, *, speed: float = 1.0, target_spe
         speed = target_speed / base
     if not (np.isfinite(speed) and speed > 0):
         raise FroudeError(f"speed factor must be > 0, got {speed}")
-    fps = motion.fps if fps is None else float(fps)
+    notes = [f"naive baseline of the clip as it is ({summary.kind}): the fit was not needed"]
+    return naive_take(motion, body, retarget, speed, motion.fps if fps is None else float(fps), notes,
+                      f"the whole clip ({summary.kind})")
+
+
+def naive_take(motion: Motion, body: BodyModel, retarget: Retarget, speed: float, fps: float, notes,
+               modelled: str, meta: dict | None = None) -> Output:
+    """What engines do with a take as it is: joint angles copied, the root's motion × L about the first
+    frame's COM on the floor, played ``speed`` times faster at fps [1/s], as long as the take (its path,
+    a turn included, scaled by L). body: the take's; meta: the output's provenance (default: the take's)."""
+    from .metrics import max_joint_jump_deg
+
+    L = retarget.L
     n = int(math.floor(motion.duration / speed * fps + 1e-9)) + 1
     played = motion.sample(np.arange(n) / fps * speed)
     origin = body.com(motion)[0].copy()
     origin[UP_AXIS] = detect_gait(motion, body).ground
     root = origin + L * (played.root_positions - origin)
-    meta = {"source": str(motion.meta.get("source", "motion")),
-            "length_scale": float(motion.meta.get("length_scale", 1.0))}
-    out = Motion(retarget.skeleton, root, played.rotations, 1.0 / fps, None, meta)
-    notes = [f"naive baseline of the clip as it is ({summary.kind}): the fit was not needed"]
-    return _naive_result(out, retarget, speed, notes, f"the whole clip ({summary.kind})", False,
-                         max_joint_jump_deg(motion))
+    if meta is None:
+        meta = {"source": str(motion.meta.get("source", "motion")),
+                "length_scale": float(motion.meta.get("length_scale", 1.0))}
+    out = Motion(retarget.skeleton, root, played.rotations, 1.0 / fps, None, dict(meta))
+    return _naive_result(out, retarget, speed, list(notes), modelled, False, max_joint_jump_deg(motion))

@@ -20,7 +20,7 @@ import numpy as np
 from .body.characters import Retarget
 from .body.gait import detect_gait, summarize
 from .body.model import BodyModel
-from .body.path import is_straight, straighten, take_path, turn_note
+from .body.path import is_straight, straighten, take_path, turn_note, unstraighten
 from .body.take import modelled_part, running_take, select_range
 from .core.motion import Motion
 from .errors import FitError, FroudeError
@@ -151,10 +151,18 @@ def plan_scale(
     notes += speed_range_notes(speed)
     n_steps = output_steps(strides, duration, m_scaled.step_time * m_scaled.time_unit)
     if method == "naive":
-        from .naive import naive_cycle
+        from .naive import naive_cycle, naive_take
 
-        res = naive_cycle(prep.cycle, retarget, speed, n_steps, fps, prep.origin, prep.output_meta, notes,
-                          prep.modelled, bool(prep.motion.meta.get("in_place")))
+        if prep.turn is not None:
+            # the cycle is of the take straightened along its turn: repeating it would walk straight, which is
+            # not what engines do with a turning take (they play it, and it turns)
+            taken = unstraighten(prep.motion, prep.turn)
+            notes.append(f"the naive baseline of a turning take plays the take as it was taken "
+                         f"({taken.duration / speed:.2f} s, its whole turn), not {n_steps / 2:g} strides")
+            res = naive_take(taken, prep.body, retarget, speed, fps, notes, prep.modelled, prep.output_meta)
+        else:
+            res = naive_cycle(prep.cycle, retarget, speed, n_steps, fps, prep.origin, prep.output_meta, notes,
+                              prep.modelled, bool(prep.motion.meta.get("in_place")))
         assert res.report is not None  # a naive output always has its report
         res.report.extras.update(machine=prep.kind.name, flights=prep.kind.has_flight)  # which bars apply
         return ScalePlan(prep, None, retarget, speed, tuple(notes), "naive", None, naive=res)

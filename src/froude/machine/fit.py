@@ -29,7 +29,7 @@ import numpy as np
 
 from ..body.gait import detect_gait, require_running, summarize
 from ..body.model import BodyModel
-from ..constants import GRAVITY, UP_AXIS, heading_frame
+from ..constants import GRAVITY, UP_AXIS
 from ..core.motion import Motion
 from ..errors import FitError, NotARunningMotion
 from .control_fit import fit_leg_control
@@ -37,11 +37,10 @@ from .dynamics import N_PER_STANCE, Control, simulate, step
 from .forces import (
     CUTOFF_HZ,
     EVENT_THRESHOLD_BW,
+    clip_com,
     flight_residual,
     force_shares,
-    ground_force,
     refine_events,
-    smooth_com,
     stance_geometry,
 )
 from .model import SimpleMachine
@@ -495,10 +494,8 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     motion, com, markers, gait, summary = _analysis_motion(motion, body, src)
     dt = motion.frame_time
     F = motion.n_frames
-    times = np.arange(F) * dt
-    p, v, acc = smooth_com(com, dt, cutoff_hz)
-    f = ground_force(acc, mass)
-    heading, _, lateral = heading_frame(summary.heading)
+    cc = clip_com(com, dt, mass, summary.heading, cutoff_hz)
+    times, p, v, f, heading, lateral = cc.times, cc.p, cc.v, cc.f, cc.heading, cc.lateral
     # Lateral COM line (least squares over the clip): sway and foot offsets are measured from it.
     lat = p @ lateral
     line = np.polyfit(times, lat, 1)

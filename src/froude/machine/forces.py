@@ -41,14 +41,41 @@ from ..body.com_force import (  # the eq. 1 force's one home is the body layer (
     ground_force,
     smooth_com,
 )
-from ..constants import GRAVITY, UP_AXIS
+from ..constants import GRAVITY, UP_AXIS, heading_frame
 from ..errors import FitError
 
 __all__ = [
     "CUTOFF_HZ", "FILTER_ORDER", "EDGE_PAD_S", "EDGE_FIT_S", "EVENT_THRESHOLD_BW", "EVENT_SEARCH_S",
     "smooth_com", "ground_force", "butter_lowpass", "filtfilt", "refine_events", "StanceGeometry",
-    "stance_geometry", "force_shares", "flight_residual",
+    "stance_geometry", "force_shares", "flight_residual", "ClipCom", "clip_com",
 ]
+
+@dataclass(frozen=True)
+class ClipCom:
+    """What both machines' fits measure of a clip first (:func:`clip_com`), SI, world axes.
+
+    times (F,) [s]; p, v (F, 3) the zero-lag filtered COM [m], [m/s]; f (F, 3) the eq. 1 ground force [N];
+    heading, lateral (3,) the unit forward and lateral (right) directions of travel.
+    """
+
+    times: np.ndarray
+    p: np.ndarray
+    v: np.ndarray
+    f: np.ndarray
+    heading: np.ndarray
+    lateral: np.ndarray
+
+
+def clip_com(com: np.ndarray, frame_time: float, mass: float, heading: np.ndarray,
+             cutoff_hz: float = CUTOFF_HZ) -> ClipCom:
+    """The filtered COM, its eq. 1 force and the heading frame of a clip (the opening of the running and the
+    walking fit). com: (F, 3) body COM [m]; frame_time [s]; mass [kg]; heading (3,) the gait's direction of
+    travel (``body.gait`` summary); cutoff_hz: the filter's cutoff."""
+    p, v, acc = smooth_com(com, frame_time, cutoff_hz)
+    fwd, _, lateral = heading_frame(heading)
+    return ClipCom(times=np.arange(com.shape[0]) * frame_time, p=p, v=v, f=ground_force(acc, mass), heading=fwd,
+                   lateral=lateral)
+
 
 #: Vertical-force threshold for touchdown / liftoff [body weights].
 EVENT_THRESHOLD_BW = 0.5

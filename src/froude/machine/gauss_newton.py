@@ -44,8 +44,9 @@ def constrained_gauss_newton(evaluate, n, w_prior, *, start=None, what="the shap
     the constraints' Newton step of least norm and, in their null space, the Gauss-Newton step of the
     cost. Far from the minimum a step must lower the merit ½‖r‖² + ½ w²‖y‖² + MERIT_PENALTY ‖c‖₁, first as
     it is, then with a second-order correction onto the constraints (which curve: a long step violates
-    them by O(step²), the Maratos effect), else it is halved (up to 12 times). A step shorter than
-    LOCAL_STEP is taken whole: there Gauss-Newton contracts, and a merit test would compare costs
+    them by O(step²), the Maratos effect), else it is halved (up to 12 times; the largest such λ is
+    searched from the last iteration's, ``_descent_step``). A step shorter than LOCAL_STEP is taken whole:
+    there Gauss-Newton contracts, and a merit test would compare costs
     that differ in their last bits (where the old trust-region fit stopped). Converged when the full
     step's largest component is below step_tol: the end point is then the constrained minimum to that
     tolerance, whatever path led there.
@@ -64,6 +65,7 @@ def constrained_gauss_newton(evaluate, n, w_prior, *, start=None, what="the shap
         return 0.5 * float(r @ r) + 0.5 * w_prior ** 2 * float(y @ y) + MERIT_PENALTY * float(np.abs(c).sum())
 
     full = math.inf
+    lam = 1.0  # the line search's last step (its next search starts near it: ``_descent_step``)
     steps: list[float] = []
     cap = max(max_iter, MAX_ITERATIONS_CONVERGING)
     for it in range(cap):
@@ -80,10 +82,10 @@ def constrained_gauss_newton(evaluate, n, w_prior, *, start=None, what="the shap
         dy = dy_c + N @ np.linalg.lstsq(A, b, rcond=None)[0]
         full = float(np.max(np.abs(dy)))
         steps.append(full)
-        step = _descent_step(evaluate, merit, y, dy, merit(y, r, c), pinv_c, whole=full < LOCAL_STEP)
+        step = _descent_step(evaluate, merit, y, dy, merit(y, r, c), pinv_c, whole=full < LOCAL_STEP, lam_hint=lam)
         if step is None:
             raise FitError(f"{what} found no valid descent from its current point")
-        y, (r, c) = step
+        y, (r, c), lam = step
         if full < step_tol:
             return y, 0.5 * float(r @ r) + 0.5 * w_prior ** 2 * float(y @ y)
     raise FitError(f"{what} did not converge in {len(steps)} iterations (last step {full:.2g} in "
@@ -126,10 +128,20 @@ def _forward_differences(evaluate, y, r, c, h, what):
     return Jr, Jc
 
 
-def _descent_step(evaluate, merit, y, dy, phi, pinv_c, whole):
-    """(y, evaluate(y)) of the step from y along dy that ``constrained_gauss_newton`` takes, or None."""
-    lam = 1.0
-    for _ in range(13):
+#: Halvings of a step the line search tries (``_descent_step``): λ = 1, 1/2, … 2^-(HALVINGS − 1).
+HALVINGS = 13
+
+
+def _descent_step(evaluate, merit, y, dy, phi, pinv_c, whole, lam_hint=1.0):
+    """(y, evaluate(y), λ) of the step from y along dy that ``constrained_gauss_newton`` takes, or None.
+
+    The step is the largest λ = 2^-k (k < HALVINGS) whose point, or its second-order correction, lowers the
+    merit below phi (``whole``: λ = 1 if its point is valid). lam_hint: the λ the previous iteration took; the
+    search starts at twice it and goes down while rejected, else up while accepted (to 1), so where the
+    accepted λ form an interval it takes the λ a search from 1 down takes, and a fit creeping at λ = 1/32
+    far from its minimum (the Bandai walk) pays 3 evaluations an iteration, not 11.
+    """
+    def accept(lam):
         y_new = y + lam * dy
         out = evaluate(y_new)
         if out is not None and (whole or merit(y_new, *out) <= phi):
@@ -139,5 +151,19 @@ def _descent_step(evaluate, merit, y, dy, phi, pinv_c, whole):
             out = evaluate(y_soc)
             if out is not None and merit(y_soc, *out) <= phi:
                 return y_soc, out
-        lam *= 0.5
+        return None
+
+    k = 0 if whole else max(0, min(HALVINGS - 1, round(-math.log2(lam_hint)) - 1))
+    found = accept(0.5 ** k)
+    if found is not None:
+        while k > 0:  # up while accepted
+            higher = accept(0.5 ** (k - 1))
+            if higher is None:
+                break
+            k, found = k - 1, higher
+        return (*found, 0.5 ** k)
+    for lower in range(k + 1, HALVINGS):  # down while rejected
+        found = accept(0.5 ** lower)
+        if found is not None:
+            return (*found, 0.5 ** lower)
     return None

@@ -52,10 +52,10 @@ import numpy as np
 from ..body.com_force import acceleration_response, force_landmarks
 from ..body.gait import detect_gait, summarize, walks
 from ..body.model import BodyModel
-from ..constants import GRAVITY, UP_AXIS, heading_frame
+from ..constants import GRAVITY, UP_AXIS
 from ..core.motion import Motion
 from ..errors import FitError, NotAWalkingMotion
-from .forces import CUTOFF_HZ, ground_force, smooth_com
+from .forces import CUTOFF_HZ, clip_com
 from .gauss_newton import constrained_gauss_newton
 from .orbit import rowwise, solve_orbit
 from .walk_model import WalkingMachine
@@ -99,6 +99,12 @@ def _scales(z0, free=()):
 #: The second start of the cycle search: a plain spring leg, Geyer et al.'s K ≈ 20 (k = 20 kN/m, m = 80 kg,
 #: l0 = 1 m gives 25), l_d = l0; (K, a, b, c).
 GEYER_CONTROL = (20.0, 0.0, 0.0, 0.0)
+#: Residual [max-norm of the cycle search's rows] to which a start of the shape fit is made periodic. The shape
+#: fit meets the constraints itself (its first step is their Newton step) and ends at its minimum to STEP_TOL
+#: (1e-4 scaled) whatever its start, and the exact cycle is found after it to 1e-10; the start's own search
+#: converges only linearly near the end (the nearest-point Newton turns along the curved cycle set: 07_01's
+#: starts with pulses at 0.2 an iteration), so its last four orders cost up to 7 Jacobians a start for nothing.
+START_TOL = 1e-6
 #: Samples of the stance-normalised force profiles (τ = 0 … 1).
 PROFILE_SAMPLES = 51
 
@@ -279,7 +285,7 @@ def stance_force_profile(rec, tau, *, frame_time=None, cutoff_hz=CUTOFF_HZ, time
     if frame_time is None:
         return rec.sample(t_m).total_force[:, 1]
     n_fft = PROFILE_FFT_SAMPLES
-    y = rec.sample(np.arange(n_fft) * (w.t_step / n_fft)).pos[:, 1]  # COM height over one step [l0]
+    y = rec.positions(np.arange(n_fft) * (w.t_step / n_fft))[0][:, 1]  # COM height over one step [l0]
     coef = np.fft.rfft(y) / n_fft
     harmonic = np.arange(coef.size)
     freq_hz = harmonic / (w.t_step * time_unit)
@@ -287,8 +293,10 @@ def stance_force_profile(rec, tau, *, frame_time=None, cutoff_hz=CUTOFF_HZ, time
     gain[1:] *= 2.0  # the negative frequencies' half (no harmonic at the Nyquist index survives: see above)
     # The sum over harmonics is elementwise on purpose: as a (N, H) complex matrix product it went to a
     # multithreaded BLAS, whose start-up cost 20 times the sum itself on a loaded machine.
-    phase = np.exp(2j * np.pi * np.outer(t_m / w.t_step, harmonic))
-    acc = np.einsum("ij,j->i", phase, gain * coef).real  # [l0 / s²]
+    # Only the harmonics below the clip's Nyquist frequency count (gain 0 above: 8 of 129 at 30 Hz frames).
+    kept = gain != 0.0
+    phase = np.exp(2j * np.pi * np.outer(t_m / w.t_step, harmonic[kept]))
+    acc = np.einsum("ij,j->i", phase, (gain * coef)[kept]).real  # [l0 / s²]
     return 1.0 + acc * time_unit ** 2  # l0 = g T²: the acceleration in g
 
 
@@ -357,12 +365,12 @@ def _clearance_shortfall(rec, theta0: float, l_td: float, n_samples: int = 200) 
     """
     w = rec.step
     t = np.linspace(w.t_double, w.t_step, n_samples)
-    tr = rec.sample(t)
-    past = tr.pos[:-1, 0] > l_td * math.sin(theta0)
-    turn = past & (tr.vel[:-1, 1] < 0.0) & (tr.vel[1:, 1] >= 0.0)  # a local minimum of the COM height
+    pos, vel = rec.positions(t)
+    past = pos[:-1, 0] > l_td * math.sin(theta0)
+    turn = past & (vel[:-1, 1] < 0.0) & (vel[1:, 1] >= 0.0)  # a local minimum of the COM height
     if not turn.any():
         return 0.0
-    c = float(np.min(tr.pos[:-1, 1][turn])) - l_td * math.cos(theta0)
+    c = float(np.min(pos[:-1, 1][turn])) - l_td * math.cos(theta0)
     return max(0.0, MIN_CLEARANCE - c) / MIN_CLEARANCE
 
 
@@ -403,7 +411,7 @@ def _shape_problem(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, tim
         if not w.valid:
             return None
         prof = stance_force_profile(rec, tau, frame_time=frame_time, time_unit=time_unit)
-        h = rec.sample(step_phase_times(w.t_double, w.t_step)).pos[:, 1]
+        h = rec.positions(step_phase_times(w.t_double, w.t_step))[0][:, 1]
         nx = w.next
         c = np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3], (w.t_step - tgt[0]) / tgt[0],
                       (w.t_double - tgt[1]) / tgt[1], (w.step_length / w.t_step - tgt[2]) / tgt[2]])
@@ -514,10 +522,8 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         raise NotAWalkingMotion(f"{src}: {summary.kind}, not a walk: {summary.reason}")
     dt = motion.frame_time
     F = motion.n_frames
-    times = np.arange(F) * dt
-    p, v, acc = smooth_com(com, dt, cutoff_hz)
-    f = ground_force(acc, mass)
-    heading, _, lateral = heading_frame(summary.heading)
+    cc = clip_com(com, dt, mass, summary.heading, cutoff_hz)
+    times, p, v, f, heading, lateral = cc.times, cc.p, cc.v, cc.f, cc.heading, cc.lateral
 
     x_fwd = p @ heading
     geo, stances = [], []
@@ -611,7 +617,7 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
             for pulses, free in ((pulses_off, ()), (pulses_on, ("p", "q"))):
                 z0 = np.array([u0, v0, d0, step_time / T, th0, *ctl0, 1.0, 0.0, *pulses])
                 try:
-                    z1, _, it1, _ = _cycle_search(z0, T_c, roll, targets, n_shape)
+                    z1, _, it1, _ = _cycle_search(z0, T_c, roll, targets, n_shape, tol=START_TOL)
                 except FitError as e:
                     errors.append(str(e))
                     continue

@@ -219,58 +219,92 @@ class _Machine:
         return f, g, dx / l, y / l
 
     def accel(self, x, y, t, legs, armed):
-        """(ax, ay) of the COM [g]: gravity and the legs' forces (``leg`` written out, with ``ld``: this is the
-        simulator's inner loop, and the calls cost more than the arithmetic; the same operations in the same
-        order, so the result is the same to the bit)."""
-        ax, ay = 0.0, -1.0
-        K, Tc, roll, a1, b, c, e, pulses = self.K, self.Tc, self.roll, self.a1, self.b, self.c, self.e, self.pulses
-        for (xc, t0), arm in zip(legs, armed):
+        """(ax, ay) of the COM [g]: gravity and the legs' forces (``accel_fn``'s, for one point)."""
+        return self.accel_fn(legs, armed)(x, y, t)
+
+    def accel_fn(self, legs, armed):
+        """acc(x, y, t) → (ax, ay) of the COM [g] with these legs [(contact x, touchdown time)] and arming
+        flags: gravity and the legs' forces (``leg`` written out, with ``ld``, and the control's constants
+        bound once: this is the simulator's inner loop, where calls and attribute look-ups cost more than
+        the arithmetic; the same operations in the same order, so the result is the same to the bit)."""
+        K, Tc, roll, a1, b, c, e = self.K, self.Tc, self.roll, self.a1, self.b, self.c, self.e
+        pulses = tuple(self.pulses)
+        legs_armed = tuple((float(xc), float(t0), bool(arm)) for (xc, t0), arm in zip(legs, armed))
+        sqrt, cos, half_pi = math.sqrt, math.cos, 0.5 * math.pi
+        if len(pulses) == 2 and all(armed):
+            return _accel_two_pulses(self, legs_armed)
+
+        def acc(x, y, t):
+            ax, ay = 0.0, -1.0
+            for xc, t0, arm in legs_armed:
+                tau = (t - t0) / Tc
+                dx = x - xc - roll * tau
+                l = sqrt(dx * dx + y * y)
+                v = a1 + tau * (b + tau * (c + e * tau))
+                for amp, centre, width in pulses:
+                    xb = (tau - centre) / width
+                    if -1.0 < xb < 1.0:
+                        cx = cos(half_pi * xb)
+                        v += amp * (cx * cx)
+                g = v - l
+                f = K * (g if arm else max(g, 0.0))
+                ax += f * (dx / l)
+                ay += f * (y / l)
+            return ax, ay
+
+        return acc
+
+    def slack_fn(self, xc, t0):
+        """g(x, y, t) = l_d − l of one leg (``leg``'s g, with the control's constants bound once)."""
+        Tc, roll, a1, b, c, e = self.Tc, self.roll, self.a1, self.b, self.c, self.e
+        pulses = tuple(self.pulses)
+        sqrt, cos, half_pi = math.sqrt, math.cos, 0.5 * math.pi
+
+        def g(x, y, t):
             tau = (t - t0) / Tc
             dx = x - xc - roll * tau
-            l = math.sqrt(dx * dx + y * y)
+            l = sqrt(dx * dx + y * y)
             v = a1 + tau * (b + tau * (c + e * tau))
             for amp, centre, width in pulses:
                 xb = (tau - centre) / width
                 if -1.0 < xb < 1.0:
-                    cx = math.cos(0.5 * math.pi * xb)
+                    cx = cos(half_pi * xb)
                     v += amp * (cx * cx)
-            g = v - l
-            f = K * (g if arm else max(g, 0.0))
-            ax += f * (dx / l)
-            ay += f * (y / l)
-        return ax, ay
+            return v - l
+
+        return g
 
     def rk4(self, s, t, h, legs, armed):
         """One RK4 step of size h from state s = (x, y, vx, vy) at time t."""
-        x, y, vx, vy = s
-        k1x, k1y = self.accel(x, y, t, legs, armed)
-        hh = 0.5 * h
-        x2, y2, vx2, vy2 = x + hh * vx, y + hh * vy, vx + hh * k1x, vy + hh * k1y
-        k2x, k2y = self.accel(x2, y2, t + hh, legs, armed)
-        x3, y3, vx3, vy3 = x + hh * vx2, y + hh * vy2, vx + hh * k2x, vy + hh * k2y
-        k3x, k3y = self.accel(x3, y3, t + hh, legs, armed)
-        x4, y4, vx4, vy4 = x + h * vx3, y + h * vy3, vx + h * k3x, vy + h * k3y
-        k4x, k4y = self.accel(x4, y4, t + h, legs, armed)
-        h6 = h / 6.0
-        return (x + h6 * (vx + 2 * vx2 + 2 * vx3 + vx4), y + h6 * (vy + 2 * vy2 + 2 * vy3 + vy4),
-                vx + h6 * (k1x + 2 * k2x + 2 * k3x + k4x), vy + h6 * (k1y + 2 * k2y + 2 * k3y + k4y))
+        return _rk4(self.accel_fn(legs, armed), s, t, h)
 
-    def _crossing(self, s, t, h, legs, armed, fn, e0, e1):
-        """Partial step σ ∈ (0, h] where fn(state, time) falls from e0 > 0 to ≤ 0 (regula falsi, Illinois)."""
+    @staticmethod
+    def _crossing(acc, s, t, h, fn, e0, e1):
+        """(σ, state at t + σ): the partial step σ ∈ (0, h] where fn(state, time) falls from e0 > 0 to ≤ 0
+        (regula falsi, Illinois); acc: the phase's ``accel_fn``."""
         lo, hi, flo, fhi = 0.0, h, e0, e1
         sig = h * e0 / (e0 - e1)
+        side = 0  # which end the last iterate replaced (+1 lo, −1 hi)
         for _ in range(60):
-            em = fn(self.rk4(s, t, sig, legs, armed), t + sig)
+            q = _rk4(acc, s, t, sig)
+            em = fn(q, t + sig)
             if abs(em) <= 1e-14 or hi - lo <= 1e-15:
-                break
+                return sig, q
+            # Illinois: the kept end's value is halved only when the same end was replaced twice in a row
+            # (halving it every time made the iterates alternate sides and the bracket merely halve: ~30
+            # iterations an event where this takes 4-8).
             if em > 0.0:
                 lo, flo = sig, em
-                fhi *= 0.5
+                if side == 1:
+                    fhi *= 0.5
+                side = 1
             else:
                 hi, fhi = sig, em
-                flo *= 0.5
+                if side == -1:
+                    flo *= 0.5
+                side = -1
             sig = lo + (hi - lo) * flo / (flo - fhi)
-        return sig
+        return sig, _rk4(acc, s, t, sig)
 
     def run_phase(self, s, t, legs, armed, event, t_max, nodes=None):
         """Integrate until event(state, t) crosses from > 0 to ≤ 0; returns (state, t, armed, reason).
@@ -280,32 +314,33 @@ class _Machine:
         nodes: optional list to which (t, x, y, vx, vy) of every node is appended (event points included).
         """
         armed = list(armed)
+        acc = self.accel_fn(legs, armed)
+        slack = {i: self.slack_fn(xc, t0) for i, (xc, t0) in enumerate(legs) if not armed[i]}
         e0 = event(s, t)
         h = self.h
         while True:
             if t > t_max:
                 return s, t, armed, NO_EVENT
-            s1 = self.rk4(s, t, h, legs, armed)
+            s1 = _rk4(acc, s, t, h)
             e1 = event(s1, t + h)
             if e0 > 0.0 and e1 <= 0.0:
-                sig = self._crossing(s, t, h, legs, armed, event, e0, e1)
-                s_end = self.rk4(s, t, sig, legs, armed)
+                sig, s_end = self._crossing(acc, s, t, h, event, e0, e1)
                 if nodes is not None:
                     nodes.append((t + sig, *s_end))
                 return s_end, t + sig, armed, OK
-            for i, (xc, t0) in enumerate(legs):
-                if not armed[i] and self.leg(s1[0], s1[1], t + h, xc, t0, True)[1] > 0.0:
-                    def slack(q, tq, xc=xc, t0=t0):
-                        return -self.leg(q[0], q[1], tq, xc, t0, True)[1]
+            h_taken = h
+            for i, gi in slack.items():
+                if gi(s1[0], s1[1], t + h) > 0.0:
+                    def neg_slack(q, tq, gi=gi):
+                        return -gi(q[0], q[1], tq)
 
-                    g0 = slack(s, t)
-                    sig = self._crossing(s, t, h, legs, armed, slack, g0, slack(s1, t + h)) if g0 > 0.0 else h
-                    s1 = self.rk4(s, t, sig, legs, armed)
-                    h_taken = sig
+                    g0 = neg_slack(s, t)
+                    if g0 > 0.0:
+                        h_taken, s1 = self._crossing(acc, s, t, h, neg_slack, g0, neg_slack(s1, t + h))
                     armed[i] = True
+                    del slack[i]
+                    acc = self.accel_fn(legs, armed)
                     break
-            else:
-                h_taken = h
             s, t = s1, t + h_taken
             e0 = event(s, t)
             if nodes is not None:
@@ -314,6 +349,84 @@ class _Machine:
                 return s, t, armed, COLLAPSE
             if s[2] <= 0.0:
                 return s, t, armed, STALL
+
+
+def _accel_two_pulses(mc: _Machine, legs_armed):
+    """``_Machine.accel_fn`` of one or two armed legs under a control with both pulses on (the shape fit's
+    usual case), its loops over the legs and pulses unrolled: a third less time per call in the simulator's
+    inner loop, the same operations in the same order (the same result to the bit)."""
+    K, Tc, roll, a1, b, c, e = mc.K, mc.Tc, mc.roll, mc.a1, mc.b, mc.c, mc.e
+    (ap, cp, wp), (aq, cq, wq) = mc.pulses
+    sqrt, cos, half_pi = math.sqrt, math.cos, 0.5 * math.pi
+    (xc1, t1, _) = legs_armed[-1]
+
+    if len(legs_armed) == 1:
+        def one(x, y, t):
+            tau = (t - t1) / Tc
+            dx = x - xc1 - roll * tau
+            l = sqrt(dx * dx + y * y)
+            v = a1 + tau * (b + tau * (c + e * tau))
+            xb = (tau - cp) / wp
+            if -1.0 < xb < 1.0:
+                cx = cos(half_pi * xb)
+                v += ap * (cx * cx)
+            xb = (tau - cq) / wq
+            if -1.0 < xb < 1.0:
+                cx = cos(half_pi * xb)
+                v += aq * (cx * cx)
+            f = K * (v - l)
+            return 0.0 + f * (dx / l), -1.0 + f * (y / l)
+
+        return one
+    (xc0, t0, _) = legs_armed[0]
+
+    def two(x, y, t):
+        tau = (t - t0) / Tc
+        dx = x - xc0 - roll * tau
+        l = sqrt(dx * dx + y * y)
+        v = a1 + tau * (b + tau * (c + e * tau))
+        xb = (tau - cp) / wp
+        if -1.0 < xb < 1.0:
+            cx = cos(half_pi * xb)
+            v += ap * (cx * cx)
+        xb = (tau - cq) / wq
+        if -1.0 < xb < 1.0:
+            cx = cos(half_pi * xb)
+            v += aq * (cx * cx)
+        f = K * (v - l)
+        ax, ay = 0.0 + f * (dx / l), -1.0 + f * (y / l)
+        tau = (t - t1) / Tc
+        dx = x - xc1 - roll * tau
+        l = sqrt(dx * dx + y * y)
+        v = a1 + tau * (b + tau * (c + e * tau))
+        xb = (tau - cp) / wp
+        if -1.0 < xb < 1.0:
+            cx = cos(half_pi * xb)
+            v += ap * (cx * cx)
+        xb = (tau - cq) / wq
+        if -1.0 < xb < 1.0:
+            cx = cos(half_pi * xb)
+            v += aq * (cx * cx)
+        f = K * (v - l)
+        return ax + f * (dx / l), ay + f * (y / l)
+
+    return two
+
+
+def _rk4(acc, s, t, h):
+    """One RK4 step of size h from state s = (x, y, vx, vy) at time t; acc(x, y, t) → (ax, ay)."""
+    x, y, vx, vy = s
+    k1x, k1y = acc(x, y, t)
+    hh = 0.5 * h
+    x2, y2, vx2, vy2 = x + hh * vx, y + hh * vy, vx + hh * k1x, vy + hh * k1y
+    k2x, k2y = acc(x2, y2, t + hh)
+    x3, y3, vx3, vy3 = x + hh * vx2, y + hh * vy2, vx + hh * k2x, vy + hh * k2y
+    k3x, k3y = acc(x3, y3, t + hh)
+    x4, y4, vx4, vy4 = x + h * vx3, y + h * vy3, vx + h * k3x, vy + h * k3y
+    k4x, k4y = acc(x4, y4, t + h)
+    h6 = h / 6.0
+    return (x + h6 * (vx + 2 * vx2 + 2 * vx3 + vx4), y + h6 * (vy + 2 * vy2 + 2 * vy3 + vy4),
+            vx + h6 * (k1x + 2 * k2x + 2 * k3x + k4x), vy + h6 * (k1y + 2 * k2y + 2 * k3y + k4y))
 
 
 def _valid_inputs(state: WalkState, theta0: float, ctl: Control) -> bool:
@@ -340,8 +453,10 @@ def _one_step(state: WalkState, theta0: float, ctl: Control, n_per_stance: int, 
     t_max = MAX_PHASE_FACTOR * mc.Tc
     lead_armed = mc.leg(0.0, y_td, 0.0, x_lead, 0.0, True)[1] > 0.0
 
+    trail_slack = mc.slack_fn(-state.d, -state.s)
+
     def trail_event(s, t):
-        return mc.leg(s[0], s[1], t, -state.d, -state.s, True)[1]
+        return trail_slack(s[0], s[1], t)
 
     s1, t_lo, armed, code = mc.run_phase(s0, 0.0, legs, [True, lead_armed], trail_event, t_max, nodes)
     if code != OK:
@@ -355,9 +470,12 @@ def _one_step(state: WalkState, theta0: float, ctl: Control, n_per_stance: int, 
         return s[1] - y_td if (s[3] < 0.0 and s[0] > x_lead) else 1.0
 
     # Single support: watch for the leg unloading as well as for the touchdown.
-    def both(s, t):
-        g = mc.leg(s[0], s[1], t, x_lead, 0.0, True)[1]
-        return min(td_event(s, t), g if armed[1] else 1.0)
+    lead_slack = mc.slack_fn(x_lead, 0.0)
+    lead_pushes = armed[1]
+
+    def both(s, t):  # td_event written out (called at every node)
+        td = s[1] - y_td if (s[3] < 0.0 and s[0] > x_lead) else 1.0
+        return min(td, lead_slack(s[0], s[1], t) if lead_pushes else 1.0)
 
     s2, t_td, _, code = mc.run_phase(s1, t_lo, stance_leg, [armed[1]], both, t_lo + t_max, nodes)
     if code != OK:
@@ -431,18 +549,21 @@ class RecordedStep:
         # drop duplicate times (an event node can coincide with the next regular node)
         self._nodes = arr = arr[np.concatenate([[True], np.diff(arr[:, 0]) > 1e-12])]
         # accelerations at the nodes (Hermite velocities); a leg's force is never a pull (clamped)
-        acc = np.empty((arr.shape[0], 2))
-        for k, (tk, x, y, _, _) in enumerate(arr):
-            act = self._legs if tk <= self._t_lo else self._legs[1:]
-            acc[k] = mc.accel(x, y, tk, act, [False] * len(act))
-        self._acc = acc
+        tk, x, y = arr[:, 0], arr[:, 1], arr[:, 2]
+        ax, ay = np.zeros(tk.size), np.full(tk.size, -1.0)
+        for i, (xc, t0) in enumerate(self._legs):  # the trailing leg until its liftoff, then the leading
+            on = tk <= self._t_lo if i == 0 else np.ones(tk.size, bool)
+            f, ux, uy = _leg_force(mc, x[on], y[on], tk[on], xc, t0)
+            ax[on] += f * ux
+            ay[on] += f * uy
+        self._acc = np.stack([ax, ay], axis=1)
 
-    def sample(self, times) -> WalkTrajectory:
-        """Dense samples at ``times`` (S,) in [0, t_step] [√(l0/g)] (clipped): cubic Hermite positions and
-        velocities between the RK4 nodes, leg forces from the model (eq. 2) at those positions."""
+    def positions(self, times) -> tuple[np.ndarray, np.ndarray]:
+        """(pos (S, 2), vel (S, 2)) of the COM at ``times`` (S,) in [0, t_step] [√(l0/g)] (clipped): cubic
+        Hermite positions and velocities between the RK4 nodes (``sample`` without the legs' forces)."""
         if not self.step.valid:
             raise PlanError(self._why)
-        arr, acc, mc, legs, t_lo = self._nodes, self._acc, self._mc, self._legs, self._t_lo
+        arr, acc = self._nodes, self._acc
         t = np.clip(np.asarray(times, float), 0.0, self.step.t_step)
         k = np.clip(np.searchsorted(arr[:, 0], t, side="right") - 1, 0, arr.shape[0] - 2)
         n0, n1 = arr[k], arr[k + 1]
@@ -451,6 +572,16 @@ class RecordedStep:
         for d in range(2):
             pos[:, d] = _hermite(n0[:, 0], n1[:, 0], n0[:, 1 + d], n0[:, 3 + d], n1[:, 1 + d], n1[:, 3 + d], t)
             vel[:, d] = _hermite(n0[:, 0], n1[:, 0], n0[:, 3 + d], acc[k, d], n1[:, 3 + d], acc[k + 1, d], t)
+        return pos, vel
+
+    def sample(self, times) -> WalkTrajectory:
+        """Dense samples at ``times`` (S,) in [0, t_step] [√(l0/g)] (clipped): cubic Hermite positions and
+        velocities between the RK4 nodes, leg forces from the model (eq. 2) at those positions."""
+        if not self.step.valid:
+            raise PlanError(self._why)
+        mc, legs, t_lo = self._mc, self._legs, self._t_lo
+        t = np.clip(np.asarray(times, float), 0.0, self.step.t_step)
+        pos, vel = self.positions(t)
         force = np.zeros((t.size, 2, 2))
         for i, (xc, t0) in enumerate(legs):
             on = t <= t_lo if i == 0 else np.ones(t.size, bool)
@@ -462,6 +593,17 @@ class RecordedStep:
         return WalkTrajectory(t=t, pos=pos, vel=vel, force=force, contact_x=np.array([legs[0][0], legs[1][0]]),
                               t_touchdown=np.array([legs[0][1], legs[1][1]]), t_liftoff=float(t_lo),
                               t_step=float(self.step.t_step))
+
+
+def _leg_force(mc: _Machine, x, y, t, xc: float, t0: float):
+    """(f (N,) force along the leg [m g], clamped ≥ 0; ux, uy (N,) its unit vector contact → COM) of one leg
+    (contact xc, touchdown t0) at COM positions x, y and times t (N,) each: ``_Machine.accel_fn``'s leg over
+    arrays, the same operations in the same order (to the cosine's last bit)."""
+    tau = (t - t0) / mc.Tc
+    dx = x - xc - mc.roll * tau
+    l = np.sqrt(dx * dx + y * y)
+    f = mc.K * np.maximum(desired_leg_length(mc.ctl, tau) - l, 0.0)
+    return f, dx / l, y / l
 
 
 def record_step(state: WalkState, theta0: float, control: Control, *, roll: float = 0.0, l_td: float = 1.0,

@@ -30,12 +30,9 @@ import numpy as np
 
 from .core.motion import Motion
 from .errors import FroudeError
+from .io.formats import save
 
 __all__ = ["Result", "accelerate", "fit", "ground_reaction_force", "info", "load", "save", "scale"]
-
-#: Suffixes froude reads and writes motions as.
-MOTION_SUFFIXES = (".bvh", ".glb", ".gltf")
-
 
 def _checked_keywords(fn):
     """Unknown keyword arguments → TypeError naming the closest valid one and listing them all."""
@@ -68,29 +65,12 @@ def load(path: str | os.PathLike, *, length_scale: float | None = None, clean: b
     """
     suffix = Path(path).suffix.lower()
     if suffix in (".glb", ".gltf"):
-        from .io.gltf import load_gltf
+        from .io.gltf import load_gltf  # lazy: start-up (import froude and its light verbs load no pipeline)
 
         return load_gltf(path, fps=fps, clean=clean, length_scale=length_scale)
-    from .io.bvh import load_bvh
+    from .io.bvh import load_bvh  # lazy: start-up (import froude and its light verbs load no pipeline)
 
     return load_bvh(path, length_scale=length_scale, clean=clean)
-
-
-def save(motion: Motion, path: str | os.PathLike, *, mesh: bool = True, **bvh_options) -> Path:
-    """Write a motion by suffix: ``.bvh``, or ``.glb``/``.gltf`` (skin, joints, animation, and a mannequin
-    mesh unless mesh=False); atomically. Returns the path. (The one place output formats are chosen.)
-    bvh_options: ``io.bvh.save_bvh``'s (length_scale, up, rotations_only; default: the input's conventions)."""
-    suffix = Path(path).suffix.lower()
-    if suffix == ".bvh":
-        from .io.bvh import save_bvh
-
-        save_bvh(motion, path, **bvh_options)
-        return Path(path)
-    if suffix in (".glb", ".gltf"):
-        from .io.gltf import save_gltf
-
-        return save_gltf(motion, path, mesh=mesh)
-    raise FroudeError(f"{path}: a motion is written as {', '.join(MOTION_SUFFIXES)}")
 
 
 # ---- results ------------------------------------------------------------------------------------------------
@@ -114,7 +94,7 @@ class Result:
     @cached_property
     def table(self) -> dict:
         """The per-frame columns (``froude.io.framedata``): {name: (F,) array}."""
-        from .io.framedata import frame_table
+        from .io.framedata import frame_table  # lazy: start-up (import froude and its light verbs load no pipeline)
 
         return frame_table(self.motion, self.body, machine_path=self.machine_path)
 
@@ -154,9 +134,9 @@ class Result:
     def save(self, path: str | os.PathLike, *, mesh: bool = True, report: bool = True) -> list[Path]:
         """Write the motion (suffix decides: .bvh / .glb / .gltf) and, unless report=False, OUT.report.json
         beside it; atomically. Returns the paths written."""
-        from .io.atomic import atomic_group
-        from .metrics import write_report
-        from .pipeline import report_path
+        from .io.atomic import atomic_group  # lazy: start-up (import froude and its light verbs load no pipeline)
+        from .metrics import write_report  # lazy: start-up (import froude and its light verbs load no pipeline)
+        from .pipeline import report_path  # lazy: start-up (import froude and its light verbs load no pipeline)
 
         with atomic_group():  # both files or neither
             out = [save(self.motion, path, mesh=mesh)]
@@ -168,14 +148,14 @@ class Result:
 
     def save_data(self, path: str | os.PathLike) -> Path:
         """Write the per-frame table as .csv / .parquet / .npz (atomically)."""
-        from .io.framedata import write_frame_data
+        from .io.framedata import write_frame_data  # lazy: start-up
 
         return write_frame_data(self.table, path)
 
 
 def _prepared(clip, reference_mass: float, length_scale: float | None):
     """A pipeline.Prepared from a path, a Motion or an earlier Result (whose fit is reused)."""
-    from . import pipeline
+    from . import pipeline  # lazy: start-up (import froude and its light verbs load no pipeline)
 
     if isinstance(clip, Result):
         if clip.prepared is None:
@@ -201,8 +181,8 @@ def info(clip: str | os.PathLike | Motion, *, mass: float = 70.0, length_scale: 
     metres per BVH file unit (default: detected). Keys include kind, mean_speed_m_s, froude_U,
     step_frequency_hz, contacts (per stance: foot, start_s, stop_s), skeleton (height_m, units ...).
     """
-    from .body.model import BodyModel
-    from .clipinfo import clip_info
+    from .body.model import BodyModel  # lazy: start-up (import froude and its light verbs load no pipeline)
+    from .clipinfo import clip_info  # lazy: start-up (import froude and its light verbs load no pipeline)
 
     motion = clip if isinstance(clip, Motion) else load(clip, length_scale=length_scale)
     return clip_info(motion, BodyModel.from_skeleton(motion.skeleton, mass=mass))[0]
@@ -219,7 +199,7 @@ def fit(clip: str | os.PathLike | Motion, *, reference_mass: float = 70.0, lengt
     Raises NotARunningMotion for a clip that neither runs nor walks (in place, too few stances),
     FroudeError for a bad file.
     """
-    from .metrics import physics_report
+    from .metrics import physics_report  # lazy: start-up (import froude and its light verbs load no pipeline)
 
     prep = _prepared(clip, reference_mass, length_scale)
     report = physics_report(prep.motion, prep.body, com_and_markers=(prep.com, prep.markers))
@@ -259,10 +239,10 @@ def scale(
     length_scale: metres per BVH file unit of the clip (default: detected); unlimited: allow a run faster
     than the human range for the character's size (default: refused, BeyondHumanRange, with the limit in m/s).
     """
-    from . import pipeline
+    from . import pipeline  # lazy: start-up (import froude and its light verbs load no pipeline)
 
     if isinstance(speed, str):
-        from .speed_goal import parse_speed
+        from .speed_goal import parse_speed  # lazy: start-up (import froude and its light verbs load no pipeline)
 
         goal = parse_speed(speed, "speed")
         speed, target_speed = (goal.factor, target_speed) if goal.factor is not None else (1.0, goal.m_s)
@@ -303,7 +283,7 @@ def accelerate(
     (default 8) or happens ``within`` seconds; lead_steps / hold_steps steady steps before / after; policy:
     "ease" or "even". Character arguments and ``unlimited`` as in ``scale``.
     """
-    from . import pipeline
+    from . import pipeline  # lazy: start-up (import froude and its light verbs load no pipeline)
 
     if steps is None and within is None:
         steps = 8
@@ -323,8 +303,8 @@ def ground_reaction_force(motion: Motion, body=None, *, mass: float = 70.0) -> n
 
     body: its BodyModel (default: built from the skeleton with ``mass`` [kg]; a given body has its own).
     """
-    from .body.model import BodyModel
-    from .machine.forces import ground_force, smooth_com
+    from .body.model import BodyModel  # lazy: start-up (import froude and its light verbs load no pipeline)
+    from .machine.forces import ground_force, smooth_com  # lazy: start-up
 
     if body is None:
         body = BodyModel.from_skeleton(motion.skeleton, mass=mass)

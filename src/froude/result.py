@@ -114,7 +114,7 @@ def _travel_direction(motion: Motion, result: Output) -> np.ndarray:
 
 def write_result(result: Output, out_path, data=None, in_place: bool | None = None,
                  **bvh_options) -> tuple[Path, ...]:
-    """Write OUT (.bvh, .glb or .gltf: ``froude.api.save`` decides by suffix) and OUT.report.json, and
+    """Write OUT (.bvh, .glb or .gltf: ``io.formats.save`` decides by suffix) and OUT.report.json, and
     the per-frame table to ``data`` (.csv/.parquet/.npz) when given: all or none. Returns the paths.
     bvh_options: ``save_bvh``'s (length_scale, up, rotations_only; default: the input's conventions).
 
@@ -122,8 +122,8 @@ def write_result(result: Output, out_path, data=None, in_place: bool | None = No
     in-place take gives in-place outputs). The report is always that of the travelling motion (its speed,
     skate and gravity are physical there) and says which was written.
     """
-    from .api import save
     from .io.atomic import atomic_group
+    from .io.formats import save
 
     out_path = Path(out_path)
     rp = report_path(out_path)

@@ -18,7 +18,7 @@ from .speed_goal import accelerate_goal
 from .synthesis.timewarp import MachinePath, machine_path
 
 __all__ = ["LAW_MAX_STEPS", "SUPPORTED_SPEED_RANGE", "check_human_speed", "check_step_lengths", "output_steps",
-           "plan_run_speed_change", "speed_range_notes"]
+           "plan_refusal", "plan_report", "plan_run_speed_change", "speed_range_notes"]
 
 #: Speed factors outside this range leave what a reference clip supports: a warning, not an error.
 SUPPORTED_SPEED_RANGE = (0.6, 1.6)
@@ -83,7 +83,6 @@ def plan_run_speed_change(prep: Prepared, retarget: Retarget, *, to_speed, to_fa
     extras). to_speed [m/s] or to_factor [-]: the goal apex speed; within [s]; fps [Hz] (None: the clip's).
     Raises BeyondHumanRange past the human range (unless unlimited), PlanError when no plan is found."""
     from .machine.planner import plan_speed_change
-    from .speed_range import plan_refusal, plan_report
 
     m = prep.machine.scaled(retarget.L, retarget.M)
     v_unit = m.speed_unit
@@ -168,3 +167,42 @@ def _law_plan(prep: Prepared, m, U_goal: float, steps, within, policy: str, lead
             return p
         n -= 1
     raise PlanError(f"the change takes more than {within:g} s even in one step", U_goal=U_goal)
+
+
+def plan_refusal(err, start_m_s: float, goal_m_s: float, v_unit: float, steps, within) -> str:
+    """The planner's refusal (``PlanError`` with its U facts) said in the user's terms: m/s, ×, steps, s.
+
+    start_m_s / goal_m_s: the apex speeds [m/s] the change goes between; v_unit: √(g l0) of the
+    character [m/s], which turns the planner's dimensionless U into m/s. The planner's own words (in U)
+    stay on the exception's ``__cause__`` for debugging.
+    """
+    head = f"cannot change speed from {start_m_s:.2f} to {goal_m_s:.2f} m/s (x{goal_m_s / start_m_s:.2f})"
+    sus = getattr(err, "U_sustainable", None)
+    if sus is not None and not sus[0] <= err.U_goal <= sus[1]:
+        lo, hi = sus[0] * v_unit, sus[1] * v_unit
+        return (f"{head}: the simple machine runs steadily only between {lo:.2f} and {hi:.2f} m/s "
+                f"(x{lo / start_m_s:.2f}-{hi / start_m_s:.2f}); choose a goal in that range")
+    in_steps = f"in {steps} step{'' if steps == 1 else 's'}"
+    if getattr(err, "steps_needed", None):
+        return f"{head} {in_steps}: too abrupt; give at least {err.steps_needed} steps"
+    if getattr(err, "steps_enough", None):
+        return f"{head} {in_steps}: too abrupt; {err.steps_enough} steps are enough"
+    if within is not None:
+        return f"{head} within {within:g} s: too abrupt; allow more time"
+    one = getattr(err, "U_one_step", None)
+    reach = "" if one is None else f" (one step from the start reaches {one * v_unit:.2f} m/s)"
+    return f"{head} {in_steps}{reach}: try more steps or a goal nearer x1"
+
+
+def plan_report(plan, m, start_speed: float, target: float) -> dict:
+    """A speed-change plan as the report's ``extras["plan"]``: per apex speed [m/s] and U, time [s],
+    touchdown angle [deg], control b and phase. m: the character's scaled SimpleMachine (its units);
+    start_speed / target: the change's apex speeds [m/s]."""
+    return {
+        "start_speed_m_s": start_speed, "target_speed_m_s": target,
+        "apex_speed_m_s": (plan.U * m.speed_unit).tolist(), "apex_U": plan.U.tolist(),
+        "apex_time_s": (plan.t_apex * m.time_unit).tolist(),
+        "theta0_deg": np.degrees(plan.theta0).tolist(), "b": plan.b.tolist(),
+        "phase": ["lead" if p == 0 else "change" if p == 1 else "hold" for p in plan.phase],
+        "mode": plan.mode, "policy": plan.policy,
+    }

@@ -1,14 +1,14 @@
-"""Which speeds a prepared clip reaches for a character with every physics bar met, and the planner's
-refusals said in the user's terms (m/s, ×, steps)."""
+"""Which speeds a prepared clip reaches for a character with every physics bar met (the planner's refusals in
+the user's terms are ``speed_change.plan_refusal``'s)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from .pipeline import Prepared
+from .errors import BeyondHumanRange, FitError
+from .pipeline import plan_scale
+from .prepared import Prepared
 
 
 @dataclass(frozen=True)
@@ -57,9 +57,6 @@ SPEED_SEARCH_TOL = 0.03
 def _speed_ok(prep: Prepared, character, s: float, numbers: dict, unlimited: bool) -> tuple[bool, str]:
     """Whether a 4-stride output (scale's default) at speed factor s meets every physics bar (and is inside
     the human range unless ``unlimited``), and why not."""
-    from .errors import BeyondHumanRange, FitError
-    from .pipeline import plan_scale
-
     try:
         rep = plan_scale(prep, character, speed=s, strides=4, unlimited=unlimited, **numbers).finish().report
     except (FitError, BeyondHumanRange) as e:
@@ -153,44 +150,3 @@ def reachable_speed_range(prep: Prepared, character=None, *, stop=None, unlimite
     prep.memo.speed_ranges[key] = out
     prep.memo.speed_probes.pop(key, None)  # the range itself is remembered now
     return out
-
-
-def plan_refusal(err, start_m_s: float, goal_m_s: float, v_unit: float, steps, within) -> str:
-    """The planner's refusal (``PlanError`` with its U facts) said in the user's terms: m/s, ×, steps, s.
-
-    start_m_s / goal_m_s: the apex speeds [m/s] the change goes between; v_unit: √(g l0) of the
-    character [m/s], which turns the planner's dimensionless U into m/s. The planner's own words (in U)
-    stay on the exception's ``__cause__`` for debugging.
-    """
-    head = f"cannot change speed from {start_m_s:.2f} to {goal_m_s:.2f} m/s (x{goal_m_s / start_m_s:.2f})"
-    sus = getattr(err, "U_sustainable", None)
-    if sus is not None and not sus[0] <= err.U_goal <= sus[1]:
-        lo, hi = sus[0] * v_unit, sus[1] * v_unit
-        return (f"{head}: the simple machine runs steadily only between {lo:.2f} and {hi:.2f} m/s "
-                f"(x{lo / start_m_s:.2f}-{hi / start_m_s:.2f}); choose a goal in that range")
-    in_steps = f"in {steps} step{'' if steps == 1 else 's'}"
-    if getattr(err, "steps_needed", None):
-        return f"{head} {in_steps}: too abrupt; give at least {err.steps_needed} steps"
-    if getattr(err, "steps_enough", None):
-        return f"{head} {in_steps}: too abrupt; {err.steps_enough} steps are enough"
-    if within is not None:
-        return f"{head} within {within:g} s: too abrupt; allow more time"
-    one = getattr(err, "U_one_step", None)
-    reach = "" if one is None else f" (one step from the start reaches {one * v_unit:.2f} m/s)"
-    return f"{head} {in_steps}{reach}: try more steps or a goal nearer x1"
-
-
-def plan_report(plan, m, start_speed: float, target: float) -> dict:
-    """A speed-change plan as the report's ``extras["plan"]``: per apex speed [m/s] and U, time [s],
-    touchdown angle [deg], control b and phase. m: the character's scaled SimpleMachine (its units);
-    start_speed / target: the change's apex speeds [m/s]."""
-    import numpy as np
-
-    return {
-        "start_speed_m_s": start_speed, "target_speed_m_s": target,
-        "apex_speed_m_s": (plan.U * m.speed_unit).tolist(), "apex_U": plan.U.tolist(),
-        "apex_time_s": (plan.t_apex * m.time_unit).tolist(),
-        "theta0_deg": np.degrees(plan.theta0).tolist(), "b": plan.b.tolist(),
-        "phase": ["lead" if p == 0 else "change" if p == 1 else "hold" for p in plan.phase],
-        "mode": plan.mode, "policy": plan.policy,
-    }

@@ -8,11 +8,15 @@ A point fixed in joint b's frame moves by  dp = dt_root + Σ_{k ancestor-or-self
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from . import quat
-from .motion import Motion
-from .skeleton import Skeleton
+
+if TYPE_CHECKING:  # types only: the skeleton computes its reference pose with this module's FK
+    from .motion import Motion
+    from .skeleton import Skeleton
 
 
 def _quat_rows(q: np.ndarray, out: np.ndarray, tmp: np.ndarray) -> None:

@@ -5,6 +5,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..constants import UP_AXIS
+from .kinematics import forward_kinematics
+
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
 ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
 
@@ -92,8 +95,6 @@ class Skeleton:
         rest pose when ``reference_pose`` is None), root at the origin."""
         if self.reference_pose is None:
             return self.rest_positions(), np.broadcast_to(np.eye(3), (self.n_joints, 3, 3)).copy()
-        from .kinematics import forward_kinematics
-
         p, R = forward_kinematics(self, np.zeros((1, 3)), self.reference_pose[None])
         return p[0], R[0]
 
@@ -104,8 +105,6 @@ class Skeleton:
 
     def standing_height(self) -> float:
         """Vertical extent [m] of the rest pose (joints and end sites): the character's stature."""
-        from ..constants import UP_AXIS
-
         pts = np.concatenate([self.rest_positions(), self.rest_end_sites()], axis=0)
         return float(pts[:, UP_AXIS].max() - pts[:, UP_AXIS].min())
 

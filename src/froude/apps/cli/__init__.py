@@ -40,7 +40,7 @@ class _Parser(argparse.ArgumentParser):
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The whole parser; with ``argv``, only the command it names is built in full (the others are listed
     with their one-line help), so a command's start-up never pays for another's ``register``."""
-    from ... import __version__
+    from ... import __version__  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     parser = _Parser(
         prog="froude",

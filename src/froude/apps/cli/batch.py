@@ -14,7 +14,7 @@ HELP = "many clips x many characters, speeds and accelerations, on Dask"
 
 
 def register(sub) -> None:
-    from ..batch import EXAMPLE_PLAN, INDEX_NAME
+    from ..batch import EXAMPLE_PLAN, INDEX_NAME  # lazy: start-up
 
     p = sub.add_parser(
         "batch", help=HELP,
@@ -43,7 +43,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from .. import batch
+    from .. import batch  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     plan = batch.load_plan(args.plan)
     clips = batch.find_clips(args.inputs, exclude=args.output)
@@ -59,7 +59,7 @@ def run(args) -> int:
 
 
 def _dry_run(clips, plan, args) -> int:
-    from .. import batch
+    from .. import batch  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     tasks = batch.make_tasks(clips, plan)
     n_done = 0

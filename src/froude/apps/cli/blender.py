@@ -29,9 +29,9 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ...errors import FroudeError
-    from ...io.atomic import require_suffix
-    from ..blender.install import PIP_INTO_BLENDER, addon_zip, install_addon
+    from ...errors import FroudeError  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...io.atomic import require_suffix  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ..blender.install import PIP_INTO_BLENDER, addon_zip, install_addon  # lazy: start-up
 
     if args.addons_dir and not args.install_addon:
         raise FroudeError("--addons-dir goes with --install-addon")

@@ -73,7 +73,7 @@ def speed(what: str):
     """An argparse ``type`` for the one speed syntax (``froude.speed_goal``): returns a SpeedGoal."""
 
     def parse(text: str):
-        from ...speed_goal import parse_speed
+        from ...speed_goal import parse_speed  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
         try:
             return parse_speed(text, what)
@@ -86,7 +86,7 @@ def speed(what: str):
 
 def time_range(text: str):
     """An argparse ``type`` for ``--range T0:T1`` [s] (``body.take.parse_time_range``): (T0, T1), either None."""
-    from ...body.take import parse_time_range
+    from ...body.take import parse_time_range  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     try:
         return parse_time_range(text)
@@ -170,7 +170,7 @@ def add_output_options(p) -> None:
 
 def output_kwargs(args) -> dict:
     """``save_bvh`` options from add_output_options."""
-    from ...body.conventions import unit_scale
+    from ...body.conventions import unit_scale  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     return {"length_scale": unit_scale(args.units)[0] if args.units else None,
             "rotations_only": args.rotations_only}
@@ -199,7 +199,7 @@ def check_character(args):
     """Resolve the character options now (unknown preset, YAML errors, bad numbers, a target BVH that
     cannot be read), before the fit; returns the Character. The pipeline resolves it again from the same
     options (cheap), so the name and caching stay the pipeline's."""
-    from ...body.characters import resolve_character
+    from ...body.characters import resolve_character  # lazy: start-up
 
     return resolve_character(args.character, **character_kwargs(args))
 
@@ -229,15 +229,15 @@ def load_clip(path: str, length_scale: float | None = None, keep_all: bool = Fal
     cleaning did.
 
     joint_map: a YAML file 'role: JointName' (``body.load_joint_map``); up: "Y"/"Z" (None: detected)."""
-    from ...body.model import load_joint_map
+    from ...body.model import load_joint_map  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     jm = load_joint_map(joint_map) if joint_map else None
     if Path(path).suffix.lower() in (".glb", ".gltf"):
-        from ...io.gltf import load_gltf
+        from ...io.gltf import load_gltf  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
         motion = load_gltf(path, length_scale=length_scale, clean=not keep_all, joint_map=jm, up=up)
     else:
-        from ...io.bvh import load_bvh
+        from ...io.bvh import load_bvh  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
         motion = load_bvh(path, length_scale=length_scale, clean=not keep_all, joint_map=jm, up=up)
     say_loaded(motion, path, quiet)
@@ -258,7 +258,7 @@ def prepare_clip(args):
     """Load args.clip (with the load options) and fit it: ``pipeline.prepare``; then say the load's notes.
 
     Nothing is printed before the fit succeeds, so a clip that cannot be used is one line."""
-    from ... import pipeline
+    from ... import pipeline  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, True, getattr(args, "joint_map", None),
                        getattr(args, "up", None))
@@ -271,7 +271,7 @@ def prepare_clip(args):
 def guard_outputs(outputs, inputs=(), folders=()) -> None:
     """The output guard (``froude.io.atomic.check_outputs``): before any work, every output writable,
     none an input or another output."""
-    from ...io.atomic import check_outputs
+    from ...io.atomic import check_outputs  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     check_outputs(outputs, inputs, folders=folders)
 
@@ -304,7 +304,7 @@ def print_rows(rows) -> None:
 
 
 # ---- exports -----------------------------------------------------------------------------------------
-#: Output suffixes of a motion (``froude.api.save`` writes them) and of per-frame data.
+#: Output suffixes of a motion (``froude.io.formats.save`` writes them) and of per-frame data.
 MOTION_OUTPUTS = (".bvh", ".glb", ".gltf")
 DATA_OUTPUTS = (".csv", ".parquet", ".npz")
 
@@ -317,6 +317,6 @@ def add_data_option(p) -> None:
 
 def data_output(args):
     """The --data path with its suffix checked (None when not asked for)."""
-    from ...io.atomic import require_suffix
+    from ...io.atomic import require_suffix  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     return None if args.data is None else require_suffix(args.data, DATA_OUTPUTS, "--data output")

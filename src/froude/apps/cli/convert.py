@@ -40,14 +40,14 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ...io.atomic import atomic_group, require_suffix
+    from ...io.atomic import atomic_group, require_suffix  # lazy: start-up
 
     require_suffix(args.input, MOTION_OUTPUTS, "input")
     out = require_suffix(args.output, MOTION_OUTPUTS)
     data = data_output(args)
     check_inputs(args.input)
     guard_outputs([out] + ([data] if data else []), [args.input])
-    from ...api import load, save
+    from ...api import load, save  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     motion = load(args.input, length_scale=args.length_scale, clean=not args.keep_all_frames, fps=args.fps)
     say(f"{args.input}: {motion.skeleton.n_joints} joints, {motion.n_frames} frames at {motion.fps:.1f} Hz",
@@ -55,7 +55,7 @@ def run(args) -> int:
     with atomic_group():
         save(motion, out, mesh=not args.no_mesh)
         if data is not None:
-            from ...io.framedata import frame_table, write_frame_data
+            from ...io.framedata import frame_table, write_frame_data  # lazy: start-up
 
             write_frame_data(frame_table(motion), data)
     say(f"wrote {out}" + (f" and {data}" if data else ""), args.quiet)

@@ -34,8 +34,8 @@ def register(sub) -> None:
 def run(args) -> int:
     from pathlib import Path
 
-    from ...io.atomic import atomic_group
-    from ..demo import demo_files, run_demo
+    from ...io.atomic import atomic_group  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ..demo import demo_files, run_demo  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     check_inputs(args.clip)
     out = Path(args.output)

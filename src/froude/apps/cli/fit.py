@@ -74,25 +74,25 @@ def fit_table(res) -> str:
 
 
 def run(args) -> int:
-    from ...io.atomic import require_suffix
+    from ...io.atomic import require_suffix  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     out = require_suffix(args.output, (".json",))
     plot = require_suffix(args.plot, (".png",), "plot") if args.plot else None
     check_inputs(args.clip)
     guard_outputs([out, plot], [args.clip])
 
-    from ...body.model import BodyModel
+    from ...body.model import BodyModel  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     # the load's notes are said once the fit succeeded: a clip that cannot be fitted is one error line
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, True, args.joint_map, args.up)
     if args.range:
-        from ...body.take import select_range
+        from ...body.take import select_range  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
         motion = select_range(motion, args.range, Path(args.clip).name)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
-    from ...body.gait import summarize
-    from ...body.take import running_take
-    from ...kinds import choose_kind
+    from ...body.gait import summarize  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...body.take import running_take  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...kinds import choose_kind  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     # the take as ``prepare`` analyses it (a loop unrolled, an in-place take given its travel) and the one
     # decision of body.gait about what it is: the same as ``info`` says and ``scale`` models (in place or
@@ -109,7 +109,7 @@ def run(args) -> int:
 def _write_fit(args, motion, res, out, plot, plot_fn, table: str) -> int:
     """The machine file (and plot) of a fit, written together; then the table and what was written.
     plot_fn: loads the plot function (called only when a plot is asked for)."""
-    from ...io.atomic import atomic_group
+    from ...io.atomic import atomic_group  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     with atomic_group():
         if plot:
@@ -161,13 +161,13 @@ def walk_table(res) -> str:
 
 
 def _plot_run_fit():
-    from ...viz.fit_plot import plot_fit
+    from ...viz.fit_plot import plot_fit  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     return plot_fit
 
 
 def _plot_walk_fit():
-    from ...viz.walk_plot import plot_walk_fit
+    from ...viz.walk_plot import plot_walk_fit  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     return plot_walk_fit
 

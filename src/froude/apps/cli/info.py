@@ -71,16 +71,16 @@ def run(args) -> int:
     data = data_output(args)
     if data is not None:
         guard_outputs([data], [args.clip])
-    from ...body.model import BodyModel
-    from ...clipinfo import clip_info
+    from ...body.model import BodyModel  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...clipinfo import clip_info  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.json or args.quiet, args.joint_map,
                        args.up)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
     d, summary = clip_info(motion, body)
-    from ...io.jsonable import dumps
+    from ...io.jsonable import dumps  # lazy: start-up (froude --help imports every verb module and no NumPy)
     if data is not None:
-        from ...io.framedata import frame_table, write_frame_data
+        from ...io.framedata import frame_table, write_frame_data  # lazy: start-up
 
         write_frame_data(frame_table(motion, body), data)
         if not args.json:

@@ -97,7 +97,7 @@ def run(args) -> int:
     check_inputs(*args.clips)
     guard_outputs([out], args.clips)
 
-    from ...viz import render as R
+    from ...viz import render as R  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     motions = [load_clip(c, args.length_scale, args.keep_all_frames, args.quiet, args.joint_map, args.up)
                for c in args.clips]

@@ -57,22 +57,22 @@ def run(args) -> int:
         import viser  # noqa: F401
     except ImportError:
         raise FroudeError("the studio needs viser: pip install 'froude[studio]'") from None
-    from ... import pipeline
-    from ...body.characters import list_presets
-    from ...samples import sample_path
-    from ..studio import Params, serve
+    from ... import pipeline  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...body.characters import list_presets  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...samples import sample_path  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ..studio import Params, serve  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     check_inputs(args.clip)
     if args.character not in ("same", *list_presets()):
         raise FroudeError(f"unknown character '{args.character}': use same or a preset ({', '.join(list_presets())})")
-    from ..studio.guard import is_loopback
+    from ..studio.guard import is_loopback  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     if not is_loopback(args.host):
         say(f"froude view: WARNING: --host {args.host} makes the studio reachable from other machines on the "
             "network, with no password; anyone who can reach it can drive it. Use the default 127.0.0.1 unless "
             "you mean to share it.")
     clip = args.clip or str(sample_path())
-    from .common import load_clip
+    from .common import load_clip  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     clip = load_clip(clip, args.length_scale, args.keep_all_frames, False, args.joint_map, args.up)
     say(f"froude view: preparing {args.clip or 'the embedded sample (09_01)'} (fit once, reused for every change) ...")

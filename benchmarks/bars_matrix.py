@@ -121,8 +121,8 @@ class Clips:
 
     def get(self, name: str):
         if name not in self._prep:
-            from froude import pipeline
             from froude.errors import FroudeError
+            from froude.flow import pipeline
 
             try:
                 self._prep[name] = pipeline.prepare(clip_path(name))
@@ -132,8 +132,8 @@ class Clips:
 
 
 def run_one(clips: Clips, matrix: str, name: str, verb: str, character, factor: float, fps, render_dir=None) -> Row:
-    from froude import pipeline
     from froude.errors import FroudeError
+    from froude.flow import pipeline
 
     change = (f"{verb} {factor:g}x" if verb == "accelerate" else f"{character or 'same'} x{factor:g}")
     row = Row(matrix, name, change, "own" if fps is None else f"{fps:g}", "error")
@@ -162,7 +162,7 @@ def _render(res, stem: Path) -> None:
     """Write the output and ``froude render`` it (a filmstrip PNG), as a user would."""
     import subprocess
 
-    from froude import pipeline
+    from froude.flow import pipeline
 
     stem.parent.mkdir(parents=True, exist_ok=True)
     bvh = stem.with_suffix(".bvh")
@@ -227,7 +227,7 @@ def matrix_speeds(clips: Clips, only) -> list[Row]:
             rows.append(Row("speeds", name, "every speed", "own", "refused" if one_line else "error",
                             [] if one_line else ["refusal not one line"], str(prep)))
             continue
-        from froude.speed_range import reachable_speed_range
+        from froude.flow.speed_range import reachable_speed_range
 
         rng = reachable_speed_range(prep)
         for s in SPEEDS_134:

@@ -73,13 +73,13 @@ _PREP = None
 
 def _init_prep(path: str) -> None:
     global _PREP
-    from froude import pipeline
+    from froude.flow import pipeline
 
     _PREP = pipeline.prepare(path)
 
 
 def _scale_once(strides: int) -> float:
-    from froude import pipeline
+    from froude.flow import pipeline
 
     c = time.process_time()
     pipeline.scale(_PREP, "giant", speed=1.0, strides=strides)

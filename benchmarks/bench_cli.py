@@ -61,7 +61,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=7)
     args = ap.parse_args()
-    from froude.samples import sample_path
+    from froude.io.samples import sample_path
 
     clip = str(sample_path())
     with tempfile.TemporaryDirectory() as d:

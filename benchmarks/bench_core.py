@@ -23,7 +23,7 @@ from pathlib import Path  # noqa: E402
 
 from froude import BodyModel, load_bvh  # noqa: E402
 from froude.core.kinematics import com_jacobian, forward_kinematics, point_jacobian, points_world  # noqa: E402
-from froude.samples import sample_path  # noqa: E402
+from froude.io.samples import sample_path  # noqa: E402
 
 TARGET_FK_COM = 200_000  # frames/s, issue 2
 

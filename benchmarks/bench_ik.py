@@ -29,8 +29,8 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 import froude  # noqa: E402
-from froude.constants import UP_AXIS  # noqa: E402
 from froude.core import quat  # noqa: E402
+from froude.core.constants import UP_AXIS  # noqa: E402
 from froude.ik import solver as ik
 
 

@@ -21,8 +21,8 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from froude import pipeline  # noqa: E402
 from froude.errors import PlanError  # noqa: E402
+from froude.flow import pipeline  # noqa: E402
 from froude.machine.dynamics import step  # noqa: E402
 from froude.machine.planner import plan_speed_change  # noqa: E402
 from froude.machine.table import grid_around, load_or_build_table  # noqa: E402

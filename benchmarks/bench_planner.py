@@ -32,8 +32,8 @@ def best_of(fn, n):
 def start_cycle():
     try:
         from froude.io.bvh import load_bvh
+        from froude.io.samples import sample_path
         from froude.machine.fit import fit_machine
-        from froude.samples import sample_path
         m = fit_machine(load_bvh(sample_path()))
         return m, f"fitted machine of {os.path.basename(str(sample_path()))}"
     except Exception as e:  # the fit is another module; fall back to a synthetic cycle

@@ -30,7 +30,7 @@ WALK_FIT_S = 1.5
 
 def measure(strides: int, repeats: int = 5) -> None:
     import froude
-    from froude import pipeline
+    from froude.flow import pipeline
 
     t = time.perf_counter()
     prep = pipeline.prepare(froude.sample_path())
@@ -54,7 +54,7 @@ def measure(strides: int, repeats: int = 5) -> None:
 def gaits() -> None:
     """A run's and walks' prepare + scale of 4 strides (wall and CPU time), and the walking fit alone."""
     import froude
-    from froude import pipeline
+    from froude.flow import pipeline
     from froude.io.bvh import load_bvh
     from froude.machine.walk_fit import fit_walking_detailed
 
@@ -86,7 +86,7 @@ def gaits() -> None:
 def hour_child() -> None:
     """Run in a fresh process: one hour of output, its time and peak RSS."""
     import froude
-    from froude import pipeline
+    from froude.flow import pipeline
 
     prep = pipeline.prepare(froude.sample_path())
     t = time.perf_counter()

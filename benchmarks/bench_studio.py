@@ -120,10 +120,10 @@ def main() -> None:
 
     import viser
 
-    from froude import pipeline
     from froude.apps.studio.app import Studio
     from froude.apps.studio.session import Params, Session
-    from froude.samples import sample_path
+    from froude.flow import pipeline
+    from froude.io.samples import sample_path
 
     t = time.perf_counter()
     prep = pipeline.prepare(sample_path())

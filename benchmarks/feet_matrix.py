@@ -73,8 +73,8 @@ def main(argv=None) -> int:
     ap.add_argument("--all", action="store_true", help="print every row, not only the misses")
     ap.add_argument("--json", metavar="OUT.json", help="also write every row as JSON")
     args = ap.parse_args(argv)
-    from froude import pipeline
     from froude.errors import FroudeError
+    from froude.flow import pipeline
 
     only = {s.strip() for s in args.only.split(",") if s.strip()}
     rows, t0 = [], time.perf_counter()

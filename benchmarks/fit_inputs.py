@@ -199,7 +199,7 @@ def displacement_spring(motion, res, com_raw, sg) -> float:
     """K [-] of one stance sg (StanceGeometry of FitResult res) fitted to the raw COM (F, 3) [m] at the clip's
     frames over the stance and W_S on each side: x, y (heading, up) = x0 + v0 t + ∫∫ (f_leg/m u − g), f_leg = m g
     (K (1 − l/l0) + k1), u and l from the smoothed COM and the contact point (the spring-first fit's first step)."""
-    from froude.constants import GRAVITY, UP_AXIS
+    from froude.core.constants import GRAVITY, UP_AXIS
 
     t_clip = np.arange(motion.n_frames) * motion.frame_time
     t0, t1 = sg.t_touchdown - W_S, sg.t_liftoff + W_S
@@ -268,7 +268,7 @@ def machine_displacement_fit(motion, res, stance_sigma=None):
     from scipy.optimize import least_squares
 
     from froude.body.model import BodyModel
-    from froude.constants import UP_AXIS
+    from froude.core.constants import UP_AXIS
     from froude.errors import FroudeError
     from froude.machine.dynamics import Control, simulate
     from froude.machine.fit import _VARS, CYCLE_SCALES

@@ -131,7 +131,7 @@ def jitter(names: list[str]) -> int:
 
     from froude.body.gait import detect_gait
     from froude.body.model import BodyModel
-    from froude.constants import UP_AXIS
+    from froude.core.constants import UP_AXIS
     from froude.io.bvh import load_bvh
 
     for name in names:

@@ -31,7 +31,7 @@ ON_FLOOR_M = 0.01
 
 def planted_drift_mm(markers: np.ndarray, stance) -> float:
     """Largest horizontal move [mm] of a stance's planted marker from its mean place (see the module)."""
-    from froude.constants import HORIZONTAL_AXES, UP_AXIS
+    from froude.core.constants import HORIZONTAL_AXES, UP_AXIS
 
     a, b = stance.start, stance.stop
     mid = (a + b - 1) // 2

@@ -58,7 +58,7 @@ def fit_events(t, y, td0, lo0, bw=0.0):
     td0, lo0 [s]; bw > 0: where the fitted pulse crosses bw body weights instead of its ends."""
     from scipy.optimize import least_squares
 
-    from froude.constants import GRAVITY
+    from froude.core.constants import GRAVITY
 
     before = t < td0
     v_td, y_td = (np.polyfit(t[before] - td0, y[before] + 0.5 * GRAVITY * (t[before] - td0) ** 2, 1)
@@ -74,7 +74,7 @@ def trajectory_events(motion, bw=0.0):
     """[(touchdown, liftoff)] [s] of the full stances of a motion with EDGE_S of clip on either side."""
     from froude.body.gait import detect_gait
     from froude.body.model import BodyModel
-    from froude.constants import UP_AXIS
+    from froude.core.constants import UP_AXIS
 
     body = BodyModel.from_skeleton(motion.skeleton)
     com, markers = body.com_and_markers(motion)

@@ -78,9 +78,9 @@ def _per_step_misses(clip_path, out_path, L: float) -> tuple[float, float | None
 
 
 def row(prep, label: str, kw: dict) -> dict:
-    from froude import pipeline
     from froude.body.gait import detect_gait
     from froude.body.path import take_path
+    from froude.flow import pipeline
 
     strides = math.ceil(prep.path.n_steps / 2) + 1
     res = pipeline.scale(prep, strides=strides, **kw)
@@ -127,8 +127,8 @@ def main(argv=None) -> int:
     ap.add_argument("--only", help="comma-separated substrings of clip names")
     ap.add_argument("--json", help="write every row here")
     args = ap.parse_args(argv)
-    from froude import pipeline
     from froude.errors import FroudeError
+    from froude.flow import pipeline
 
     from conftest import clip
 

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from froude import pipeline
-from froude.constants import GRAVITY, UP_AXIS
+from froude.core.constants import GRAVITY, UP_AXIS
+from froude.flow import pipeline
 from froude.machine.forces import smooth_com
 from froude.machine.walk_fit import force_landmarks
 

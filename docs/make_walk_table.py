@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from froude import pipeline
+from froude.flow import pipeline
 
 MOCAP = Path(os.environ.get("FROUDE_MOCAP_DIR", "/work/shared/data/mocap"))
 BANDAI = Path(os.environ.get("FROUDE_BANDAI_DIR", "/work/shared/data/bandai"))

@@ -91,7 +91,7 @@ class _Prepared(dict):
     """Running clips prepared (loaded, fitted) on first use; a missing clip skips the test that asks."""
 
     def __missing__(self, name: str):
-        from froude import pipeline
+        from froude.flow import pipeline
 
         self[name] = pipeline.prepare(clip(name))
         return self[name]
@@ -127,7 +127,7 @@ class _MatrixOutputs(dict):
     def __missing__(self, key: str) -> MatrixOutput:
         import make_golden
 
-        from froude import pipeline
+        from froude.flow import pipeline
 
         row = next((r for r in make_golden.cases() if r[0] == key), None)
         assert row is not None, f"{key}: not a case of tests/golden/make_golden.py"

@@ -8,8 +8,8 @@ import sys
 import numpy as np
 import pytest
 
-from froude import pipeline
 from froude.errors import PlanError
+from froude.flow import pipeline
 from froude.machine.table import grid_around, load_or_build_table
 
 from conftest import RUNNING, clip, clip_params, matrix_group

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from froude import pipeline
-from froude.speed_range import reachable_speed_range
+from froude.flow import pipeline
+from froude.flow.speed_range import reachable_speed_range
 
 from conftest import BANDAI_RUNS, RUNNING, clip, clip_params
 

@@ -17,9 +17,10 @@ from pathlib import Path
 
 import pytest
 
-from froude import load_bvh, pipeline
+from froude import load_bvh
 from froude.apps import batch
 from froude.apps.batch import BatchError
+from froude.flow import pipeline
 
 from conftest import MOCAP, RUNNING, WALKING, clip
 

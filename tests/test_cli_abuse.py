@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from froude.samples import sample_path
+from froude.io.samples import sample_path
 
 from conftest import clip
 
@@ -172,7 +172,7 @@ def test_plot_folder_and_demo_outputs(work, run_cli):
 
 def test_one_speed_syntax_everywhere():
     from froude.errors import FroudeError
-    from froude.speed_goal import SpeedGoal, parse_speed
+    from froude.flow.speed_goal import SpeedGoal, parse_speed
 
     assert parse_speed("1.2") == parse_speed("1.2x") == parse_speed(" 1.2X ") == SpeedGoal(factor=1.2)
     assert parse_speed("3.5m/s") == parse_speed("3.5 m/s") == SpeedGoal(m_s=3.5)
@@ -419,9 +419,9 @@ def test_scale_of_a_run_imports_no_scipy_nor_walking_code(tmp_path):
                         "2", "-o", str(out), "-q"], capture_output=True, text=True)
     imported = {line.split("|")[-1].strip() for line in r.stderr.splitlines() if line.startswith("import time:")}
     assert r.returncode == 0 and out.is_file(), r.stderr[-2000:]
-    assert "froude.pipeline" in imported  # the check sees the work's imports
+    assert "froude.flow.pipeline" in imported  # the check sees the work's imports
     unwanted = sorted(m for m in imported if m.split(".")[0] == "scipy" or m.startswith(
-        ("froude.machine.walk", "froude.speed_range")))
+        ("froude.machine.walk", "froude.flow.speed_range")))
     assert not unwanted, unwanted
 
 def test_every_command_module_lists_its_help():

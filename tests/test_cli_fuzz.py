@@ -26,7 +26,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from froude.apps.cli import common
-from froude.samples import sample_path
+from froude.io.samples import sample_path
 
 FUZZ_EXAMPLES = int(os.environ.get("FROUDE_FUZZ_EXAMPLES", "40"))
 SETTINGS = settings(max_examples=FUZZ_EXAMPLES, deadline=None, derandomize=not os.environ.get("FROUDE_FUZZ_RANDOM"),

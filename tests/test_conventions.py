@@ -248,7 +248,7 @@ def test_walk_fit_meets_issue_17_in_other_conventions(name, variant, tmp_root):
 
 @pytest.mark.parametrize("variant", list(_variants("09_01")))
 def test_scaling_to_a_child_meets_the_bars_in_every_convention(variant, tmp_root):
-    from froude import pipeline
+    from froude.flow import pipeline
 
     path = _variant_file("09_01", variant, tmp_root)
     res = pipeline.scale(pipeline.prepare(path), "child")
@@ -551,7 +551,7 @@ def _bandai_cases():
 
 @functools.cache
 def _bandai_prep(name):
-    from froude import pipeline
+    from froude.flow import pipeline
 
     return pipeline.prepare(load_bvh(clip(name)))
 
@@ -560,8 +560,8 @@ def _bandai_prep(name):
 def test_bandai_clips_as_delivered_meet_the_bars(name, change, fps):
     """Every striding Bandai run goes through scale and accelerate with no option; the output meets the
     physics bars, measured at its own rate (the input's 30 Hz, or 120 Hz). A refusal is one line."""
-    from froude import pipeline
     from froude.errors import FroudeError
+    from froude.flow import pipeline
 
     prep = _bandai_prep(name)
     what, factor = change

@@ -13,10 +13,10 @@ import re
 import numpy as np
 import pytest
 
-from froude import pipeline
-from froude.constants import HORIZONTAL_AXES, UP_AXIS
-from froude.metrics import BARS, physics_report, source_rest_heights
-from froude.result import write_result
+from froude.core.constants import HORIZONTAL_AXES, UP_AXIS
+from froude.flow import pipeline
+from froude.flow.result import write_result
+from froude.report.metrics import BARS, physics_report, source_rest_heights
 
 from conftest import clip, oracle_fk, read_bvh_oracle
 

@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from froude.constants import GRAVITY
+from froude.core.constants import GRAVITY
 from froude.errors import NotARunningMotion
 from froude.io.bvh import load_bvh
 from froude.machine.dynamics import Control, simulate, step

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import froude
-from froude.constants import UP_AXIS
 from froude.core import quat
+from froude.core.constants import UP_AXIS
 from froude.core.kinematics import apply_dof_increment
 from froude.errors import IkError
 from froude.ik import solver as ik

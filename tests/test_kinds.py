@@ -1,5 +1,5 @@
 """Gait as one type (issue 27 acceptance 4): the pipeline, report, studio and batch ask a motion's kind
-(``froude.kinds``) and never which one it is; a third kind is added through the protocol alone."""
+(``froude.flow.kinds``) and never which one it is; a third kind is added through the protocol alone."""
 from __future__ import annotations
 
 import re
@@ -8,14 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from froude import kinds, pipeline
+from froude.flow import kinds, pipeline
 
 from conftest import clip
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "froude"
 #: The modules that must not branch on the gait: the orchestration, the report, the studio and batch.
-ASKERS = ("pipeline.py", "prepared.py", "speed_range.py", "speed_change.py", "speed_goal.py", "result.py",
-          "naive.py", "metrics.py", "path_report.py", "api.py", "apps/studio", "apps/batch", "apps/cli")
+ASKERS = ("flow/pipeline.py", "flow/prepared.py", "flow/speed_range.py", "flow/speed_change.py", "flow/speed_goal.py", "flow/result.py",
+          "flow/naive.py", "report/metrics.py", "report/path_report.py", "api.py", "apps/studio", "apps/batch", "apps/cli")
 #: A test of which gait a motion is: the machine's kind, a report's "machine" field or the walking helpers.
 BRANCH = re.compile(r"is_walking\(|[=!]= *[\"']walking[\"']|[\"']walking[\"'] *[=!]=|\bwalks\(|\.order *[=!]=")
 
@@ -30,7 +30,7 @@ def test_no_gait_branching_where_the_kind_is_asked():
     hits = [f"{p.relative_to(SRC)}:{i}: {line.strip()}" for p in _sources()
             for i, line in enumerate(p.read_text().splitlines(), 1)
             if BRANCH.search(line) and not line.lstrip().startswith("#")]
-    assert not hits, "gait branching outside froude.kinds:\n" + "\n".join(hits)
+    assert not hits, "gait branching outside froude.flow.kinds:\n" + "\n".join(hits)
 
 
 def test_the_branch_pattern_catches_what_it_is_for():

@@ -25,13 +25,13 @@ KNOWN_UPWARD = {
         "moves into report with io.framedata writing only",
     ("froude.io.framedata", "froude.body.model"): "as io.framedata -> body.gait",
     ("froude.io.framedata", "froude.machine.forces"): "as io.framedata -> body.gait",
-    ("froude.body.conventions", "froude.metrics"):
+    ("froude.body.conventions", "froude.report.metrics"):
         "units detection fits flight gravity with the report's flight_gravity: the measure moves into body",
-    ("froude.synthesis.cycle", "froude.metrics"):
+    ("froude.synthesis.cycle", "froude.report.metrics"):
         "the reference cycle uses the report's joint jump, skate reach and floor height: they move below",
-    ("froude.synthesis.targets", "froude.metrics"): "as synthesis.cycle (the skate band and markers)",
-    ("froude.synthesis.feet", "froude.metrics"): "as synthesis.cycle (the skate reach, floor and rest heights)",
-    ("froude.synthesis.phases", "froude.metrics"): "as synthesis.cycle (the vertical force in body weights)",
+    ("froude.synthesis.targets", "froude.report.metrics"): "as synthesis.cycle (the skate band and markers)",
+    ("froude.synthesis.feet", "froude.report.metrics"): "as synthesis.cycle (the skate reach, floor and rest heights)",
+    ("froude.synthesis.phases", "froude.report.metrics"): "as synthesis.cycle (the vertical force in body weights)",
 }
 #: Imports of froude inside functions without a '# lazy:' reason (scripts/layers.py lists them as file:line).
 #: Each goes to the top of its module or says how it keeps start-up fast; the count may only go down.

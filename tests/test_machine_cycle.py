@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from froude.constants import GRAVITY
+from froude.core.constants import GRAVITY
 from froude.errors import FitError
 from froude.machine.cycle import PARAMETERS, find_limit_cycle, step_jacobian, step_map_eigenvalues
 from froude.machine.dynamics import Control, step

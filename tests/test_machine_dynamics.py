@@ -6,7 +6,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
-from froude.constants import GRAVITY
+from froude.core.constants import GRAVITY
 from froude.errors import FitError, PlanError
 from froude.machine.control_fit import control_from_si, fit_leg_control
 from froude.machine.dynamics import APEX_BELOW_TOUCHDOWN, BAD_INPUT, OK, Control, energy, simulate, step

@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from froude import pipeline
 from froude.body.path import direction_of, heading_change, smooth_path, unsmooth_path, wrap_angle, yaw_of
-from froude.constants import UP
+from froude.core.constants import UP
+from froude.flow import pipeline
 
 from conftest import BANDAI_LOCO, CMU_TURN_CLIPS, CMU_TURNS, LOCO_TURNS, clip, oracle_fk, read_bvh_oracle
 
@@ -275,7 +275,7 @@ def test_the_output_leans_into_the_turn_and_its_force_closes(prepared):
 def test_a_lost_turn_is_a_missed_bar_said_in_degrees(prepared):
     """Never silently straight: an output of a turning clip that walks straight (here the take straightened
     along its path, which the machines see) misses a bar that says so in degrees."""
-    from froude.metrics import physics_report
+    from froude.report.metrics import physics_report
 
     prep = prepared[TURN]
     rep = physics_report(prep.motion, prep.body, reference_path=prep.path, reference_leg_length=prep.body.leg_length)

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 import froude
-from froude import pipeline
 from froude.body.characters import list_presets
-from froude.constants import GRAVITY
 from froude.core import quat
+from froude.core.constants import GRAVITY
+from froude.flow import pipeline
 from froude.ik.correct import correct
-from froude.metrics import physics_report
+from froude.report.metrics import physics_report
 
 from conftest import RUNNING, clip, clip_params, matrix_group
 

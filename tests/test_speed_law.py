@@ -138,8 +138,8 @@ SHARED_RUNS = RUNNING + BANDAI_RUNS
 def test_speed_ups_follow_the_law_and_stay_human(name, tmp_path):
     """Acceptance 2: at x1.5 and x2.0 (or the top of the human range) the output's step frequency and step
     length are the law's within 5 %, and no step is longer than 1.4 x stature."""
-    from froude import pipeline
     from froude.errors import FroudeError
+    from froude.flow import pipeline
 
     try:  # the law is the runners' (walks keep their own cadence law): a walk is refused before its fit
         prep = pipeline.prepare(clip(name), running_only=True)
@@ -169,7 +169,7 @@ def test_speed_ups_follow_the_law_and_stay_human(name, tmp_path):
 def test_reachable_range_and_refusal_are_the_human_ones(name, tmp_path, prepared, run_cli):
     """Acceptance 3: the range the studio offers (``reachable_speed_range``) ends at the human top for the
     clip's size, the CLI refuses past it in one line with the limit in m/s, and --unlimited lifts it."""
-    from froude.speed_range import reachable_speed_range
+    from froude.flow.speed_range import reachable_speed_range
 
     prep = prepared[name]
     rt = prep.retarget(None)
@@ -206,8 +206,8 @@ def test_an_acceleration_to_inhuman_steps_is_refused(prepared):
     """Acceptance 2's "no step longer than 1.4 x stature" for ``accelerate``: the paper's planner
     (speed_model="planner") keeps the clip's stance, so its steps grow with the goal; past 1.4 x stature the
     change is refused in the user's terms. The law's change to the same goal steps faster and stays inside."""
-    from froude import pipeline
     from froude.errors import BeyondHumanRange
+    from froude.flow import pipeline
 
     prep = prepared["09_01"]
     with pytest.raises(BeyondHumanRange, match=r"takes a step of 2\.\d\d m \(step \d+\), 1\.4\d x stature"):
@@ -257,7 +257,7 @@ def test_accelerations_follow_the_law(name, factor, steps, prepared, tmp_path):
     the final (hold) steps step at the law's frequency and length for the speed they run at (5 %), that speed
     is the goal (3 %), the speed per step changes monotonically, no step is longer than 1.4 x stature, and
     every physics bar is met."""
-    from froude import pipeline
+    from froude.flow import pipeline
 
     prep = prepared[name]
     ls = float(prep.motion.meta.get("length_scale", 1.0))

@@ -83,8 +83,8 @@ def _decision(motion):
     """(decision, world joint positions (F, J, 3) [m] of the output or None) of one clip: the machine fitted
     and the bars the child output fails (figures masked: a verdict, not its digits), or the refusal (kind of
     error and its message)."""
-    from froude import pipeline
     from froude.errors import FroudeError
+    from froude.flow import pipeline
 
     try:
         prep = pipeline.prepare(motion)

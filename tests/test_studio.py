@@ -10,12 +10,12 @@ import time
 import numpy as np
 import pytest
 
-from froude import pipeline
 from froude.apps.studio.session import Params, Session
 from froude.apps.studio.tracks import bone_segments, motion_hash, spring_legs, trail_segments
 from froude.core.kinematics import fk
 from froude.errors import FroudeError
-from froude.samples import sample_path
+from froude.flow import pipeline
+from froude.io.samples import sample_path
 
 
 @pytest.fixture(scope="module")
@@ -202,7 +202,7 @@ def test_speed_control_bounded_to_what_is_reachable(session, monkeypatch):
         assert tab.good is good and tab.gui_speed.value == good.params.speed and "beyond" in tab.message
         # another character whose search has not finished (stopped by a newer change): the slider is not
         # left at the previous character's x1.8; it spans its own limits and the status says why
-        from froude import speed_range
+        from froude.flow import speed_range
 
         def stopped(*args, **kwargs):
             raise speed_range.SearchStopped()
@@ -263,8 +263,8 @@ def test_a_change_is_not_held_up_by_the_speed_range_search(session, monkeypatch)
     import threading
     import time
 
-    from froude import speed_range
     from froude.apps.studio.app import Studio
+    from froude.flow import speed_range
 
     monkeypatch.setattr(session.prep.memo, "speed_ranges", {})  # this test's searches, not ones remembered
     monkeypatch.setattr(session.prep.memo, "speed_probes", {})
@@ -351,7 +351,7 @@ def test_bvh_export_options(session, tmp_path):
         assert np.ptp(cm.root_positions[:, [0, 2]], axis=0).max() < 0.3  # in place: no travel
         # the same in-place motion as the CLI's (only the forward progression off the root: the sideways sway
         # stays), at 30 Hz; the studio took the COM's whole horizontal motion off before
-        from froude.result import in_place_motion
+        from froude.flow.result import in_place_motion
 
         cli = in_place_motion(tab.good.result).resample(30.0)
         assert np.abs(cm.root_positions - cli.root_positions).max() < 1e-4
@@ -448,7 +448,7 @@ def test_unreachable_speed_says_so_in_metres_per_second(monkeypatch):
     """A speed with no running cycle (a Bandai run at x1.5, inside its human range, x1.58) is refused in m/s
     with the fix, not in the cycle solver's terms; past the human range the refusal says the human limit."""
     from froude.errors import FitError
-    from froude.prepared import Prepared
+    from froude.flow.prepared import Prepared
 
     from conftest import clip
 

@@ -14,11 +14,11 @@ import time
 import msgspec
 import pytest
 
-from froude import pipeline
 from froude.apps.studio.guard import allowed_hosts, handshake_refusal, is_loopback
 from froude.apps.studio.session import LIMITS, Params
 from froude.errors import FroudeError
-from froude.samples import sample_path
+from froude.flow import pipeline
+from froude.io.samples import sample_path
 
 viser = pytest.importorskip("viser")
 zstandard = pytest.importorskip("zstandard")

@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from froude import pipeline
 from froude.body.gait import detect_gait, summarize
 from froude.body.model import BodyModel
 from froude.body.take import select_range
+from froude.flow import pipeline
+from froude.flow.speed_range import reachable_speed_range
 from froude.io.bvh import load_bvh
-from froude.speed_range import reachable_speed_range
 
 from conftest import BANDAI_RUNS, RUNNING, clip, clip_params
 
@@ -91,7 +91,7 @@ def test_report_json_is_strict_with_reasons(tmp_path):
     d = _strict(rp.read_text())
     assert d["com_tracking_rms_mm"] is None and "machine" in d["unmeasured"]["com_tracking_rms_mm"]
     # a motion with no flight at all: flight gravity null with its reason
-    from froude.metrics import physics_report
+    from froude.report.metrics import physics_report
 
     still = motion.with_(root_positions=np.repeat(motion.root_positions[:1], 40, axis=0),
                          rotations=np.repeat(motion.rotations[:1], 40, axis=0))

@@ -34,7 +34,7 @@ def test_scaled_measurements_by_dimension_not_by_name():
 
 
 def test_every_measurement_of_a_fitted_machine_has_a_dimension():
-    from froude import pipeline
+    from froude.flow import pipeline
 
     m = pipeline.prepare(clip("09_01")).machine
     big = m.scaled(2.25, 3.0)  # raises on a measurement MEASURED does not list

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from froude import pipeline
+from froude.flow import pipeline
 
 from conftest import BANDAI_WALKS, MOCAP, WALKING, clip, clip_params
 
@@ -220,8 +220,8 @@ def test_skate_floor_ignores_a_swing_before_a_contact_cut_by_the_clip_end():
     # still in the swing, lowest (30 mm up, within reach of the floor) before the stance begins, and moves
     # 20 mm a frame: not a slide. The same ball sliding 10 mm inside that stance is one.
     from froude.body.gait import Gait, Stance
-    from froude.constants import UP_AXIS
-    from froude.metrics import foot_skate_floor_mm
+    from froude.core.constants import UP_AXIS
+    from froude.report.metrics import foot_skate_floor_mm
 
     F, L, dt = 60, 0.9, 1.0 / 120.0
     markers = np.zeros((F, 2, 3, 3))
@@ -247,8 +247,8 @@ def test_skate_floor_measures_a_contact_cut_by_the_clip_start_from_the_marker_re
     # at 0.5 mm: the cut stance's band is measured from there, so the swing is not a slide. The same tip
     # resting on the floor at the clip's start and sliding 1 mm a frame is one.
     from froude.body.gait import Gait, Stance
-    from froude.constants import UP_AXIS
-    from froude.metrics import foot_skate_floor_mm
+    from froude.core.constants import UP_AXIS
+    from froude.report.metrics import foot_skate_floor_mm
 
     F, L, dt = 40, 1.0, 1.0 / 30.0
     markers = np.zeros((F, 2, 3, 3))

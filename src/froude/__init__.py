@@ -36,7 +36,7 @@ _LAZY = {
     "summarize": ".body.gait",
     "load_bvh": ".io.bvh", "save_bvh": ".io.bvh",
     "Motion": ".core.motion",
-    "sample_path": ".samples",
+    "sample_path": ".io.samples",
     "Skeleton": ".core.skeleton",
 }
 
@@ -83,4 +83,4 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real imports
     )
     from .io.atomic import OutputError
     from .io.bvh import load_bvh, save_bvh
-    from .samples import sample_path
+    from .io.samples import sample_path

@@ -12,7 +12,7 @@
     froude.info(run)["froude_U"]                           # what ``froude info --json`` says
     f = froude.ground_reaction_force(run)                 # (F, 3) [N] from the COM, eq. 1
 
-Every function calls the same pipeline as the CLI (``froude.pipeline``). A misspelt keyword argument is a
+Every function calls the same pipeline as the CLI (``froude.flow.pipeline``). A misspelt keyword argument is a
 TypeError that names the valid ones.
 """
 from __future__ import annotations
@@ -134,9 +134,9 @@ class Result:
     def save(self, path: str | os.PathLike, *, mesh: bool = True, report: bool = True) -> list[Path]:
         """Write the motion (suffix decides: .bvh / .glb / .gltf) and, unless report=False, OUT.report.json
         beside it; atomically. Returns the paths written."""
+        from .flow.pipeline import report_path  # lazy: start-up (import froude and its light verbs load no pipeline)
         from .io.atomic import atomic_group  # lazy: start-up (import froude and its light verbs load no pipeline)
-        from .metrics import write_report  # lazy: start-up (import froude and its light verbs load no pipeline)
-        from .pipeline import report_path  # lazy: start-up (import froude and its light verbs load no pipeline)
+        from .report.metrics import write_report  # lazy: start-up (import froude and its light verbs load no pipeline)
 
         with atomic_group():  # both files or neither
             out = [save(self.motion, path, mesh=mesh)]
@@ -155,7 +155,7 @@ class Result:
 
 def _prepared(clip, reference_mass: float, length_scale: float | None):
     """A pipeline.Prepared from a path, a Motion or an earlier Result (whose fit is reused)."""
-    from . import pipeline  # lazy: start-up (import froude and its light verbs load no pipeline)
+    from .flow import pipeline  # lazy: start-up (import froude and its light verbs load no pipeline)
 
     if isinstance(clip, Result):
         if clip.prepared is None:
@@ -182,7 +182,7 @@ def info(clip: str | os.PathLike | Motion, *, mass: float = 70.0, length_scale: 
     step_frequency_hz, contacts (per stance: foot, start_s, stop_s), skeleton (height_m, units ...).
     """
     from .body.model import BodyModel  # lazy: start-up (import froude and its light verbs load no pipeline)
-    from .clipinfo import clip_info  # lazy: start-up (import froude and its light verbs load no pipeline)
+    from .flow.clipinfo import clip_info  # lazy: start-up (import froude and its light verbs load no pipeline)
 
     motion = clip if isinstance(clip, Motion) else load(clip, length_scale=length_scale)
     return clip_info(motion, BodyModel.from_skeleton(motion.skeleton, mass=mass))[0]
@@ -199,7 +199,7 @@ def fit(clip: str | os.PathLike | Motion, *, reference_mass: float = 70.0, lengt
     Raises NotARunningMotion for a clip that neither runs nor walks (in place, too few stances),
     FroudeError for a bad file.
     """
-    from .metrics import physics_report  # lazy: start-up (import froude and its light verbs load no pipeline)
+    from .report.metrics import physics_report  # lazy: start-up (import froude and its light verbs load no pipeline)
 
     prep = _prepared(clip, reference_mass, length_scale)
     report = physics_report(prep.motion, prep.body, com_and_markers=(prep.com, prep.markers))
@@ -239,10 +239,10 @@ def scale(
     length_scale: metres per BVH file unit of the clip (default: detected); unlimited: allow a run faster
     than the human range for the character's size (default: refused, BeyondHumanRange, with the limit in m/s).
     """
-    from . import pipeline  # lazy: start-up (import froude and its light verbs load no pipeline)
+    from .flow import pipeline  # lazy: start-up (import froude and its light verbs load no pipeline)
 
     if isinstance(speed, str):
-        from .speed_goal import parse_speed  # lazy: start-up (import froude and its light verbs load no pipeline)
+        from .flow.speed_goal import parse_speed  # lazy: start-up (import froude and its light verbs load no pipeline)
 
         goal = parse_speed(speed, "speed")
         speed, target_speed = (goal.factor, target_speed) if goal.factor is not None else (1.0, goal.m_s)
@@ -283,7 +283,7 @@ def accelerate(
     (default 8) or happens ``within`` seconds; lead_steps / hold_steps steady steps before / after; policy:
     "ease" or "even". Character arguments and ``unlimited`` as in ``scale``.
     """
-    from . import pipeline  # lazy: start-up (import froude and its light verbs load no pipeline)
+    from .flow import pipeline  # lazy: start-up (import froude and its light verbs load no pipeline)
 
     if steps is None and within is None:
         steps = 8

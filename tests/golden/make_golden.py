@@ -120,7 +120,7 @@ def summarise(motion) -> dict:
 
 def run_case(prep, kind: str, kw: dict):
     """One output of the matrix (a ``cases()`` row's kind and kwargs) through the public pipeline."""
-    from froude import pipeline
+    from froude.flow import pipeline
 
     if kind == "scale":
         kw = dict(kw)
@@ -130,7 +130,7 @@ def run_case(prep, kind: str, kw: dict):
 
 def compute(mocap: Path, only=None):
     """{key: summary} for every case (or the keys in ``only``), through the public pipeline."""
-    from froude import pipeline
+    from froude.flow import pipeline
 
     out, prepared = {}, {}
     for key, c, kind, kw in cases():

@@ -14,11 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import pipeline
+from ..flow import pipeline
 from ..io.atomic import atomic_write_text
 from ..io.bvh import save_bvh
-from ..metrics import physics_report, write_report
-from ..samples import sample_path
+from ..io.samples import sample_path
+from ..report.metrics import physics_report, write_report
 
 
 @dataclass(frozen=True)

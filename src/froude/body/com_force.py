@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from ..constants import G_WORLD, GRAVITY, UP_AXIS
+from ..core.constants import G_WORLD, GRAVITY, UP_AXIS
 from ..errors import FitError
 
 __all__ = ["CUTOFF_HZ", "FILTER_ORDER", "EDGE_PAD_S", "EDGE_FIT_S", "butter_lowpass", "filtfilt", "smooth_com",

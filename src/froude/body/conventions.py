@@ -13,8 +13,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
 from ..core import quat
+from ..core.constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 
@@ -224,7 +224,7 @@ def flight_gravity_units(com: np.ndarray, foot_low: np.ndarray, leg_length: floa
     curvature is fitted by ``metrics.flight_gravity`` (one gravity shared by every flight, each its own
     height and vertical speed). Flights cut by the clip's edges are left out (a jump off or a stumble).
     """
-    from ..metrics import flight_gravity
+    from ..report.metrics import flight_gravity
     from .gait import _runs
 
     ground = np.percentile(foot_low.min(axis=1), 5)

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
+from ..core.constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
 from ..core.motion import Motion
 from ..errors import NotARunningMotion
 from .com_force import vertical_force_bw

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import UP_AXIS
+from ..core.constants import UP_AXIS
 from ..core.kinematics import fk_soa, from_soa, to_soa
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import HORIZONTAL_AXES, UP, UP_AXIS
 from ..core import quat
+from ..core.constants import HORIZONTAL_AXES, UP, UP_AXIS
 from ..core.motion import Motion
 from .gait import Gait, step_period
 from .model import BodyModel

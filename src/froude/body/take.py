@@ -8,7 +8,7 @@ from dataclasses import replace as _replace
 
 import numpy as np
 
-from ..constants import GRAVITY, UP_AXIS
+from ..core.constants import GRAVITY, UP_AXIS
 from ..core.motion import Motion
 from ..errors import FroudeError
 from .gait import Gait, GaitSummary, detect_gait

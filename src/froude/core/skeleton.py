@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..constants import UP_AXIS
+from .constants import UP_AXIS
 from .kinematics import forward_kinematics
 
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")

@@ -9,9 +9,9 @@ from dataclasses import replace as _replace
 import numpy as np
 
 from ..body.model import BodyModel
-from ..constants import HORIZONTAL_AXES, UP_AXIS
+from ..core.constants import HORIZONTAL_AXES, UP_AXIS
 from ..core.motion import Motion
-from ..metrics import BARS
+from ..report.metrics import BARS
 from ..synthesis.targets import COM_WEIGHT, Targets
 from .solver import DEFAULT_MAX_ERROR, solve_ik
 from .tasks import DEFAULT_JOINT_WEIGHT, ComTask, MarkerTask, PostureTask, RootTask

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import GRAVITY, UP_AXIS
+from ..core.constants import GRAVITY, UP_AXIS
 from ..errors import FroudeError
 from .atomic import atomic_write
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from froude.constants import GRAVITY
+from froude.core.constants import GRAVITY
 from froude.errors import FitError
 from froude.machine.dynamics import Control
 from froude.machine.units import time_unit

@@ -45,7 +45,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from froude.constants import GRAVITY
+from froude.core.constants import GRAVITY
 from froude.errors import PlanError
 from froude.machine.units import time_unit
 

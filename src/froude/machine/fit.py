@@ -29,7 +29,7 @@ import numpy as np
 
 from ..body.gait import detect_gait, require_running, summarize
 from ..body.model import BodyModel
-from ..constants import GRAVITY, UP_AXIS
+from ..core.constants import GRAVITY, UP_AXIS
 from ..core.motion import Motion
 from ..errors import FitError, NotARunningMotion
 from .control_fit import fit_leg_control

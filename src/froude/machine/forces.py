@@ -41,7 +41,7 @@ from ..body.com_force import (  # the eq. 1 force's one home is the body layer (
     ground_force,
     smooth_com,
 )
-from ..constants import GRAVITY, UP_AXIS, heading_frame
+from ..core.constants import GRAVITY, UP_AXIS, heading_frame
 from ..errors import FitError
 
 __all__ = [

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import GRAVITY
+from ..core.constants import GRAVITY
 from ..errors import FitError
 from ..io.atomic import atomic_write_text
 from ..io.jsonable import dumps

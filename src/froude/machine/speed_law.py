@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import GRAVITY
+from ..core.constants import GRAVITY
 
 __all__ = ["ALPHA", "BETA", "F_INFLECTION", "F_MAX", "T_STANCE_MIN", "STEP_MAX_PER_STATURE", "STATURE_REF_M",
            "HUMAN_MARGIN", "HUMAN_TOP_TOL", "LawStep", "HumanTop", "cadence_ratio", "stance_time", "law_step",

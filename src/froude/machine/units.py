@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import GRAVITY
+from ..core.constants import GRAVITY
 
 __all__ = ["time_unit", "speed_unit", "froude_number", "to_si_time", "to_si_length", "to_si_velocity",
            "to_si_force", "to_si_stiffness", "Similarity", "similarity", "MEASURED", "scale_measured"]

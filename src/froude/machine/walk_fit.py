@@ -52,7 +52,7 @@ import numpy as np
 from ..body.com_force import acceleration_response, force_landmarks
 from ..body.gait import detect_gait, summarize, walks
 from ..body.model import BodyModel
-from ..constants import GRAVITY, UP_AXIS
+from ..core.constants import GRAVITY, UP_AXIS
 from ..core.motion import Motion
 from ..errors import FitError, NotAWalkingMotion
 from .forces import CUTOFF_HZ, clip_com

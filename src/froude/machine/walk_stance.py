@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import UP_AXIS
+from ..core.constants import UP_AXIS
 
 __all__ = ["WalkStance", "measure_stance"]
 

@@ -20,8 +20,8 @@ import numpy as np
 __all__ = ["Centreline", "bend", "bend_points", "lean_shift"]
 
 from ..body.path import TakePath, yaw_quat
-from ..constants import GRAVITY, UP, UP_AXIS
 from ..core import quat
+from ..core.constants import GRAVITY, UP, UP_AXIS
 from .targets import Targets
 from .timewarp import MachinePath
 

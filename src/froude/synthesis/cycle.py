@@ -21,8 +21,8 @@ import numpy as np
 
 from ..body.gait import Gait
 from ..body.model import BodyModel
-from ..constants import UP_AXIS, heading_frame
 from ..core import quat
+from ..core.constants import UP_AXIS, heading_frame
 from ..core.motion import Motion
 from ..errors import FitError
 from .feet import contact_mask, contact_phases, foot_anchors, held_feet, rest_above
@@ -140,7 +140,7 @@ def extract_cycle(
     # (a 10 mm jump of a tip still near the floor, 02_03 at 50 Hz)
     marker_from_com = _close_loop_linear(_average(from_com, occ_frames, occ_w)) + (held - marker_rel)
 
-    from ..metrics import max_joint_jump_deg
+    from ..report.metrics import max_joint_jump_deg
 
     def averaged(x):
         return _close_loop_linear(_average(x, occ_frames, occ_w))

@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from ..body.gait import Gait
-from ..constants import UP_AXIS
+from ..core.constants import UP_AXIS
 
 #: A loaded foot marker of a run is held still while within this fraction of the leg length of its lowest
 #: point: wider than the physics report's 0.02 L (SKATE_BAND_L) because the output's lowest point is not the
@@ -39,7 +39,7 @@ def rest_above(gait: Gait, markers: np.ndarray, leg_length: float, ground: float
     ``metrics.stance_rest_heights``: the definition of what an output must match, measured here on the clip
     only; the report measures the output by itself). markers: (F, 2, 3, 3) [m].
     """
-    from ..metrics import floor_height, stance_rest_heights
+    from ..report.metrics import floor_height, stance_rest_heights
 
     floor, _ = floor_height(markers, gait, leg_length)
     if not np.isfinite(floor):
@@ -588,7 +588,7 @@ def held_feet(marker_rel: np.ndarray, stance_mask: np.ndarray, leg_length: float
     # turned the foot at touchdown and slid its tip 13 mm (giant x1.5). The band (SLIDE_BAND_L) is wider
     # than the 0.02 L within which the physics report watches a marker slide, so a tip that lifts to just
     # under 0.02 L and comes down again is held all the while.
-    from ..metrics import SKATE_REACH_L
+    from ..report.metrics import SKATE_REACH_L
 
     if order == "walking":  # a walking foot rolls (heel, ball, toe): one pivot at a time holds it
         return remove_sliding_rolling(marker_rel, stance_mask, contact_tol=SKATE_REACH_L * leg_length,

@@ -141,7 +141,7 @@ def loaded_events(gait: Gait, com: np.ndarray, frame_time: float) -> list[FootEv
     of 47-90° against the clip's 25°. gait: the clip's marker contacts; com: (F, 3) [m]; frame_time [s].
     """
     from ..machine.forces import _crossing
-    from ..metrics import vertical_force_bw
+    from ..report.metrics import vertical_force_bw
 
     fy_bw = vertical_force_bw(com, frame_time)
     w = int(round(LOADED_EVENT_SEARCH_S / frame_time))

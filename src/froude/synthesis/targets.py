@@ -9,7 +9,7 @@ import numpy as np
 
 from ..body.characters import Retarget
 from ..body.model import BodyModel
-from ..constants import UP_AXIS
+from ..core.constants import UP_AXIS
 from ..core.motion import Motion
 from .cycle import ReferenceCycle, sample_cycle
 from .feet import min_jerk, swing_anchor
@@ -137,7 +137,7 @@ def _floor_top(markers: np.ndarray, leg_length: float, frame_time: float) -> np.
     within a stance and its margins, FLOOR_WINDOW_S either side), when that lowest height is within
     SKATE_REACH_L × L of the floor.
     """
-    from ..metrics import SKATE_BAND_L, SKATE_MARKERS, SKATE_REACH_L
+    from ..report.metrics import SKATE_BAND_L, SKATE_MARKERS, SKATE_REACH_L
 
     out = np.full(markers.shape[:3], -np.inf)
     half = max(1, int(round(FLOOR_WINDOW_S / frame_time)))

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import GRAVITY, UP_AXIS
+from ..core.constants import GRAVITY, UP_AXIS
 from .cycle import ReferenceCycle, sample_cycle
 
 

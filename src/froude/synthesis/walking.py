@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import UP_AXIS
+from ..core.constants import UP_AXIS
 from .cycle import sample_cycle
 from .feet import min_jerk
 from .phases import FootEvent

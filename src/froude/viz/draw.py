@@ -11,7 +11,7 @@ import numpy as np
 from ..body.gait import detect_gait, summarize
 from ..body.model import BodyModel
 from ..body.path import is_straight, straighten, take_path
-from ..constants import UP, UP_AXIS
+from ..core.constants import UP, UP_AXIS
 from ..core.motion import Motion
 from ..errors import FroudeError
 from .rig import _WIDTH, CENTRE, LEFT, RIGHT, Rig, build_rig

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import UP_AXIS
+from ..core.constants import UP_AXIS
 from ..core.motion import Motion
 from ..errors import FroudeError
 from .draw import (

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..body.model import BodyModel
-from ..constants import UP
+from ..core.constants import UP
 from ..core.kinematics import ancestor_mask, points_world
 
 # Capsule diameters as fractions of stature (an adult of 1.75 m: thigh 13 cm, upper arm 8 cm ...).

@@ -1,4 +1,4 @@
-"""Dataset-scale batches: every clip × every variation of a plan through ``froude.pipeline``, on Dask.
+"""Dataset-scale batches: every clip × every variation of a plan through ``froude.flow.pipeline``, on Dask.
 
     clips = find_clips(["clips/", "more/*.bvh"])
     plan = load_plan("plan.yaml")

@@ -36,8 +36,8 @@ def _task_params(task: Task, plan: Plan) -> dict:
 
 def read_done(outdir, task: Task, plan: Plan) -> dict | None:
     """The index row stored by a complete earlier run of ``task``, or None (missing, partial or stale)."""
+    from ...flow.pipeline import report_path
     from ...io.jsonable import jsonable
-    from ...pipeline import report_path
 
     bvh = Path(outdir) / task.output
     try:

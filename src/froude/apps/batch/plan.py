@@ -291,9 +291,9 @@ def _spec_path(spec: str, presets, base_dir) -> str:
 
 
 def _speed(s, where, bad) -> tuple[str, tuple]:
-    """A speed entry → (id part, scale kwargs) in froude's one speed syntax (``froude.speed_goal``):
+    """A speed entry → (id part, scale kwargs) in froude's one speed syntax (``froude.flow.speed_goal``):
     0.8 / '0.8x' a factor, '3.5m/s' an absolute speed."""
-    from ...speed_goal import parse_speed
+    from ...flow.speed_goal import parse_speed
 
     try:
         goal = parse_speed(s, where)

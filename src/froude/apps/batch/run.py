@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 from ...errors import FroudeError
 
 if TYPE_CHECKING:
-    from ...prepared import Prepared
+    from ...flow.prepared import Prepared
 
 from .layout import (
     INDEX_NAME,
@@ -47,7 +47,7 @@ class Prepped:
 
 def prepare_clip(path: str, mass: float, sex: str, length_scale) -> Prepped:
     """Worker task: ``pipeline.prepare`` of one clip (fit once; its result feeds all the clip's variations)."""
-    from ... import pipeline
+    from ...flow import pipeline
 
     t0 = time.perf_counter()
     try:
@@ -59,7 +59,7 @@ def prepare_clip(path: str, mass: float, sex: str, length_scale) -> Prepped:
 
 def run_task(prepped: Prepped, task: Task, plan: Plan, outdir: str) -> dict:
     """Worker task: one variation of one prepared clip → BVH + report (atomic), done-marker last; its index row."""
-    from ... import pipeline
+    from ...flow import pipeline
     from ...io.bvh import atomic_write_text
     from ...io.jsonable import dumps
 
@@ -210,8 +210,8 @@ def warm_up(client) -> None:
 
 
 def _import_pipeline() -> None:
+    import froude.flow.pipeline  # noqa: F401
     import froude.machine.fit  # noqa: F401
-    import froude.pipeline  # noqa: F401
 
 
 def run_batch(clips, plan: Plan, outdir, *, client=None, scheduler: str | None = None, n_workers: int | None = None,

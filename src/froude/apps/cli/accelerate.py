@@ -93,8 +93,8 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ...errors import PlanError  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...flow.pipeline import report_path  # lazy: start-up (froude --help imports every verb module and no NumPy)
     from ...io.atomic import atomic_group, require_suffix  # lazy: start-up
-    from ...pipeline import report_path  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     out = require_suffix(args.output, MOTION_OUTPUTS)
     data = data_output(args)
@@ -106,7 +106,7 @@ def run(args) -> int:
     goal = args.to_speed
     steps = args.steps if (args.steps is not None or args.within is not None) else 8
 
-    from ... import pipeline  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...flow import pipeline  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     t0 = time.perf_counter()
     prep = prepare_clip(args)
@@ -163,7 +163,7 @@ def run(args) -> int:
 
 def _steady_range(prep, args) -> str:
     """The steady speeds whose outputs meet every bar for this character (a goal outside them will not)."""
-    from ...speed_range import reachable_speed_range  # lazy: start-up
+    from ...flow.speed_range import reachable_speed_range  # lazy: start-up
 
     return reachable_speed_range(prep, args.character, unlimited=args.unlimited, **character_kwargs(args)).sentence()
 

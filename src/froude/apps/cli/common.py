@@ -70,10 +70,12 @@ def number(lo: float, hi: float, unit: str = "", *, integer: bool = False, lo_op
 
 
 def speed(what: str):
-    """An argparse ``type`` for the one speed syntax (``froude.speed_goal``): returns a SpeedGoal."""
+    """An argparse ``type`` for the one speed syntax (``froude.flow.speed_goal``): returns a SpeedGoal."""
 
     def parse(text: str):
-        from ...speed_goal import parse_speed  # lazy: start-up (froude --help imports every verb module and no NumPy)
+        from ...flow.speed_goal import (
+            parse_speed,  # lazy: start-up (froude --help imports every verb module and no NumPy)
+        )
 
         try:
             return parse_speed(text, what)
@@ -258,7 +260,7 @@ def prepare_clip(args):
     """Load args.clip (with the load options) and fit it: ``pipeline.prepare``; then say the load's notes.
 
     Nothing is printed before the fit succeeds, so a clip that cannot be used is one line."""
-    from ... import pipeline  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...flow import pipeline  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, True, getattr(args, "joint_map", None),
                        getattr(args, "up", None))

@@ -92,7 +92,7 @@ def run(args) -> int:
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
     from ...body.gait import summarize  # lazy: start-up (froude --help imports every verb module and no NumPy)
     from ...body.take import running_take  # lazy: start-up (froude --help imports every verb module and no NumPy)
-    from ...kinds import choose_kind  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...flow.kinds import choose_kind  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     # the take as ``prepare`` analyses it (a loop unrolled, an in-place take given its travel) and the one
     # decision of body.gait about what it is: the same as ``info`` says and ``scale`` models (in place or

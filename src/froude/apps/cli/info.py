@@ -72,7 +72,7 @@ def run(args) -> int:
     if data is not None:
         guard_outputs([data], [args.clip])
     from ...body.model import BodyModel  # lazy: start-up (froude --help imports every verb module and no NumPy)
-    from ...clipinfo import clip_info  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...flow.clipinfo import clip_info  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, args.json or args.quiet, args.joint_map,
                        args.up)

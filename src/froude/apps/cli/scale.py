@@ -88,8 +88,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from ...flow.pipeline import report_path  # lazy: start-up (froude --help imports every verb module and no NumPy)
     from ...io.atomic import atomic_group, require_suffix  # lazy: start-up
-    from ...pipeline import report_path  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     out = require_suffix(args.output, MOTION_OUTPUTS)
     data = data_output(args)
@@ -99,8 +99,8 @@ def run(args) -> int:
     goal = args.speed
     t0 = time.perf_counter()
 
-    from ... import pipeline  # lazy: start-up (froude --help imports every verb module and no NumPy)
     from ...errors import FitError, FroudeError, NotARunningMotion, NotAWalkingMotion  # lazy: start-up
+    from ...flow import pipeline  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     try:
         prep = prepare_clip(args)
@@ -144,7 +144,7 @@ def run(args) -> int:
 
 def _naive_any_clip(args, out, data, goal, why, t0) -> int:
     """--method naive on a clip the fit refuses (a walk, a jump, too short): the clip itself, naively."""
-    from ... import pipeline  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...flow import pipeline  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     motion = load_clip(args.clip, args.length_scale, args.keep_all_frames, True, getattr(args, "joint_map", None),
                        getattr(args, "up", None))
@@ -165,7 +165,7 @@ def _naive_any_clip(args, out, data, goal, why, t0) -> int:
 def _speed_range(prep, args):
     """The reachable speeds of the asked character, for a refusal (imported only then: a run that succeeds
     never needs it)."""
-    from ...speed_range import reachable_speed_range  # lazy: start-up
+    from ...flow.speed_range import reachable_speed_range  # lazy: start-up
 
     return reachable_speed_range(prep, args.character, unlimited=args.unlimited, **character_kwargs(args))
 

@@ -57,9 +57,9 @@ def run(args) -> int:
         import viser  # noqa: F401
     except ImportError:
         raise FroudeError("the studio needs viser: pip install 'froude[studio]'") from None
-    from ... import pipeline  # lazy: start-up (froude --help imports every verb module and no NumPy)
     from ...body.characters import list_presets  # lazy: start-up (froude --help imports every verb module and no NumPy)
-    from ...samples import sample_path  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...flow import pipeline  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...io.samples import sample_path  # lazy: start-up (froude --help imports every verb module and no NumPy)
     from ..studio import Params, serve  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     check_inputs(args.clip)

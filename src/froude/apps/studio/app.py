@@ -178,7 +178,7 @@ class Tab(_Layout, _Playback, _Export):
         The search gives way to the user: a change (or the tab closing) that comes in meanwhile stops it
         after the output being checked, and the change is computed next; the outputs already checked are
         kept, and the search resumes from them when this preset's result is next on screen (apply)."""
-        from ...speed_range import SearchStopped, reachable_speed_range
+        from ...flow.speed_range import SearchStopped, reachable_speed_range
 
         rng = self.session.speed_ranges.get(character)
         lim = LIMITS["speed"]
@@ -390,7 +390,7 @@ class Tab(_Layout, _Playback, _Export):
 
     def _solve_naive(self) -> None:
         """The engine-style naive retarget of the current result (scale only), drawn beside it."""
-        from ... import pipeline
+        from ...flow import pipeline
 
         p = self.good.params
         if p.mode != "scale":
@@ -421,7 +421,7 @@ class Tab(_Layout, _Playback, _Export):
     def open_clip(self, name: str, data: bytes) -> bool:
         """Prepare an uploaded clip (checked, fitted) and make it this tab's reference. A bad clip says
         why in one line and the current clip stays."""
-        from ... import pipeline
+        from ...flow import pipeline
 
         self._work_since, self._work_what = time.perf_counter(), f"opening {name} (loading, checking, fitting)"
         self._set_status(None)  # the progress line says what is going on

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ...errors import FroudeError
-from ...result import Output
+from ...flow.result import Output
 from .session import with_report
 
 if TYPE_CHECKING:  # a part of Tab: its methods use the attributes Tab.__init__ sets
@@ -41,8 +41,8 @@ class _Export(_TabPart):
         """The result as BVH: in the clip's units or metres/centimetres, at the clip's rate or another, with
         its root motion or in place (the CLI's ``in_place_motion``: only the forward progression between
         touchdowns comes off the root, so the sway and the surge within each step stay)."""
+        from ...flow.result import in_place_motion
         from ...io.bvh import bvh_text
-        from ...result import in_place_motion
 
         units, rate, root = str(self.gui_bvh_units.value), str(self.gui_bvh_fps.value), str(self.gui_bvh_root.value)
         if units not in BVH_UNITS or rate not in BVH_RATES or root not in BVH_ROOT:  # crafted values

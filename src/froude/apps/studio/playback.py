@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ...constants import UP_AXIS
+from ...core.constants import UP_AXIS
 from .tracks import Track, capsule_instances
 
 if TYPE_CHECKING:  # a part of Tab: its methods use the attributes Tab.__init__ sets

@@ -13,10 +13,10 @@ from typing import Any
 
 import numpy as np
 
-from ... import pipeline
 from ...body.characters import apply_character, list_presets, resolve_character
 from ...errors import FitError, FroudeError
-from ...result import Output
+from ...flow import pipeline
+from ...flow.result import Output
 from .tracks import Track, machine_track, motion_hash, reference_track
 
 MODES = ("scale", "accelerate")

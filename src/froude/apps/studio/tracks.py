@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ...body.path import unstraighten, unstraighten_points
-from ...constants import GRAVITY, UP_AXIS
+from ...core.constants import GRAVITY, UP_AXIS
 from ...core.kinematics import fk_soa, to_soa
 from ...core.motion import Motion
 
@@ -253,7 +253,7 @@ def path_stance_contacts(path, n_frames: int) -> np.ndarray:
 
 def body_force_bw(com: np.ndarray, frame_time: float) -> np.ndarray:
     """(F,) vertical ground force [body weights] implied by a COM path; NaN when it is too short."""
-    from ...metrics import vertical_force_bw
+    from ...report.metrics import vertical_force_bw
 
     try:
         return vertical_force_bw(com, frame_time)

@@ -17,23 +17,23 @@ from pathlib import Path
 
 import numpy as np
 
-from .body.characters import Retarget
-from .body.gait import detect_gait, summarize
-from .body.model import BodyModel
-from .body.path import is_straight, straighten, take_path, turn_note, unstraighten
-from .body.take import modelled_part, running_take, select_range
-from .core.motion import Motion
-from .errors import FitError, FroudeError
+from ..body.characters import Retarget
+from ..body.gait import detect_gait, summarize
+from ..body.model import BodyModel
+from ..body.path import is_straight, straighten, take_path, turn_note, unstraighten
+from ..body.take import modelled_part, running_take, select_range
+from ..core.motion import Motion
+from ..errors import FitError, FroudeError
+from ..report.metrics import BARS, physics_report, source_rest_heights
+from ..synthesis.bend import bend
+from ..synthesis.targets import build_targets, raised, stance_only
+from ..synthesis.timewarp import MachinePath, machine_path
 from .kinds import choose_kind
-from .metrics import BARS, physics_report, source_rest_heights
 from .naive import naive_clip
 from .prepared import Prepared
 from .result import Output, report_path, write_result
 from .speed_change import output_steps, speed_range_notes
 from .speed_goal import scale_factor
-from .synthesis.bend import bend
-from .synthesis.targets import build_targets, raised, stance_only
-from .synthesis.timewarp import MachinePath, machine_path
 
 __all__ = ["Output", "PERIODIC_MIN_STRIDES", "Prepared", "ScalePlan", "accelerate", "add_report", "finish",
            "naive_clip", "plan_scale", "prepare", "report_path", "scale", "targets_of", "write_result"]
@@ -46,7 +46,7 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     time_range: (T0, T1) [s] (either None): model only that part of the take (its speed, cadence and
     strides); the whole take by default. running_only: refuse a walk (NotARunningMotion) before fitting.
     """
-    from .io.bvh import load_bvh
+    from ..io.bvh import load_bvh
 
     if isinstance(clip, Motion):
         motion, source = clip, str(clip.meta.get("source", "motion"))
@@ -235,7 +235,7 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
     the IK of one stride only, sampled PERIODIC_OVERSAMPLE times finer, and tile it (the result is
     periodic too; ``ik.correct.tile_stride``).
     """
-    from .ik.correct import correct, tile_stride
+    from ..ik.correct import correct, tile_stride
 
     targets, path = targets_of(prep, path, retarget)
     n_strides = len(path.foot_of_step) / 2

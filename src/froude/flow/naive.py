@@ -5,16 +5,16 @@ import math
 
 import numpy as np
 
-from .body.characters import Retarget, apply_character, resolve_character
-from .body.gait import detect_gait, summarize
-from .body.model import BodyModel
-from .constants import UP_AXIS
-from .core.motion import Motion
-from .errors import FroudeError
-from .machine.units import similarity
-from .metrics import physics_report
+from ..body.characters import Retarget, apply_character, resolve_character
+from ..body.gait import detect_gait, summarize
+from ..body.model import BodyModel
+from ..core.constants import UP_AXIS
+from ..core.motion import Motion
+from ..errors import FroudeError
+from ..machine.units import similarity
+from ..report.metrics import physics_report
+from ..synthesis.cycle import ReferenceCycle, sample_cycle
 from .result import Output
-from .synthesis.cycle import ReferenceCycle, sample_cycle
 
 
 def naive_cycle(cyc: ReferenceCycle, retarget: Retarget, speed: float, n_steps: int, fps: float,
@@ -82,7 +82,7 @@ def naive_take(motion: Motion, body: BodyModel, retarget: Retarget, speed: float
     """What engines do with a take as it is: joint angles copied, the root's motion × L about the first
     frame's COM on the floor, played ``speed`` times faster at fps [1/s], as long as the take (its path,
     a turn included, scaled by L). body: the take's; meta: the output's provenance (default: the take's)."""
-    from .metrics import max_joint_jump_deg
+    from ..report.metrics import max_joint_jump_deg
 
     L = retarget.L
     n = int(math.floor(motion.duration / speed * fps + 1e-9)) + 1

@@ -28,7 +28,7 @@ def heading_frame(heading: np.ndarray) -> np.ndarray:
     fwd[UP_AXIS] = 0.0
     n = np.linalg.norm(fwd)
     if not n > 0:
-        from .errors import FitError
+        from ..errors import FitError
 
         raise FitError("no horizontal travel direction: cannot define the heading frame")
     fwd /= n

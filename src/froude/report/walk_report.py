@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from .synthesis.walking import walking_events
+from ..synthesis.walking import walking_events
 
 __all__ = ["walking_extras", "walking_report", "walking_rows"]
 
@@ -42,7 +42,7 @@ def walking_report(com: np.ndarray, gait, frame_time: float) -> dict:
     """The walking figures of a motion's report (issue 17): double-support fraction, the vertical force's
     two peaks and trough over a stance [BW] and their stance phases, from the COM (eq. 1, the project's
     one differentiation) averaged over the complete stances. com: (F, 3) [m]. NaN when not measurable."""
-    from .machine.walk_fit import PROFILE_SAMPLES, force_landmarks
+    from ..machine.walk_fit import PROFILE_SAMPLES, force_landmarks
     from .metrics import vertical_force_bw
 
     F = com.shape[0]
@@ -82,7 +82,7 @@ def walking_extras(prep, res, report) -> dict:
     similarity and the walking speed law, ``_expected_and_naive_cadence``), naive (engines keep the clip's
     timing, played faster with the speed) and its error against the expected one.
     """
-    from .body.gait import detect_gait
+    from ..body.gait import detect_gait
     from .metrics import _with_ground
 
     body = res.retarget.body

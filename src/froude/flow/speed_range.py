@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import BeyondHumanRange, FitError
+from ..errors import BeyondHumanRange, FitError
 from .pipeline import plan_scale
 from .prepared import Prepared
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Protocol
 
-from .body.gait import GaitSummary, require_running, walks
+from ..body.gait import GaitSummary, require_running, walks
 
 __all__ = ["KINDS", "RUNNING", "WALKING", "MotionKind", "choose_kind", "kind_named", "register"]
 
@@ -89,19 +89,19 @@ class Running:
         return summary.kind == "running"
 
     def fit_detailed(self, motion, body, *, mass: float, source: str):
-        from .machine.fit import fit_machine_detailed
+        from ..machine.fit import fit_machine_detailed
 
         return fit_machine_detailed(motion, body, mass=mass, source=source)
 
     def fit(self, motion, body, com, markers, gait, source: str, mass: float):
-        from .synthesis.cycle import extract_cycle
-        from .synthesis.phases import fit_events
+        from ..synthesis.cycle import extract_cycle
+        from ..synthesis.phases import fit_events
 
         fit = self.fit_detailed(motion, body, mass=mass, source=Path(source).name)
         return fit, extract_cycle(motion, body, gait, com, markers, events=fit_events(fit.machine, motion))
 
     def machine_at_speed(self, prep, speed: float, memo: dict):
-        from .machine.speed import machine_at_speed
+        from ..machine.speed import machine_at_speed
 
         hit = memo.get(speed)
         if hit is None:
@@ -112,8 +112,8 @@ class Running:
         return prep.human_top(retarget)
 
     def scale_path(self, prep, retarget, speed, *, n_steps, fps, speed_model, unlimited, base_m_s):
+        from ..synthesis.timewarp import machine_path
         from .speed_change import check_human_speed
-        from .synthesis.timewarp import machine_path
 
         if not unlimited:
             check_human_speed(prep, retarget, speed, base_m_s)
@@ -158,17 +158,17 @@ class Walking:
         return walks(summary)
 
     def fit_detailed(self, motion, body, *, mass: float, source: str):
-        from .machine.walk_fit import fit_walking_detailed
+        from ..machine.walk_fit import fit_walking_detailed
 
         return fit_walking_detailed(motion, body, mass=mass, source=source)
 
     def fit(self, motion, body, com, markers, gait, source: str, mass: float):
-        from .synthesis.walking import fit_walk
+        from ..synthesis.walking import fit_walk
 
         return fit_walk(motion, body, com, markers, gait, source, mass)
 
     def machine_at_speed(self, prep, speed: float, memo: dict):
-        from .machine.walk_speed import walking_machines_at_speeds
+        from ..machine.walk_speed import walking_machines_at_speeds
 
         return walking_machines_at_speeds(prep.machine, [speed], memo)[speed]
 
@@ -176,7 +176,7 @@ class Walking:
         return None  # the walking cycle itself ends at the walk-run transition (``check_walking_speed``)
 
     def scale_path(self, prep, retarget, speed, *, n_steps, fps, speed_model, unlimited, base_m_s):
-        from .synthesis.walking import walk_scale_path
+        from ..synthesis.walking import walk_scale_path
 
         path, method = walk_scale_path(prep, retarget, speed, n_steps=n_steps, fps=fps)
         return path, method, None
@@ -185,7 +185,7 @@ class Walking:
                      energy, policy, unlimited, speed_model):
         """energy, policy, unlimited and speed_model are the running planner's: a walk's change has its own
         planner (``synthesis.walking.plan_walk_speed_change``; the human speed law's sources are runners)."""
-        from .synthesis.walking import plan_walk_speed_change
+        from ..synthesis.walking import plan_walk_speed_change
 
         path, walk_plan = plan_walk_speed_change(prep, retarget, to_speed=to_speed, to_factor=to_factor,
                                                  steps=steps, within=within, lead_steps=lead_steps,
@@ -193,12 +193,12 @@ class Walking:
         return path, None, list(prep.notes), {"plan": walk_plan}
 
     def report_extras(self, prep, res, report) -> dict:
-        from .walk_report import walking_extras
+        from ..report.walk_report import walking_extras
 
         return walking_extras(prep, res, report)
 
     def summary_rows(self, report) -> list[tuple[str, str]]:
-        from .walk_report import walking_rows
+        from ..report.walk_report import walking_rows
 
         return walking_rows(report)
 

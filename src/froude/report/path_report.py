@@ -8,8 +8,8 @@ import math
 
 import numpy as np
 
-from .body.path import STRAIGHT_TAKE_RAD, TakePath, direction_of, is_straight, wrap_angle, yaw_of
-from .constants import GRAVITY
+from ..body.path import STRAIGHT_TAKE_RAD, TakePath, direction_of, is_straight, wrap_angle, yaw_of
+from ..core.constants import GRAVITY
 
 __all__ = ["FACING_TOL_RAD", "FORCE_FLOOR_BW", "FORCE_TOL", "HEADING_TOL_RAD", "LEAN_SPEED_TOL_RAD", "LEAN_TOL_RAD",
            "force_per_stride", "intended_heading_change", "lean_per_step", "path_comparison", "path_rows"]

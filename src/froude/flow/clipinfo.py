@@ -6,13 +6,13 @@ import math
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .body.gait import GaitSummary
+    from ..body.gait import GaitSummary
 
 
 def clip_info(motion, body) -> tuple[dict, GaitSummary]:
     """(the JSON-able summary of a clip in SI units, its gait summary). motion: a Motion; body: its BodyModel."""
-    from .body.gait import detect_gait, summarize
-    from .io.jsonable import jsonable
+    from ..body.gait import detect_gait, summarize
+    from ..io.jsonable import jsonable
 
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers, com)  # the feet reconciled with the COM force (body.gait)
@@ -26,7 +26,7 @@ def clip_info(motion, body) -> tuple[dict, GaitSummary]:
 def path_dict(motion, body, com, gait) -> dict | None:
     """The take's path (``body.path``): total heading change, speed along the path, facing vs travel, and
     per step heading change, radius, speed and lean; None for a take too short to have one (< 3 frames)."""
-    from .body.path import take_path
+    from ..body.path import take_path
 
     if motion.n_frames < 3:
         return None
@@ -37,8 +37,8 @@ def _take(motion, body) -> dict | None:
     """How fit and scale take a loop or an in-place take (``body.take.running_take``): its notes and the
     speed and cadence measured on the take so analysed (a loop's own stride, an in-place take's speed from
     its feet); None for a take analysed as it is. ``scale`` with no change reproduces these figures."""
-    from .body.gait import summarize
-    from .body.take import running_take
+    from ..body.gait import summarize
+    from ..body.take import running_take
 
     if motion.n_frames < 3:
         return None

@@ -11,7 +11,7 @@ import math
 import re
 from dataclasses import dataclass
 
-from .errors import FroudeError
+from ..errors import FroudeError
 
 #: Speed factors accepted at all (what a goal can reach is decided later by the planner).
 FACTOR_RANGE = (0.1, 5.0)

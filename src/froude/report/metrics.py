@@ -10,14 +10,14 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from .body.gait import Gait, detect_gait, summarize
-from .body.model import SIDES, BodyModel
-from .body.path import TakePath, is_straight, take_path
-from .constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
-from .core import quat
-from .core.motion import Motion
-from .io.jsonable import dumps, jsonable
-from .machine.speed_law import STEP_MAX_PER_STATURE
+from ..body.gait import Gait, detect_gait, summarize
+from ..body.model import SIDES, BodyModel
+from ..body.path import TakePath, is_straight, take_path
+from ..core import quat
+from ..core.constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
+from ..core.motion import Motion
+from ..io.jsonable import dumps, jsonable
+from ..machine.speed_law import STEP_MAX_PER_STATURE
 
 #: The project's physics bars (docs/architecture.md, "Quality bars").
 BARS = {
@@ -495,7 +495,7 @@ def vertical_force_bw(com: np.ndarray, frame_time: float) -> np.ndarray:
 
     Uses the project's one differentiation of COM trajectories (``machine.forces``).
     """
-    from .machine.forces import smooth_com
+    from ..machine.forces import smooth_com
 
     acc = smooth_com(com, frame_time)[2]
     return 1.0 + acc[:, UP_AXIS] / GRAVITY
@@ -648,6 +648,6 @@ def _stiffness(com: np.ndarray, gait: Gait, fz_bw: np.ndarray, body: BodyModel) 
 
 def write_report(report: Report, path) -> None:
     """Write a report as JSON, atomically."""
-    from .io.atomic import atomic_write_text
+    from ..io.atomic import atomic_write_text
 
     atomic_write_text(path, report.to_json() + "\n")

@@ -8,14 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .body.characters import Retarget
-from .constants import UP_AXIS
-from .core.motion import Motion
-from .errors import FroudeError
+from ..body.characters import Retarget
+from ..core.constants import UP_AXIS
+from ..core.motion import Motion
+from ..errors import FroudeError
+from ..report.metrics import Report, write_report
+from ..synthesis.targets import Targets
+from ..synthesis.timewarp import MachinePath
 from .kinds import kind_named
-from .metrics import Report, write_report
-from .synthesis.targets import Targets
-from .synthesis.timewarp import MachinePath
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,7 +58,7 @@ class Output:
              f"{f(r.max_joint_jump_deg, '.1f')} deg (reference {f(r.reference_max_joint_jump_deg, '.1f')})"),
         ]
         if "path_vs_clip" in r.extras:
-            from .path_report import path_rows
+            from ..report.path_report import path_rows
 
             rows += path_rows(r.extras["path_vs_clip"])
         return rows + kind_named(r.extras.get("machine")).summary_rows(r)
@@ -122,8 +122,8 @@ def write_result(result: Output, out_path, data=None, in_place: bool | None = No
     in-place take gives in-place outputs). The report is always that of the travelling motion (its speed,
     skate and gravity are physical there) and says which was written.
     """
-    from .io.atomic import atomic_group
-    from .io.formats import save
+    from ..io.atomic import atomic_group
+    from ..io.formats import save
 
     out_path = Path(out_path)
     rp = report_path(out_path)
@@ -139,7 +139,7 @@ def write_result(result: Output, out_path, data=None, in_place: bool | None = No
         write_report(result.report, rp)
         if data is None:
             return out_path, rp
-        from .io.framedata import frame_table, write_frame_data
+        from ..io.framedata import frame_table, write_frame_data
 
         table = frame_table(result.motion, result.retarget.body, machine_path=result.path)
         return out_path, rp, write_frame_data(table, data)

@@ -1,0 +1,1 @@
+"""The physics report: its measures and bars (metrics), the walking and path sections."""

@@ -14,8 +14,9 @@ from conftest import clip
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "froude"
 #: The modules that must not branch on the gait: the orchestration, the report, the studio and batch.
-ASKERS = ("flow/pipeline.py", "flow/prepared.py", "flow/speed_range.py", "flow/speed_change.py", "flow/speed_goal.py", "flow/result.py",
-          "flow/naive.py", "report/metrics.py", "report/path_report.py", "api.py", "apps/studio", "apps/batch", "apps/cli")
+ASKERS = ("flow/pipeline.py", "flow/prepared.py", "flow/speed_range.py", "flow/speed_change.py", "flow/speed_goal.py",
+          "flow/result.py", "flow/naive.py", "report/metrics.py", "report/path_report.py", "api.py", "apps/studio",
+          "apps/batch", "apps/cli")
 #: A test of which gait a motion is: the machine's kind, a report's "machine" field or the walking helpers.
 BRANCH = re.compile(r"is_walking\(|[=!]= *[\"']walking[\"']|[\"']walking[\"'] *[=!]=|\bwalks\(|\.order *[=!]=")
 

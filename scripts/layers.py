@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ast
 import sys
+import textwrap
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,21 +38,6 @@ PLACES = {
     "froude.core": "core", "froude.io": "io", "froude.body": "body", "froude.machine": "machine",
     "froude.synthesis": "synthesis", "froude.ik": "ik", "froude.report": "report", "froude.viz": "report",
     "froude.flow": "flow", "froude.apps": "apps",
-    # the top-level modules before issue 27's move (/work/notes/house4_move.sh), one a line so the move stays tidy
-    "froude.core.constants": "core",
-    "froude.io.samples": "io",
-    "froude.report.metrics": "report",
-    "froude.report.walk_report": "report",
-    "froude.report.path_report": "report",
-    "froude.flow.pipeline": "flow",
-    "froude.flow.prepared": "flow",
-    "froude.flow.naive": "flow",
-    "froude.flow.result": "flow",
-    "froude.flow.speed_range": "flow",
-    "froude.flow.speed_goal": "flow",
-    "froude.flow.speed_change": "flow",
-    "froude.flow.clipinfo": "flow",
-    "froude.flow.kinds": "flow",
 }
 
 #: The mark an import inside a function carries to say why it is there: only to keep start-up fast.
@@ -222,8 +208,9 @@ def graph_text(imps: list[Import], mods: dict[str, Path]) -> str:
     for name, what in reversed(LAYERS):
         uses = ", ".join(f"{dst} {n}" for (src, dst), n in sorted(count.items(), key=lambda e: -ORDER[e[0][1]])
                          if src == name)
-        rows.append(f"{name:9s} {what}\n          modules: {', '.join(sorted(by_layer[name]))}\n"
-                    f"          imports: {uses or '-'}")
+        listed = textwrap.fill(", ".join(sorted(by_layer[name])), 110, initial_indent=" " * 10 + "modules: ",
+                               subsequent_indent=" " * 19)
+        rows.append(f"{name:9s} {what}\n{listed}\n          imports: {uses or '-'}")
     return "\n".join(rows)
 
 

@@ -94,7 +94,7 @@ class Result:
     @cached_property
     def table(self) -> dict:
         """The per-frame columns (``froude.io.framedata``): {name: (F,) array}."""
-        from .io.framedata import frame_table  # lazy: start-up (import froude and its light verbs load no pipeline)
+        from .report.frames import frame_table  # lazy: start-up (import froude and its light verbs load no pipeline)
 
         return frame_table(self.motion, self.body, machine_path=self.machine_path)
 

@@ -139,7 +139,8 @@ def write_result(result: Output, out_path, data=None, in_place: bool | None = No
         write_report(result.report, rp)
         if data is None:
             return out_path, rp
-        from ..io.framedata import frame_table, write_frame_data
+        from ..io.framedata import write_frame_data
+        from ..report.frames import frame_table
 
         table = frame_table(result.motion, result.retarget.body, machine_path=result.path)
         return out_path, rp, write_frame_data(table, data)

@@ -16,7 +16,7 @@ One table, one row per frame, SI units in every column name::
     phase                                  flight, left, right or double (feet on the ground)
 
 Written as CSV (``.csv``), Parquet (``.parquet``, needs pyarrow) or NumPy (``.npz``), atomically; a value
-that is not finite is an error, never a cell.
+that is not finite is an error, never a cell. The table is built by ``report.frames.frame_table``.
 """
 from __future__ import annotations
 
@@ -31,56 +31,15 @@ from ..errors import FroudeError
 from .atomic import atomic_write
 
 DATA_SUFFIXES = (".csv", ".parquet", ".npz")
-_AXES = "xyz"
-_MARKERS = ("ankle", "toe", "toe_end")
-_FEET = ("left", "right")
+#: The column suffix of each axis (x, y, z: world axes, +Y up).
+AXIS_NAMES = "xyz"
 #: Frames at each end left out of the report's force peak (the filter's edges are least trustworthy).
 EDGE_FRAMES = 3
 
 
-def frame_table(motion, body=None, *, machine_path=None) -> dict[str, np.ndarray]:
-    """The per-frame columns (module docstring) of ``motion`` as {name: (F,) array}, in column order.
-
-    body: the BodyModel (default: built from the skeleton, 70 kg); machine_path: a synthesis.timewarp.MachinePath on
-    the same frames (outputs), adding the machine's COM, force and stance.
-    """
-    from ..body.gait import detect_gait
-    from ..body.model import BodyModel
-    from ..machine.forces import ground_force, smooth_com
-
-    if body is None:
-        body = BodyModel.from_skeleton(motion.skeleton)
-    com, markers = body.com_and_markers(motion)
-    _, v, a = smooth_com(com, motion.frame_time)
-    force = ground_force(a, body.total_mass)
-    gait = detect_gait(motion, body, markers)
-    cols: dict[str, np.ndarray] = {"time_s": motion.times}
-    for name, arr in (("com_{}_m", com), ("com_v{}_m_s", v), ("com_force_{}_N", force)):
-        for k, ax in enumerate(_AXES):
-            cols[name.format(ax)] = arr[:, k]
-    if machine_path is not None:
-        if len(machine_path.times) != motion.n_frames:
-            raise FroudeError(f"the machine path has {len(machine_path.times)} frames, the motion {motion.n_frames}")
-        for name, arr in (("machine_com_{}_m", machine_path.com), ("machine_force_{}_N", machine_path.force)):
-            for k, ax in enumerate(_AXES):
-                cols[name.format(ax)] = arr[:, k]
-        for i, foot in enumerate(_FEET):
-            cols[f"machine_stance_{foot}"] = machine_path.stance[:, i].astype(np.int8)
-    contact = np.asarray(gait.contact, bool)
-    for i, foot in enumerate(_FEET):
-        cols[f"contact_{foot}"] = contact[:, i].astype(np.int8)
-    for i, foot in enumerate(_FEET):
-        for m, marker in enumerate(_MARKERS):
-            for k, ax in enumerate(_AXES):
-                cols[f"{foot}_{marker}_{ax}_m"] = markers[:, i, m, k]
-    cols["phase"] = np.where(contact[:, 0] & contact[:, 1], "double",
-                             np.where(contact[:, 0], "left", np.where(contact[:, 1], "right", "flight")))
-    return cols
-
-
 def peak_vertical_force_bw(table: dict, mass: float) -> float:
     """The report's peak vertical force [body weights] recomputed from a table's com_force column."""
-    fy = np.asarray(table[f"com_force_{_AXES[UP_AXIS]}_N"])
+    fy = np.asarray(table[f"com_force_{AXIS_NAMES[UP_AXIS]}_N"])
     inner = slice(EDGE_FRAMES, max(EDGE_FRAMES, len(fy) - EDGE_FRAMES))
     return float(np.max(fy[inner]) / (mass * GRAVITY))
 

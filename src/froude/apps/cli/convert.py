@@ -55,7 +55,8 @@ def run(args) -> int:
     with atomic_group():
         save(motion, out, mesh=not args.no_mesh)
         if data is not None:
-            from ...io.framedata import frame_table, write_frame_data  # lazy: start-up
+            from ...io.framedata import write_frame_data  # lazy: start-up
+            from ...report.frames import frame_table  # lazy: start-up
 
             write_frame_data(frame_table(motion), data)
     say(f"wrote {out}" + (f" and {data}" if data else ""), args.quiet)

@@ -80,7 +80,8 @@ def run(args) -> int:
     d, summary = clip_info(motion, body)
     from ...io.jsonable import dumps  # lazy: start-up (froude --help imports every verb module and no NumPy)
     if data is not None:
-        from ...io.framedata import frame_table, write_frame_data  # lazy: start-up
+        from ...io.framedata import write_frame_data  # lazy: start-up
+        from ...report.frames import frame_table  # lazy: start-up
 
         write_frame_data(frame_table(motion, body), data)
         if not args.json:

@@ -63,7 +63,8 @@ class _Export(_TabPart):
     def _on_download_csv(self, event) -> None:
         """Per-frame data (COM, ground force, contacts, machine path) through ``froude.io.framedata``."""
         try:
-            from ...io.framedata import frame_table, write_frame_data
+            from ...io.framedata import write_frame_data
+            from ...report.frames import frame_table
         except ImportError:
             self._show_error("per-frame CSV needs froude.io.framedata, which this build does not have")
             return

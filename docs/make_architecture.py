@@ -1,95 +1,21 @@
 """Draw docs/images/architecture.png (and .svg): froude's layers, the modules in each, and the imports
-between layers, read from the source (``ast``), so the picture is the code's, not a wish.
+between layers, read from the source by scripts/layers.py (the same ``ast`` parse as tests/test_layers.py,
+imports inside functions counted), so the picture is the code's, not a wish.
 
 Run:  python docs/make_architecture.py
-Prints every import that points up a layer (there should be none) and the layer of every module.
+Prints the layer graph (pasted into docs/architecture.md), every import that points up a layer and every
+import circle (tests/test_layers.py fails on a new one).
 """
 from __future__ import annotations
 
-import ast
 import math
 import sys
 from collections import Counter
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-PKG = HERE.parent / "src" / "froude"
-
-#: Bottom to top: a layer may import the ones below it, never above. (layer, what it holds)
-LAYERS = [
-    ("core", "quaternions, skeleton, motion, FK and Jacobians; constants, errors"),
-    ("io", "BVH, glTF, per-frame tables, atomic writes, JSON"),
-    ("body", "body model (de Leva), joint roles, gait and contacts, characters, conventions, the take"),
-    ("machine", "§4-5: units, dynamics, orbits, forces, fit, speed (§5.2), transition table and planner (§5.3)"),
-    ("synthesis", "§6 input: reference cycle, time warp, IK targets"),
-    ("ik", "§6: IK tasks, the batched whole-body solver and its kernels, the correction policy"),
-    ("report", "the physics report (metrics) and plots/renders (viz)"),
-    ("pipeline", "prepare / scale / accelerate / naive: orchestration; the public verbs (api)"),
-    ("apps", "command line, studio, batch, demo, signals"),
-]
-#: Top-level modules (src/froude/X.py) and the layer they belong to; packages are their own layer.
-TOP_LEVEL = {
-    "constants": "core", "errors": "core", "samples": "io", "speed_goal": "machine", "metrics": "report",
-    "viz": "report", "pipeline": "pipeline", "prepared": "pipeline", "result": "pipeline", "naive": "pipeline",
-    "speed_range": "pipeline", "speed_change": "pipeline", "clipinfo": "pipeline", "path_report": "report",
-    "api": "pipeline", "__init__": "pipeline", "__main__": "apps",
-    "characters": "body", "conventions": "body", "gait": "body", "presets": "body", "quat": "core",
-    "skeleton": "core", "motion": "core", "kinematics": "core", "synthesis": "synthesis", "ik": "ik",
-    "batch": "apps", "demo": "apps", "cli": "apps", "studio": "apps", "body": "body",
-}
-ORDER = {name: i for i, (name, _) in enumerate(LAYERS)}
-
-
-def layer_of(module: str) -> str:
-    """'froude.machine.fit' → 'machine'; a top-level module by TOP_LEVEL (unknown ones: 'pipeline')."""
-    parts = module.split(".")
-    head = parts[1] if len(parts) > 1 else "__init__"
-    return head if head in ORDER else TOP_LEVEL.get(head, "pipeline")
-
-
-def modules() -> dict[str, Path]:
-    out = {}
-    for p in sorted(PKG.rglob("*.py")):
-        rel = p.relative_to(PKG.parent).with_suffix("")
-        name = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
-        out[name] = p
-    return out
-
-
-def imports(name: str, path: Path) -> set[str]:
-    """froude modules imported by one module (absolute and relative, at any depth in the file)."""
-    pkg = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
-    found = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = pkg.split(".")[: len(pkg.split(".")) - node.level + 1]
-                mod = ".".join(base + ([node.module] if node.module else []))
-            else:
-                mod = node.module or ""
-            if mod.startswith("froude"):
-                found.add(mod)
-                found.update(f"{mod}.{a.name}" for a in node.names)
-        elif isinstance(node, ast.Import):
-            found.update(a.name for a in node.names if a.name.startswith("froude"))
-    return found
-
-
-def edges(mods: dict[str, Path]) -> tuple[Counter, list[str]]:
-    """(Counter of (from layer, to layer) module imports, the upward imports as text)."""
-    count: Counter = Counter()
-    upward = []
-    for name, path in mods.items():
-        src = layer_of(name)
-        for target in imports(name, path):
-            if target not in mods:
-                continue
-            dst = layer_of(target)
-            if dst != src:
-                count[(src, dst)] += 1
-                if ORDER[dst] > ORDER[src]:
-                    upward.append(f"{name} ({src}) imports {target} ({dst})")
-    return count, sorted(set(upward))
+sys.path.insert(0, str(HERE.parent / "scripts"))
+from layers import LAYERS, ORDER, all_imports, circles, graph_text, layer_edges, layer_of, modules, upward  # noqa: E402
 
 
 def draw(mods: dict[str, Path], count: Counter, out: Path) -> None:
@@ -149,15 +75,15 @@ def draw(mods: dict[str, Path], count: Counter, out: Path) -> None:
 
 def main() -> int:
     mods = modules()
-    count, upward = edges(mods)
-    for name in mods:
-        print(f"{layer_of(name):10s} {name}")
-    for line in upward:
-        print("UPWARD:", line)
+    imps = all_imports()
+    print(graph_text(imps, mods))
+    up, rings = upward(imps), circles(imps)
+    for line in up + rings:
+        print(line)
     out = HERE / "images" / "architecture.png"
     out.parent.mkdir(exist_ok=True)
-    draw(mods, count, out)
-    print(f"wrote {out} and {out.with_suffix('.svg')}; {len(upward)} upward import(s)")
+    draw(mods, layer_edges(imps), out)
+    print(f"wrote {out} and {out.with_suffix('.svg')}; {len(up)} upward import(s), {len(rings)} circle(s)")
     return 0
 
 

@@ -42,16 +42,22 @@ def draw(mods: dict[str, Path], count: Counter, out: Path) -> None:
                                     fc=shade, ec="#30507a", lw=1.2))
         ax.text(x0 + 0.15, y + box_h - 0.2, layer, fontsize=12, weight="bold", va="top", color="#10243f")
         ax.text(x0 + 1.45, y + box_h - 0.22, what, fontsize=8.2, va="top", color="#10243f", style="italic")
-        names = ", ".join(sorted(n.split(".", 1)[1] if "." in n and n.split(".")[0] == layer else n
-                                 for n in by_layer[layer]))
+        short = sorted(n.split(".", 1)[1] if "." in n and n.split(".")[0] == layer else n for n in by_layer[layer])
+        groups: dict[str, list[str]] = {}  # a sub-package's modules as one entry, so that a box holds its layer
+        for n in short:
+            head, _, rest = n.partition(".")
+            groups.setdefault(head, []).extend([rest] if rest else [])
+        names = ", ".join(f"{h}.{{{', '.join(m)}}}" if len(m) > 1 else f"{h}.{m[0]}" if m else h
+                          for h, m in groups.items())
         lines, line = [], ""
         for word in names.split(" "):
-            if len(line) + len(word) > 120:
+            if len(line) + len(word) > (120 if len(names) <= 240 else 165):  # a long list: two smaller lines
                 lines.append(line)
                 line = ""
             line += word + " "
         lines.append(line)
-        ax.text(x0 + 0.15, y + 0.12, "\n".join(lines), fontsize=7.4, va="bottom", family="monospace",
+        ax.text(x0 + 0.15, y + 0.12, "\n".join(lines), fontsize=7.4 if len(names) <= 240 else 6.0, va="bottom",
+                family="monospace",
                 color="#1b1b1b")
     # imports between layers on the left: one arc per (from, to), width ~ log of the module imports
     for k, ((src, dst), n) in enumerate(sorted(count.items(), key=lambda e: (ORDER[e[0][0]], ORDER[e[0][1]]))):

@@ -13,12 +13,12 @@ import math
 
 import numpy as np
 
-from ..core.constants import G_WORLD, GRAVITY, UP_AXIS
+from ..core.constants import G_WORLD, GRAVITY, HORIZONTAL_AXES, UP_AXIS
 from ..errors import FitError
 
 __all__ = ["CUTOFF_HZ", "FILTER_ORDER", "EDGE_PAD_S", "EDGE_FIT_S", "butter_lowpass", "filtfilt", "smooth_com",
            "ground_force", "vertical_force_bw",
-           "acceleration_response", "force_landmarks"]
+           "acceleration_response", "force_landmarks", "FLIGHT_MIN_FRAMES", "flight_gravity"]
 
 #: Low-pass cutoff of the COM filter [Hz] (−6 dB point of the forward-backward filter).
 CUTOFF_HZ = 8.0
@@ -141,6 +141,43 @@ def vertical_force_bw(p_world_com: np.ndarray, frame_time: float, cutoff_hz: flo
     (``smooth_com``; 1 for a body at rest, 0 in flight)."""
     _, _, a = smooth_com(p_world_com, frame_time, cutoff_hz)
     return 1.0 + a[:, UP_AXIS] / GRAVITY
+
+
+#: Fewest frames of a flight phase the flight-gravity parabola is fitted to (3 samples determine it: at
+#: 30 Hz a 0.12 s flight has 3-4 frames; a physical output's COM is an exact parabola there).
+FLIGHT_MIN_FRAMES = 3
+
+
+def flight_gravity(com: np.ndarray, frame_time: float, flights,
+                   min_frames: int = FLIGHT_MIN_FRAMES) -> tuple[float, list[float], float]:
+    """Gravity seen in flight: one parabola curvature shared by the COM height of every flight phase.
+
+    com: (F, 3) [m]; flights: [(start, stop), ...] frame intervals. Returns g [m/s^2] (9.81 for physical
+    motion) from one least-squares fit y_i(t) = c_i + b_i t − g t²/2 over all flights of at least
+    ``min_frames`` frames (each its own height and vertical speed, gravity common: short flights of a 30 Hz
+    clip then still constrain it together), the per-phase values, and the RMS horizontal COM acceleration
+    in flight [m/s^2] (≈ 0 for physical motion: nothing pushes a body in the air). NaN when no flight is
+    long enough.
+    """
+    used = [(a, b) for a, b in flights if b - a >= min_frames]
+    if not used:
+        return float("nan"), [], float("nan")
+    n = len(used)
+    rows, ys, gs, acc_h = [], [], [], []
+    for i, (a, b) in enumerate(used):
+        t = np.arange(b - a) * frame_time
+        t = t - t.mean()  # centred: better conditioned, same curvature
+        A = np.zeros((b - a, 2 * n + 1))
+        A[:, 2 * i] = 1.0
+        A[:, 2 * i + 1] = t
+        A[:, -1] = -0.5 * t * t
+        rows.append(A)
+        ys.append(com[a:b, UP_AXIS])
+        gs.append(-2.0 * np.polyfit(t, com[a:b, UP_AXIS], 2)[0])
+        for ax in HORIZONTAL_AXES:
+            acc_h.append(2.0 * np.polyfit(t, com[a:b, ax], 2)[0])
+    sol, *_ = np.linalg.lstsq(np.concatenate(rows), np.concatenate(ys), rcond=None)
+    return float(sol[-1]), [float(x) for x in gs], float(np.sqrt(np.mean(np.square(acc_h))))
 
 
 def force_landmarks(tau: np.ndarray, fy_bw: np.ndarray, tau_double: float) -> dict:

@@ -17,6 +17,7 @@ from ..core import quat
 from ..core.constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
+from .com_force import flight_gravity
 
 #: Length units a BVH file may be in: (name, metres per file unit). CMU's ASF->BVH conversions use
 #: 1/0.45 inch.
@@ -221,10 +222,9 @@ def flight_gravity_units(com: np.ndarray, foot_low: np.ndarray, leg_length: floa
     com: (F, 3) COM; foot_low: (F, 2) lowest foot marker height per foot; leg_length in the same
     units. A frame is in flight when both feet are above the ground (5th percentile of the lower foot)
     by 3 % of the leg and neither is planted (``planted_feet``, when given), a scale-free test. The
-    curvature is fitted by ``metrics.flight_gravity`` (one gravity shared by every flight, each its own
+    curvature is fitted by ``com_force.flight_gravity`` (one gravity shared by every flight, each its own
     height and vertical speed). Flights cut by the clip's edges are left out (a jump off or a stumble).
     """
-    from ..report.metrics import flight_gravity
     from .gait import _runs
 
     ground = np.percentile(foot_low.min(axis=1), 5)

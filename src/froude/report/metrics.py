@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ..body.com_force import FLIGHT_MIN_FRAMES, flight_gravity, vertical_force_bw
 from ..body.gait import Gait, detect_gait, summarize
 from ..body.model import SIDES, BodyModel
 from ..body.path import TakePath, is_straight, take_path
@@ -182,43 +183,6 @@ def _where(w: dict, foot: bool = True) -> str:
         return ""
     spans = ", ".join(f"{a}-{b - 1}" if b - 1 > a else f"{a}" for a, b in w["frames"])
     return f": {w['foot']} foot, frames {spans}" if foot and "foot" in w else f": frames {spans}"
-
-
-#: Fewest frames of a flight phase the flight-gravity parabola is fitted to (3 samples determine it: at
-#: 30 Hz a 0.12 s flight has 3-4 frames; a physical output's COM is an exact parabola there).
-FLIGHT_MIN_FRAMES = 3
-
-
-def flight_gravity(com: np.ndarray, frame_time: float, flights,
-                   min_frames: int = FLIGHT_MIN_FRAMES) -> tuple[float, list[float], float]:
-    """Gravity seen in flight: one parabola curvature shared by the COM height of every flight phase.
-
-    com: (F, 3) [m]; flights: [(start, stop), ...] frame intervals. Returns g [m/s^2] (9.81 for physical
-    motion) from one least-squares fit y_i(t) = c_i + b_i t − g t²/2 over all flights of at least
-    ``min_frames`` frames (each its own height and vertical speed, gravity common: short flights of a 30 Hz
-    clip then still constrain it together), the per-phase values, and the RMS horizontal COM acceleration
-    in flight [m/s^2] (≈ 0 for physical motion: nothing pushes a body in the air). NaN when no flight is
-    long enough.
-    """
-    used = [(a, b) for a, b in flights if b - a >= min_frames]
-    if not used:
-        return float("nan"), [], float("nan")
-    n = len(used)
-    rows, ys, gs, acc_h = [], [], [], []
-    for i, (a, b) in enumerate(used):
-        t = np.arange(b - a) * frame_time
-        t = t - t.mean()  # centred: better conditioned, same curvature
-        A = np.zeros((b - a, 2 * n + 1))
-        A[:, 2 * i] = 1.0
-        A[:, 2 * i + 1] = t
-        A[:, -1] = -0.5 * t * t
-        rows.append(A)
-        ys.append(com[a:b, UP_AXIS])
-        gs.append(-2.0 * np.polyfit(t, com[a:b, UP_AXIS], 2)[0])
-        for ax in HORIZONTAL_AXES:
-            acc_h.append(2.0 * np.polyfit(t, com[a:b, ax], 2)[0])
-    sol, *_ = np.linalg.lstsq(np.concatenate(rows), np.concatenate(ys), rcond=None)
-    return float(sol[-1]), [float(x) for x in gs], float(np.sqrt(np.mean(np.square(acc_h))))
 
 
 #: Skate is measured on these foot markers (index into the body's (ankle, toe, toe end)): the ball and
@@ -488,17 +452,6 @@ def _true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
 def max_joint_jump_deg(motion: Motion) -> float:
     """Largest frame-to-frame rotation change of any joint [deg] (root orientation included)."""
     return float(np.degrees(quat.max_step_angle(motion.rotations)))
-
-
-def vertical_force_bw(com: np.ndarray, frame_time: float) -> np.ndarray:
-    """(F,) vertical ground force in body weights from the COM height (eq. 1 projected on +Y).
-
-    Uses the project's one differentiation of COM trajectories (``machine.forces``).
-    """
-    from ..machine.forces import smooth_com
-
-    acc = smooth_com(com, frame_time)[2]
-    return 1.0 + acc[:, UP_AXIS] / GRAVITY
 
 
 # Long because every figure of the report is measured here from the motion alone, one call each, in the order

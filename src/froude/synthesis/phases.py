@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..body.com_force import vertical_force_bw
 from ..body.gait import Gait
 from ..core.motion import Motion
 from ..errors import FitError
@@ -141,7 +142,6 @@ def loaded_events(gait: Gait, com: np.ndarray, frame_time: float) -> list[FootEv
     of 47-90° against the clip's 25°. gait: the clip's marker contacts; com: (F, 3) [m]; frame_time [s].
     """
     from ..machine.forces import _crossing
-    from ..report.metrics import vertical_force_bw
 
     fy_bw = vertical_force_bw(com, frame_time)
     w = int(round(LOADED_EVENT_SEARCH_S / frame_time))

@@ -3,17 +3,15 @@ speed, Froude number, contacts, steps, phases, and how fit and scale take a loop
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:
-    from ..body.gait import GaitSummary
+from ..body.gait import GaitSummary, detect_gait, summarize
+from ..body.path import take_path
+from ..body.take import running_take
+from ..io.jsonable import jsonable
 
 
 def clip_info(motion, body) -> tuple[dict, GaitSummary]:
     """(the JSON-able summary of a clip in SI units, its gait summary). motion: a Motion; body: its BodyModel."""
-    from ..body.gait import detect_gait, summarize
-    from ..io.jsonable import jsonable
-
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers, com)  # the feet reconciled with the COM force (body.gait)
     summary = summarize(motion, body, com, gait)
@@ -26,8 +24,6 @@ def clip_info(motion, body) -> tuple[dict, GaitSummary]:
 def path_dict(motion, body, com, gait) -> dict | None:
     """The take's path (``body.path``): total heading change, speed along the path, facing vs travel, and
     per step heading change, radius, speed and lean; None for a take too short to have one (< 3 frames)."""
-    from ..body.path import take_path
-
     if motion.n_frames < 3:
         return None
     return take_path(motion, body, com, gait).to_dict()
@@ -37,9 +33,6 @@ def _take(motion, body) -> dict | None:
     """How fit and scale take a loop or an in-place take (``body.take.running_take``): its notes and the
     speed and cadence measured on the take so analysed (a loop's own stride, an in-place take's speed from
     its feet); None for a take analysed as it is. ``scale`` with no change reproduces these figures."""
-    from ..body.gait import summarize
-    from ..body.take import running_take
-
     if motion.n_frames < 3:
         return None
     taken, notes = running_take(motion, body)

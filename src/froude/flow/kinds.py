@@ -16,6 +16,10 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from ..body.gait import GaitSummary, require_running, walks
+from ..synthesis.cycle import extract_cycle
+from ..synthesis.phases import fit_events
+from ..synthesis.timewarp import machine_path
+from .speed_change import check_human_speed, plan_run_speed_change
 
 __all__ = ["KINDS", "RUNNING", "WALKING", "MotionKind", "choose_kind", "kind_named", "register"]
 
@@ -94,9 +98,6 @@ class Running:
         return fit_machine_detailed(motion, body, mass=mass, source=source)
 
     def fit(self, motion, body, com, markers, gait, source: str, mass: float):
-        from ..synthesis.cycle import extract_cycle
-        from ..synthesis.phases import fit_events
-
         fit = self.fit_detailed(motion, body, mass=mass, source=Path(source).name)
         return fit, extract_cycle(motion, body, gait, com, markers, events=fit_events(fit.machine, motion))
 
@@ -112,9 +113,6 @@ class Running:
         return prep.human_top(retarget)
 
     def scale_path(self, prep, retarget, speed, *, n_steps, fps, speed_model, unlimited, base_m_s):
-        from ..synthesis.timewarp import machine_path
-        from .speed_change import check_human_speed
-
         if not unlimited:
             check_human_speed(prep, retarget, speed, base_m_s)
         if speed_model != "stretch" and abs(speed - 1.0) > 1e-9:
@@ -128,8 +126,6 @@ class Running:
 
     def speed_change(self, prep, retarget, *, to_speed, to_factor, steps, within, lead_steps, hold_steps, fps,
                      energy, policy, unlimited, speed_model):
-        from .speed_change import plan_run_speed_change
-
         return plan_run_speed_change(prep, retarget, to_speed=to_speed, to_factor=to_factor, steps=steps,
                                      within=within, lead_steps=lead_steps, hold_steps=hold_steps, fps=fps,
                                      energy=energy, policy=policy, unlimited=unlimited, speed_model=speed_model)
@@ -158,17 +154,17 @@ class Walking:
         return walks(summary)
 
     def fit_detailed(self, motion, body, *, mass: float, source: str):
-        from ..machine.walk_fit import fit_walking_detailed
+        from ..machine.walk_fit import fit_walking_detailed  # lazy: start-up (a run's verbs load no walking code)
 
         return fit_walking_detailed(motion, body, mass=mass, source=source)
 
     def fit(self, motion, body, com, markers, gait, source: str, mass: float):
-        from ..synthesis.walking import fit_walk
+        from ..synthesis.walking import fit_walk  # lazy: start-up (a run's verbs load no walking code)
 
         return fit_walk(motion, body, com, markers, gait, source, mass)
 
     def machine_at_speed(self, prep, speed: float, memo: dict):
-        from ..machine.walk_speed import walking_machines_at_speeds
+        from ..machine.walk_speed import walking_machines_at_speeds  # lazy: start-up
 
         return walking_machines_at_speeds(prep.machine, [speed], memo)[speed]
 
@@ -176,7 +172,7 @@ class Walking:
         return None  # the walking cycle itself ends at the walk-run transition (``check_walking_speed``)
 
     def scale_path(self, prep, retarget, speed, *, n_steps, fps, speed_model, unlimited, base_m_s):
-        from ..synthesis.walking import walk_scale_path
+        from ..synthesis.walking import walk_scale_path  # lazy: start-up (a run's verbs load no walking code)
 
         path, method = walk_scale_path(prep, retarget, speed, n_steps=n_steps, fps=fps)
         return path, method, None
@@ -185,7 +181,7 @@ class Walking:
                      energy, policy, unlimited, speed_model):
         """energy, policy, unlimited and speed_model are the running planner's: a walk's change has its own
         planner (``synthesis.walking.plan_walk_speed_change``; the human speed law's sources are runners)."""
-        from ..synthesis.walking import plan_walk_speed_change
+        from ..synthesis.walking import plan_walk_speed_change  # lazy: start-up (a run's verbs load no walking code)
 
         path, walk_plan = plan_walk_speed_change(prep, retarget, to_speed=to_speed, to_factor=to_factor,
                                                  steps=steps, within=within, lead_steps=lead_steps,
@@ -193,12 +189,12 @@ class Walking:
         return path, None, list(prep.notes), {"plan": walk_plan}
 
     def report_extras(self, prep, res, report) -> dict:
-        from ..report.walk_report import walking_extras
+        from ..report.walk_report import walking_extras  # lazy: start-up (a run's verbs load no walking code)
 
         return walking_extras(prep, res, report)
 
     def summary_rows(self, report) -> list[tuple[str, str]]:
-        from ..report.walk_report import walking_rows
+        from ..report.walk_report import walking_rows  # lazy: start-up (a run's verbs load no walking code)
 
         return walking_rows(report)
 

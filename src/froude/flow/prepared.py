@@ -8,11 +8,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..body.characters import Retarget, apply_character, resolve_character
+from ..body.characters import Retarget, apply_character, list_presets, resolve_character
 from ..body.gait import Gait, GaitSummary
 from ..body.model import BodyModel
 from ..body.path import TakePath
+from ..core.constants import GRAVITY
 from ..core.motion import Motion
+from ..machine.speed_law import froude_cadence, human_top_factor
 from ..synthesis.cycle import ReferenceCycle
 
 if TYPE_CHECKING:
@@ -90,8 +92,6 @@ class Prepared:
     def law_cadence(self) -> float:
         """Where a run sits on the human speed law: the fitted cycle's step frequency in Froude terms of the
         runner's stature, f √(S/g) [-] (``machine.speed_law``)."""
-        from ..machine.speed_law import froude_cadence
-
         m = self.machine
         return float(froude_cadence(1.0 / (m.step_time * m.time_unit), self.body.stature))
 
@@ -105,9 +105,6 @@ class Prepared:
         """``machine.speed_law.human_top_factor`` of a run for one character: the fastest speed factor whose
         steady step stays inside the human limits for the character's stature (the clip's cycle scaled to
         it by dynamic similarity, the law placed by the clip's own cadence)."""
-        from ..core.constants import GRAVITY
-        from ..machine.speed_law import human_top_factor
-
         m = self.machine.scaled(retarget.L, retarget.M)
         stature = retarget.body.stature
         t_unit = m.time_unit / float(np.sqrt(stature / GRAVITY))  # the machine's time unit in √(S/g)
@@ -131,6 +128,4 @@ class Prepared:
 
 @functools.cache
 def _preset_names() -> frozenset:
-    from ..body.characters import list_presets
-
     return frozenset(list_presets())

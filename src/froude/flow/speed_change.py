@@ -12,7 +12,8 @@ import math
 import numpy as np
 
 from ..body.characters import Retarget
-from ..errors import FroudeError, PlanError
+from ..errors import BeyondHumanRange, FitError, FroudeError, PlanError
+from ..machine.speed_law import HUMAN_TOP_TOL, STEP_MAX_PER_STATURE
 from ..synthesis.timewarp import MachinePath, machine_path
 from .prepared import Prepared
 from .speed_goal import accelerate_goal
@@ -47,9 +48,6 @@ def output_steps(strides: int | None, duration: float | None, step_time_s: float
 def check_human_speed(prep: Prepared, retarget: Retarget, factor: float, base_m_s: float) -> None:
     """Refuse (BeyondHumanRange) a run's speed factor past the human range for the character's size
     (``Prepared.human_top``), saying the human limit in m/s. base_m_s: the character's speed at x1 [m/s]."""
-    from ..errors import BeyondHumanRange
-    from ..machine.speed_law import HUMAN_TOP_TOL
-
     top = prep.human_top(retarget)
     if factor > top.factor + HUMAN_TOP_TOL:
         raise BeyondHumanRange(
@@ -63,9 +61,6 @@ def check_step_lengths(path: MachinePath, stature_m: float, start_m_s: float, go
     (``machine.speed_law.STEP_MAX_PER_STATURE`` × the character's stature ``stature_m`` [m]): the §5.3 planner
     keeps the fitted control's stance, so its steps grow with the speed where a runner's cadence would (the
     law's steps stay inside below the human top; this guards the path whichever planned it)."""
-    from ..errors import BeyondHumanRange
-    from ..machine.speed_law import STEP_MAX_PER_STATURE
-
     steps_m = np.linalg.norm(np.diff(path.contacts, axis=0), axis=1)
     if steps_m.size and steps_m.max() > STEP_MAX_PER_STATURE * stature_m:
         k = int(np.argmax(steps_m))
@@ -82,7 +77,7 @@ def plan_run_speed_change(prep: Prepared, retarget: Retarget, *, to_speed, to_fa
     """The machine path of a run changing speed (``pipeline.accelerate``'s arguments): (path, plan, notes,
     extras). to_speed [m/s] or to_factor [-]: the goal apex speed; within [s]; fps [Hz] (None: the clip's).
     Raises BeyondHumanRange past the human range (unless unlimited), PlanError when no plan is found."""
-    from ..machine.planner import plan_speed_change
+    from ..machine.planner import plan_speed_change  # lazy: start-up (scale loads no planner)
 
     m = prep.machine.scaled(retarget.L, retarget.M)
     v_unit = m.speed_unit
@@ -134,9 +129,8 @@ def _law_plan(prep: Prepared, m, U_goal: float, steps, within, policy: str, lead
     """``machine.planner.law.plan_law_change`` for a run: the change through the law's cycles at the policy's
     factors to the goal apex speed U_goal [√(g l0)] (m: the character's machine, the start). within [s]: the
     most change steps whose change lasts no longer (the gentlest that fits). Raises PlanError."""
-    from ..errors import FitError
-    from ..machine.planner import POLICIES
-    from ..machine.planner.law import law_cycles, law_factors, law_goal_factor, plan_law_change
+    from ..machine.planner import POLICIES  # lazy: start-up (scale loads no planner)
+    from ..machine.planner.law import law_cycles, law_factors, law_goal_factor, plan_law_change  # lazy: start-up
 
     if policy not in POLICIES:
         raise PlanError(f"unknown policy '{policy}' ({' or '.join(POLICIES)})")

@@ -303,3 +303,11 @@ def test_folded_subtrees_keep_the_com(clip, body):
                           max_iters=0)
         assert np.abs(res.com - com).max() < 1e-12
         assert res.marker_error.max() < 1e-12
+
+
+def test_the_repairs_skate_bar_is_the_reports():
+    """The IK sits below the report, so it takes the skate bar as a value: its default is the report's."""
+    from froude.ik.correct import SKATE_BAR_M
+    from froude.report.metrics import BARS
+
+    assert SKATE_BAR_M == 1e-3 * BARS["foot_skate_floor_mm"]

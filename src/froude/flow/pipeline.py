@@ -250,7 +250,8 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
                              retarget.body)
     else:
         ik = correct(targets, retarget.body, repair_rounds=prep.kind.repair_rounds,
-                     joint_jump_bar_deg=BARS["joint_jump_ratio"] * prep.cycle.max_joint_jump_deg)
+                     joint_jump_bar_deg=BARS["joint_jump_ratio"] * prep.cycle.max_joint_jump_deg,
+                     skate_bar_m=1e-3 * BARS["foot_skate_floor_mm"])
         if not ik.ok:
             bad = np.flatnonzero(ik.failed)
             notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]

@@ -20,15 +20,10 @@ KNOWN_UPWARD = {
         "reading a BVH detects the rig's units and up axis from its motion with the body's roles; the detection "
         "moves into body with io.bvh reading raw numbers",
     ("froude.io.gltf", "froude.body.conventions"): "as io.bvh: glTF reads the rig's conventions with body's",
-    ("froude.synthesis.cycle", "froude.report.metrics"):
-        "the reference cycle uses the report's joint jump, skate reach, floor and rest heights (the definitions an "
-        "output must match): they move below synthesis",
-    ("froude.synthesis.targets", "froude.report.metrics"): "as synthesis.cycle (the skate band and markers)",
-    ("froude.synthesis.feet", "froude.report.metrics"): "as synthesis.cycle (the skate reach, floor and rest heights)",
 }
 #: Imports of froude inside functions without a '# lazy:' reason (scripts/layers.py lists them as file:line).
 #: Each goes to the top of its module or says how it keeps start-up fast; the count may only go down.
-MAX_UNMARKED_LAZY = 108
+MAX_UNMARKED_LAZY = 103
 
 
 @pytest.fixture(scope="module")

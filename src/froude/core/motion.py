@@ -157,3 +157,8 @@ class Motion:
             translations=None if self.translations is None else self.translations[item],
             frame_time=self.frame_time * abs(step),
         )
+
+
+def max_joint_jump_deg(motion: Motion) -> float:
+    """Largest frame-to-frame rotation change of any joint [deg] (root orientation included)."""
+    return float(np.degrees(quat.max_step_angle(motion.rotations)))

@@ -9,7 +9,7 @@ from ..body.characters import Retarget, apply_character, resolve_character
 from ..body.gait import detect_gait, summarize
 from ..body.model import BodyModel
 from ..core.constants import UP_AXIS
-from ..core.motion import Motion
+from ..core.motion import Motion, max_joint_jump_deg
 from ..errors import FroudeError
 from ..machine.units import similarity
 from ..report.metrics import physics_report
@@ -82,8 +82,6 @@ def naive_take(motion: Motion, body: BodyModel, retarget: Retarget, speed: float
     """What engines do with a take as it is: joint angles copied, the root's motion × L about the first
     frame's COM on the floor, played ``speed`` times faster at fps [1/s], as long as the take (its path,
     a turn included, scaled by L). body: the take's; meta: the output's provenance (default: the take's)."""
-    from ..report.metrics import max_joint_jump_deg
-
     L = retarget.L
     n = int(math.floor(motion.duration / speed * fps + 1e-9)) + 1
     played = motion.sample(np.arange(n) / fps * speed)

@@ -23,7 +23,7 @@ from ..body.gait import Gait
 from ..body.model import BodyModel
 from ..core import quat
 from ..core.constants import UP_AXIS, heading_frame
-from ..core.motion import Motion
+from ..core.motion import Motion, max_joint_jump_deg
 from ..errors import FitError
 from .feet import contact_mask, contact_phases, foot_anchors, held_feet, rest_above
 from .phases import FootEvent, event_phases, events_from_gait, loaded_events, phase_of_events, stride_durations
@@ -139,8 +139,6 @@ def extract_cycle(
     # that IK targets blending from the ground path to it after lift-off do not jump by the correction
     # (a 10 mm jump of a tip still near the floor, 02_03 at 50 Hz)
     marker_from_com = _close_loop_linear(_average(from_com, occ_frames, occ_w)) + (held - marker_rel)
-
-    from ..report.metrics import max_joint_jump_deg
 
     def averaged(x):
         return _close_loop_linear(_average(x, occ_frames, occ_w))

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from ..body.footing import SKATE_REACH_L, floor_height, stance_rest_heights
 from ..body.gait import Gait
 from ..core.constants import UP_AXIS
 
@@ -35,11 +36,10 @@ def rest_above(gait: Gait, markers: np.ndarray, leg_length: float, ground: float
     """How far ``ground`` [m] is above the clip's floor, and how high each foot marker rests in the clip's
     stances above ``ground`` (2, 3) [m] (NaN without a whole stance of that foot).
 
-    The floor and the rest heights are the clip's as the physics report defines them (``metrics.floor_height``,
-    ``metrics.stance_rest_heights``: the definition of what an output must match, measured here on the clip
+    The floor and the rest heights are the clip's as the physics report defines them (``body.footing.floor_height``,
+    ``body.footing.stance_rest_heights``: the definition of what an output must match, measured here on the clip
     only; the report measures the output by itself). markers: (F, 2, 3, 3) [m].
     """
-    from ..report.metrics import floor_height, stance_rest_heights
 
     floor, _ = floor_height(markers, gait, leg_length)
     if not np.isfinite(floor):
@@ -588,8 +588,6 @@ def held_feet(marker_rel: np.ndarray, stance_mask: np.ndarray, leg_length: float
     # turned the foot at touchdown and slid its tip 13 mm (giant x1.5). The band (SLIDE_BAND_L) is wider
     # than the 0.02 L within which the physics report watches a marker slide, so a tip that lifts to just
     # under 0.02 L and comes down again is held all the while.
-    from ..report.metrics import SKATE_REACH_L
-
     if order == "walking":  # a walking foot rolls (heel, ball, toe): one pivot at a time holds it
         return remove_sliding_rolling(marker_rel, stance_mask, contact_tol=SKATE_REACH_L * leg_length,
                                       band=ROLL_BAND_L * leg_length)

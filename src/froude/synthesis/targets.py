@@ -8,6 +8,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..body.characters import Retarget
+from ..body.footing import SKATE_BAND_L, SKATE_MARKERS, SKATE_REACH_L
 from ..body.model import BodyModel
 from ..core.constants import UP_AXIS
 from ..core.motion import Motion
@@ -135,10 +136,8 @@ def _floor_top(markers: np.ndarray, leg_length: float, frame_time: float) -> np.
     As the physics report's stricter skate measure (metrics.foot_skate_floor_mm) sees it: the ball and the tip
     (SKATE_MARKERS), within SKATE_BAND_L × L of their lowest height about a contact (here the lowest target
     within a stance and its margins, FLOOR_WINDOW_S either side), when that lowest height is within
-    SKATE_REACH_L × L of the floor.
+    SKATE_REACH_L × L of the floor (``body.footing``).
     """
-    from ..report.metrics import SKATE_BAND_L, SKATE_MARKERS, SKATE_REACH_L
-
     out = np.full(markers.shape[:3], -np.inf)
     half = max(1, int(round(FLOOR_WINDOW_S / frame_time)))
     for k in SKATE_MARKERS:

@@ -429,3 +429,18 @@ def test_a_batch_of_a_turn_and_a_straight_run(run_cli, tmp_path):
     stride_s = 2.0 / float(rows[turn.stem]["step_frequency_hz"])
     assert _oracle_heading_deg(out / rows[turn.stem]["output"], stride_s) > 45.0  # 4 strides of the child
     assert abs(_oracle_heading_deg(out / rows["09_01"]["output"], 0.6)) < 5.0
+
+
+def test_fit_models_the_take_that_scale_models(prepared, run_cli, tmp_path):
+    """``froude fit`` of a turning take fits the take straightened along its path, as ``prepare`` does for
+    every verb: the same machine, and the note that says so (it fitted the turning take as it was, with the
+    straight machine's sagittal plane cutting across the turn)."""
+    out = tmp_path / "turn.machine.json"
+    code, _, err = run_cli("fit", clip(TURN), "-o", out)
+    assert code == 0, err
+    written = json.loads(out.read_text())["cycle"]
+    fitted = prepared[TURN].machine.to_dict()["cycle"]
+    assert written.keys() == fitted.keys()
+    for k, v in fitted.items():
+        assert written[k] == pytest.approx(v, rel=1e-9, abs=1e-12), k
+    assert "a turning take" in err and "runs along its path" in err

@@ -11,6 +11,7 @@ the reference's direction of travel.
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 from dataclasses import dataclass
 from dataclasses import replace as _replace
 from pathlib import Path
@@ -18,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from ..body.characters import Retarget
-from ..body.gait import detect_gait, summarize
+from ..body.gait import Gait, detect_gait, summarize
 from ..body.model import BodyModel
-from ..body.path import is_straight, straighten, take_path, turn_note, unstraighten
+from ..body.path import TakePath, is_straight, straighten, take_path, turn_note, unstraighten
 from ..body.take import modelled_part, running_take, select_range
 from ..core.motion import Motion
 from ..errors import FitError, FroudeError
@@ -55,31 +56,61 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     if time_range is not None:
         motion = select_range(motion, time_range, Path(source).name)
     body = BodyModel.from_skeleton(motion.skeleton, mass=mass, sex=sex, joint_map=joint_map)
-    motion, take_notes = running_take(motion, body)
+    take = analysed_take(motion, body)
+    motion, com, markers, gait, turn = take.motion, take.com, take.markers, take.gait, take.turn
+    summary = summarize(motion, body, com, gait)
+    kind = choose_kind(summary, source, running_only)  # body.gait's one decision chooses the machine
+    with said_on_turn(source, turn):
+        fit, cycle = kind.fit(motion, body, com, markers, gait, source, mass)
+    machine = fit.machine
+    modelled, note = modelled_part(motion, summary, com, gait)
+    return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source, fit,
+                    modelled=modelled, notes=take.notes + ((note,) if note else ()), clip_path=take.clip_path,
+                    turn=turn, kind=kind)
+
+
+@dataclass(frozen=True, eq=False)
+class AnalysedTake:
+    """A take as the machines see it (``analysed_take``): motion, its COM (F, 3) [m] and foot markers
+    (F, 2, 3, 3) [m], its contacts (gait), its path as taken (clip_path), the same when it turns (turn, else
+    None: then motion is the take straightened along it), and what was done to it (notes)."""
+
+    motion: Motion
+    com: np.ndarray
+    markers: np.ndarray
+    gait: Gait
+    clip_path: TakePath
+    turn: TakePath | None
+    notes: tuple
+
+
+def analysed_take(motion: Motion, body: BodyModel) -> AnalysedTake:
+    """The take ``prepare`` and ``froude fit`` model: a loop unrolled and an in-place take given its travel
+    (``running_take``), and a take that turns straightened along its path (the machines run along it)."""
+    motion, notes = running_take(motion, body)
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers, com)
     clip_path = take_path(motion, body, com, gait)
     turn = None if is_straight(clip_path) else clip_path
-    if turn is not None:  # the machines run along the path: the take is straightened for them
+    if turn is not None:
         motion = straighten(motion, turn)
         com, markers = body.com_and_markers(motion)
         gait = detect_gait(motion, body, markers, com)
-        take_notes = list(take_notes) + [turn_note(turn)]
-    summary = summarize(motion, body, com, gait)
-    kind = choose_kind(summary, source, running_only)  # body.gait's one decision chooses the machine
+        notes = list(notes) + [turn_note(turn)]
+    return AnalysedTake(motion, com, markers, gait, clip_path, turn, tuple(notes))
+
+
+@contextmanager
+def said_on_turn(source: str, turn):
+    """A fit's refusal (FitError) of a turning take says that the fit saw it straightened."""
     try:
-        fit, cycle = kind.fit(motion, body, com, markers, gait, source, mass)
+        yield
     except FitError as e:
         if turn is None:
             raise
-        name = Path(source).name  # say that the fit saw the take straightened
+        name = Path(source).name
         raise FitError(f"{'' if name in str(e) else name + ': '}{e} (fitted to the take straightened along its "
                        f"{math.degrees(turn.heading_change_rad):+.0f} deg turn)") from e
-    machine = fit.machine
-    modelled, note = modelled_part(motion, summary, com, gait)
-    return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source, fit,
-                    modelled=modelled, notes=tuple(take_notes) + ((note,) if note else ()), clip_path=clip_path,
-                    turn=turn, kind=kind)
 
 
 @dataclass(frozen=True, eq=False)

@@ -91,16 +91,18 @@ def run(args) -> int:
         motion = select_range(motion, args.range, Path(args.clip).name)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
     from ...body.gait import summarize  # lazy: start-up (froude --help imports every verb module and no NumPy)
-    from ...body.take import running_take  # lazy: start-up (froude --help imports every verb module and no NumPy)
     from ...flow.kinds import choose_kind  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...flow.pipeline import analysed_take, said_on_turn  # lazy: start-up (as above)
 
-    # the take as ``prepare`` analyses it (a loop unrolled, an in-place take given its travel) and the one
-    # decision of body.gait about what it is: the same as ``info`` says and ``scale`` models (in place or
-    # unknown is refused in info's words, before a fit)
-    motion, notes = running_take(motion, body)
-    kind = choose_kind(summarize(motion, body), Path(args.clip).name)
-    res = kind.fit_detailed(motion, body, mass=args.mass, source=Path(args.clip).name)
-    for note in notes:
+    # the take as ``prepare`` analyses it (a loop unrolled, an in-place take given its travel, a turning take
+    # straightened along its path) and the one decision of body.gait about what it is: the same as ``info``
+    # says and ``scale`` models (in place or unknown is refused in info's words, before a fit)
+    take = analysed_take(motion, body)
+    motion = take.motion
+    kind = choose_kind(summarize(motion, body, take.com, take.gait), Path(args.clip).name)
+    with said_on_turn(args.clip, take.turn):
+        res = kind.fit_detailed(motion, body, mass=args.mass, source=Path(args.clip).name)
+    for note in take.notes:
         say(f"note: {note}", args.quiet)
     table, plot_fn = FIT_OUTPUTS[kind.name]
     return _write_fit(args, motion, res, out, plot, plot_fn, table(res))

@@ -4,15 +4,19 @@ back, and what part of it the machine stands for (in one line, with a note when 
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
+from dataclasses import dataclass
 from dataclasses import replace as _replace
+from pathlib import Path
 
 import numpy as np
 
 from ..core.constants import GRAVITY, UP_AXIS
 from ..core.motion import Motion
-from ..errors import FroudeError
+from ..errors import FitError, FroudeError
 from .gait import Gait, GaitSummary, detect_gait
 from .model import BodyModel
+from .path import TakePath, is_straight, straighten, take_path, turn_note
 
 #: A take whose stride speeds spread more than this (fastest / slowest − 1) is said to change speed: the
 #: output then says which part the machine models and how to choose another (``time_range``).
@@ -177,3 +181,47 @@ def running_take(motion: Motion, body: BodyModel) -> tuple[Motion, list[str]]:
 
 def _full_stances(motion: Motion, body: BodyModel) -> int:
     return len(detect_gait(motion, body).full_stances)
+
+
+@dataclass(frozen=True, eq=False)
+class AnalysedTake:
+    """A take as the machines see it (``analysed_take``): motion, its COM (F, 3) [m] and foot markers
+    (F, 2, 3, 3) [m], its contacts (gait), its path as taken (clip_path), the same when it turns (turn, else
+    None: then motion is the take straightened along it), and what was done to it (notes)."""
+
+    motion: Motion
+    com: np.ndarray
+    markers: np.ndarray
+    gait: Gait
+    clip_path: TakePath
+    turn: TakePath | None
+    notes: tuple
+
+
+def analysed_take(motion: Motion, body: BodyModel) -> AnalysedTake:
+    """The take ``prepare`` and ``froude fit`` model: a loop unrolled and an in-place take given its travel
+    (``running_take``), and a take that turns straightened along its path (the machines run along it)."""
+    motion, notes = running_take(motion, body)
+    com, markers = body.com_and_markers(motion)
+    gait = detect_gait(motion, body, markers, com)
+    clip_path = take_path(motion, body, com, gait)
+    turn = None if is_straight(clip_path) else clip_path
+    if turn is not None:
+        motion = straighten(motion, turn)
+        com, markers = body.com_and_markers(motion)
+        gait = detect_gait(motion, body, markers, com)
+        notes = list(notes) + [turn_note(turn)]
+    return AnalysedTake(motion, com, markers, gait, clip_path, turn, tuple(notes))
+
+
+@contextmanager
+def said_on_turn(source: str, turn):
+    """A fit's refusal (FitError) of a turning take says that the fit saw it straightened."""
+    try:
+        yield
+    except FitError as e:
+        if turn is None:
+            raise
+        name = Path(source).name
+        raise FitError(f"{'' if name in str(e) else name + ': '}{e} (fitted to the take straightened along its "
+                       f"{math.degrees(turn.heading_change_rad):+.0f} deg turn)") from e

@@ -5,19 +5,32 @@ from __future__ import annotations
 import math
 
 from ..body.gait import GaitSummary, detect_gait, summarize
-from ..body.path import take_path
+from ..body.path import is_straight, straighten, take_path
 from ..body.take import running_take
 from ..io.jsonable import jsonable
 
 
 def clip_info(motion, body) -> tuple[dict, GaitSummary]:
-    """(the JSON-able summary of a clip in SI units, its gait summary). motion: a Motion; body: its BodyModel."""
+    """(the JSON-able summary of a clip in SI units, its gait summary). motion: a Motion; body: its BodyModel.
+
+    A take that turns is summarised along its path, straightened as fit and scale model it
+    (``body.path.straighten``): its kind, speed and steps are those of the walk or run the machines see (a
+    tight walking turn covers little ground in a straight line and would read as in place); its path as taken
+    is the "path" entry."""
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers, com)  # the feet reconciled with the COM force (body.gait)
-    summary = summarize(motion, body, com, gait)
-    d = jsonable(info_dict(motion, body, summary, gait))
+    path = path_dict(motion, body, com, gait)
+    along = motion
+    if path is not None:
+        taken = take_path(motion, body, com, gait)
+        if not is_straight(taken):
+            along = straighten(motion, taken)
+            com, markers = body.com_and_markers(along)
+            gait = detect_gait(along, body, markers, com)
+    summary = summarize(along, body, com, gait)
+    d = jsonable(info_dict(along, body, summary, gait))
     d["take"] = jsonable(_take(motion, body))
-    d["path"] = path_dict(motion, body, com, gait)
+    d["path"] = path
     return d, summary
 
 

@@ -10,8 +10,6 @@ the reference's direction of travel.
 """
 from __future__ import annotations
 
-import math
-from contextlib import contextmanager
 from dataclasses import dataclass
 from dataclasses import replace as _replace
 from pathlib import Path
@@ -19,12 +17,12 @@ from pathlib import Path
 import numpy as np
 
 from ..body.characters import Retarget
-from ..body.gait import Gait, detect_gait, summarize
+from ..body.gait import summarize
 from ..body.model import BodyModel
-from ..body.path import TakePath, is_straight, straighten, take_path, turn_note, unstraighten
-from ..body.take import modelled_part, running_take, select_range
+from ..body.path import unstraighten
+from ..body.take import analysed_take, modelled_part, said_on_turn, select_range
 from ..core.motion import Motion
-from ..errors import FitError, FroudeError
+from ..errors import FroudeError
 from ..report.metrics import BARS, physics_report, source_rest_heights
 from ..synthesis.bend import bend
 from ..synthesis.targets import build_targets, raised, stance_only
@@ -67,50 +65,6 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source, fit,
                     modelled=modelled, notes=take.notes + ((note,) if note else ()), clip_path=take.clip_path,
                     turn=turn, kind=kind)
-
-
-@dataclass(frozen=True, eq=False)
-class AnalysedTake:
-    """A take as the machines see it (``analysed_take``): motion, its COM (F, 3) [m] and foot markers
-    (F, 2, 3, 3) [m], its contacts (gait), its path as taken (clip_path), the same when it turns (turn, else
-    None: then motion is the take straightened along it), and what was done to it (notes)."""
-
-    motion: Motion
-    com: np.ndarray
-    markers: np.ndarray
-    gait: Gait
-    clip_path: TakePath
-    turn: TakePath | None
-    notes: tuple
-
-
-def analysed_take(motion: Motion, body: BodyModel) -> AnalysedTake:
-    """The take ``prepare`` and ``froude fit`` model: a loop unrolled and an in-place take given its travel
-    (``running_take``), and a take that turns straightened along its path (the machines run along it)."""
-    motion, notes = running_take(motion, body)
-    com, markers = body.com_and_markers(motion)
-    gait = detect_gait(motion, body, markers, com)
-    clip_path = take_path(motion, body, com, gait)
-    turn = None if is_straight(clip_path) else clip_path
-    if turn is not None:
-        motion = straighten(motion, turn)
-        com, markers = body.com_and_markers(motion)
-        gait = detect_gait(motion, body, markers, com)
-        notes = list(notes) + [turn_note(turn)]
-    return AnalysedTake(motion, com, markers, gait, clip_path, turn, tuple(notes))
-
-
-@contextmanager
-def said_on_turn(source: str, turn):
-    """A fit's refusal (FitError) of a turning take says that the fit saw it straightened."""
-    try:
-        yield
-    except FitError as e:
-        if turn is None:
-            raise
-        name = Path(source).name
-        raise FitError(f"{'' if name in str(e) else name + ': '}{e} (fitted to the take straightened along its "
-                       f"{math.degrees(turn.heading_change_rad):+.0f} deg turn)") from e
 
 
 @dataclass(frozen=True, eq=False)

@@ -91,8 +91,8 @@ def run(args) -> int:
         motion = select_range(motion, args.range, Path(args.clip).name)
     body = BodyModel.from_skeleton(motion.skeleton, mass=args.mass)
     from ...body.gait import summarize  # lazy: start-up (froude --help imports every verb module and no NumPy)
+    from ...body.take import analysed_take, said_on_turn  # lazy: start-up (as above)
     from ...flow.kinds import choose_kind  # lazy: start-up (froude --help imports every verb module and no NumPy)
-    from ...flow.pipeline import analysed_take, said_on_turn  # lazy: start-up (as above)
 
     # the take as ``prepare`` analyses it (a loop unrolled, an in-place take given its travel, a turning take
     # straightened along its path) and the one decision of body.gait about what it is: the same as ``info``

@@ -198,10 +198,11 @@ class AnalysedTake:
     notes: tuple
 
 
-def analysed_take(motion: Motion, body: BodyModel) -> AnalysedTake:
+def analysed_take(motion: Motion, body: BodyModel, unroll: bool = True) -> AnalysedTake:
     """The take ``prepare`` and ``froude fit`` model: a loop unrolled and an in-place take given its travel
-    (``running_take``), and a take that turns straightened along its path (the machines run along it)."""
-    motion, notes = running_take(motion, body)
+    (``running_take``; not when unroll is False: ``info`` shows that part apart), and a take that turns
+    straightened along its path (the machines run along it). motion: at least 3 frames (a path)."""
+    motion, notes = running_take(motion, body) if unroll else (motion, [])
     com, markers = body.com_and_markers(motion)
     gait = detect_gait(motion, body, markers, com)
     clip_path = take_path(motion, body, com, gait)

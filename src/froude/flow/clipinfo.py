@@ -5,8 +5,7 @@ from __future__ import annotations
 import math
 
 from ..body.gait import GaitSummary, detect_gait, summarize
-from ..body.path import is_straight, straighten, take_path
-from ..body.take import running_take
+from ..body.take import analysed_take, running_take
 from ..io.jsonable import jsonable
 
 
@@ -17,29 +16,17 @@ def clip_info(motion, body) -> tuple[dict, GaitSummary]:
     (``body.path.straighten``): its kind, speed and steps are those of the walk or run the machines see (a
     tight walking turn covers little ground in a straight line and would read as in place); its path as taken
     is the "path" entry."""
-    com, markers = body.com_and_markers(motion)
-    gait = detect_gait(motion, body, markers, com)  # the feet reconciled with the COM force (body.gait)
-    path = path_dict(motion, body, com, gait)
-    along = motion
-    if path is not None:
-        taken = take_path(motion, body, com, gait)
-        if not is_straight(taken):
-            along = straighten(motion, taken)
-            com, markers = body.com_and_markers(along)
-            gait = detect_gait(along, body, markers, com)
+    if motion.n_frames < 3:  # too short for a path
+        com, markers = body.com_and_markers(motion)
+        along, gait, path = motion, detect_gait(motion, body, markers, com), None
+    else:  # the feet reconciled with the COM force (body.gait), along the path
+        take = analysed_take(motion, body, unroll=False)
+        along, com, gait, path = take.motion, take.com, take.gait, take.clip_path.to_dict()
     summary = summarize(along, body, com, gait)
     d = jsonable(info_dict(along, body, summary, gait))
     d["take"] = jsonable(_take(motion, body))
-    d["path"] = path
+    d["path"] = path  # the path as taken: heading change, speed along it, facing vs travel, per-step figures
     return d, summary
-
-
-def path_dict(motion, body, com, gait) -> dict | None:
-    """The take's path (``body.path``): total heading change, speed along the path, facing vs travel, and
-    per step heading change, radius, speed and lean; None for a take too short to have one (< 3 frames)."""
-    if motion.n_frames < 3:
-        return None
-    return take_path(motion, body, com, gait).to_dict()
 
 
 def _take(motion, body) -> dict | None:

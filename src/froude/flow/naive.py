@@ -36,8 +36,7 @@ def naive_cycle(cyc: ReferenceCycle, retarget: Retarget, speed: float, n_steps: 
            + np.outer(L * data["com_height"], up) + np.outer(L * data["com_lateral"], lat))
     root = com + (L * data["root_from_com"]) @ cyc.frame
     motion = Motion(retarget.skeleton, root, rot, 1.0 / fps, None, dict(meta))
-    res = _naive_result(motion, retarget, speed, list(notes), modelled, input_in_place, cyc.max_joint_jump_deg)
-    return res
+    return _naive_result(motion, retarget, speed, list(notes), modelled, input_in_place, cyc.max_joint_jump_deg)
 
 
 def _naive_result(motion: Motion, retarget: Retarget, speed: float, notes: list, modelled: str,
@@ -60,7 +59,6 @@ def naive_clip(motion: Motion, character=None, *, speed: float = 1.0, target_spe
     target_speed [m/s] is turned into a factor of the clip's own scaled mean speed; performer_mass [kg]:
     the reference performer's (the character's own mass is a character number, ``mass=``).
     """
-
     body = BodyModel.from_skeleton(motion.skeleton, mass=performer_mass)
     retarget = apply_character(resolve_character(character, **character_numbers), body)
     L = retarget.L

@@ -132,7 +132,8 @@ def plan_scale(
         raise FroudeError(f"fps must be > 0, got {fps}")
     notes = list(prep.notes)
     m_scaled = prep.machine.scaled(retarget.L, retarget.M)
-    speed = scale_factor(speed, target_speed, m_scaled.mean_speed * m_scaled.speed_unit)
+    base_m_s = m_scaled.mean_speed * m_scaled.speed_unit  # the character's speed at x1
+    speed = scale_factor(speed, target_speed, base_m_s)
     notes += speed_range_notes(speed)
     n_steps = output_steps(strides, duration, m_scaled.step_time * m_scaled.time_unit)
     if method == "naive":
@@ -157,7 +158,7 @@ def plan_scale(
         raise FroudeError(f"unknown speed model '{speed_model}' (law or stretch)")
     path, method, periodic = prep.kind.scale_path(prep, retarget, speed, n_steps=n_steps, fps=fps,
                                                   speed_model=speed_model, unlimited=unlimited,
-                                                  base_m_s=m_scaled.mean_speed * m_scaled.speed_unit)
+                                                  base_m_s=base_m_s)
     return ScalePlan(prep, path, retarget, speed, tuple(notes), method, periodic)
 
 

@@ -130,8 +130,8 @@ def _repair_later(res, targets: Targets, body: BodyModel, held: np.ndarray, init
     branch or miss their COM or held foot markers, each solved from its own pose and from the previous
     frame's. A pose is judged by how far it misses the bars in all, in bar units, then how many
     (``_bar_misses``: its larger jump to either neighbour against the reference pose's there plus
-    BRANCH_JUMP_DEG and against the joint-jump bar jump_bar [deg], its worst held error against
-    RETRY_MARKER_ERROR), then by its worst held error, and never taken further over the joint-jump bar
+    BRANCH_JUMP_DEG and against the joint-jump bar jump_bar [deg], its worst COM or held-marker error against
+    the skate bar skate_bar_m [m]), then by its worst held error, and never taken further over the joint-jump bar
     (``_better``); the frame keeps the best of its old pose and the two new ones. Judged on both sides: the
     first pass compares a jumped frame with the previous one only, and one frame mended that way can jump to
     the next (the Bandai walk child's knee jump moved between 1.2 and 1.8 x the reference's with the number

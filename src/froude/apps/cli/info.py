@@ -43,8 +43,8 @@ def _fmt_list(values, unit="s") -> str:
 
 
 def _path_rows(p: dict | None) -> list[tuple[str, str]]:
-    """The table rows of the path (``clipinfo.path_dict``): heading change, speed along it, facing vs
-    travel, turn, radius and lean per step."""
+    """The table rows of the path (``clip_info``'s "path", ``body.path.TakePath.to_dict``): heading change,
+    speed along it, facing vs travel, turn, radius and lean per step."""
     if p is None:
         return []
     h = p["heading_change_deg"]

@@ -220,10 +220,13 @@ class _Layout(_TabPart):
         frame, _ = s.track.frame_at(self._t)
         # drawn heights [m] of the reference and the result at this instant (true relative size checks)
         h_ref, h_res = self.reference.vertical_extent(self._t), self.result.vertical_extent(self._t)
+        # the speed factors this character reaches with every bar met, once worked out (the slider's bounds)
+        rng = self.session.speed_ranges.get(p.character)
+        reach = "pending" if rng is None else ("none" if rng.empty else f"{rng.lo:.2f}-{rng.hi:.2f}")
         return (f"`state: clip={self.clip_name.replace(' ', '_')} character={p.character} mode={p.mode} "
                 f"speed_factor={p.speed:g} to_factor={p.to_factor:g} steps={p.steps} strides={p.strides} "
                 f"n_frames={s.n_frames} frame={frame} h_ref_m={h_ref:.4f} h_res_m={h_res:.4f} "
-                f"speed_m_s={speed} naive_frames={naive} hash={s.hash} status={status}`")
+                f"speed_m_s={speed} naive_frames={naive} speed_reach={reach} hash={s.hash} status={status}`")
 
     def _status_md(self) -> str:
         if self.message.startswith("error"):

@@ -11,7 +11,7 @@ import statistics  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
-from froude.io.bvh import load_bvh  # noqa: E402
+from froude.body.load import load_bvh  # noqa: E402
 from froude.io.samples import sample_path  # noqa: E402
 from froude.machine.fit import fit_machine  # noqa: E402
 

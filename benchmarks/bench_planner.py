@@ -31,7 +31,7 @@ def best_of(fn, n):
 
 def start_cycle():
     try:
-        from froude.io.bvh import load_bvh
+        from froude.body.load import load_bvh
         from froude.io.samples import sample_path
         from froude.machine.fit import fit_machine
         m = fit_machine(load_bvh(sample_path()))

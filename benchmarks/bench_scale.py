@@ -54,8 +54,8 @@ def measure(strides: int, repeats: int = 5) -> None:
 def gaits() -> None:
     """A run's and walks' prepare + scale of 4 strides (wall and CPU time), and the walking fit alone."""
     import froude
+    from froude.body.load import load_bvh
     from froude.flow import pipeline
-    from froude.io.bvh import load_bvh
     from froude.machine.walk_fit import fit_walking_detailed
 
     repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -67,7 +67,7 @@ def _takes(name, tmp):
     """(120 Hz motion, [the four thinned 30 Hz motions]) of a CMU run."""
     from bars_matrix import clip_path
 
-    from froude.io.bvh import load_bvh
+    from froude.body.load import load_bvh
 
     import rig_variants as rv
     from conftest import read_bvh_oracle

@@ -43,7 +43,7 @@ def _take(b, how: str, phase: int):
 def main(argv: list[str]) -> int:
     from bars_matrix import clip_path
 
-    from froude.io.bvh import load_bvh
+    from froude.body.load import load_bvh
     from froude.machine.fit import fit_machine
 
     import rig_variants as rv
@@ -93,7 +93,7 @@ def stances(names: list[str]) -> int:
     touchdown and liftoff [ms], the stance's own spring fit K [%] and touchdown angle [°]; RMS over all."""
     from bars_matrix import clip_path
 
-    from froude.io.bvh import load_bvh
+    from froude.body.load import load_bvh
     from froude.machine.fit import fit_machine_detailed
 
     import rig_variants as rv
@@ -130,9 +130,9 @@ def jitter(names: list[str]) -> int:
     from scipy.signal import butter, periodogram, sosfiltfilt
 
     from froude.body.gait import detect_gait
+    from froude.body.load import load_bvh
     from froude.body.model import BodyModel
     from froude.core.constants import UP_AXIS
-    from froude.io.bvh import load_bvh
 
     for name in names:
         m = load_bvh(clip_path(name))

@@ -45,10 +45,10 @@ def main() -> int:
     from turns_matrix import _clips
 
     from froude.body.gait import detect_gait
+    from froude.body.load import load_bvh
     from froude.body.model import BodyModel
     from froude.body.path import straighten, take_path
     from froude.body.take import running_take
-    from froude.io.bvh import load_bvh
 
     from conftest import clip
 

@@ -117,7 +117,7 @@ def _takes(name):
     from bars_matrix import clip_path
     from fit_rates import _take
 
-    from froude.io.bvh import load_bvh
+    from froude.body.load import load_bvh
 
     import rig_variants as rv
     from conftest import read_bvh_oracle
@@ -134,7 +134,7 @@ def stances(names, bw):
     """Per stance: touchdown, liftoff and duration of each thinned take against 120 Hz [ms]; RMS over all."""
     from bars_matrix import clip_path
 
-    from froude.io.bvh import load_bvh
+    from froude.body.load import load_bvh
 
     err = []
     for name in names:
@@ -156,8 +156,8 @@ def fits(names, bw):
     change from the force events (K, θ0, COM height RMS)."""
     from bars_matrix import clip_path
 
+    from froude.body.load import load_bvh
     from froude.errors import FroudeError
-    from froude.io.bvh import load_bvh
     from froude.machine.fit import fit_machine
 
     rows, miss, n = [], 0, 0

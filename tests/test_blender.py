@@ -19,9 +19,9 @@ import pytest
 
 import froude
 from froude.apps.blender.adapter import Armature, armature_basis, armature_motion, pose_from_basis
-from froude.body.conventions import Z_UP_TO_Y_UP
 from froude.core import quat
 from froude.core.kinematics import fk
+from froude.core.rig import Z_UP_TO_Y_UP
 
 from conftest import bpy_python, cli_main, clip
 

@@ -17,8 +17,8 @@ import pytest
 
 from froude.body import conventions
 from froude.body.gait import detect_gait, summarize
+from froude.body.load import load_bvh
 from froude.body.model import BodyModel, find_roles
-from froude.io.bvh import load_bvh
 
 import rig_variants as rv
 from conftest import BANDAI, BANDAI_RUNS, BANDAI_WALKS, MOCAP, RUNNING, clip, clip_params, read_bvh_oracle

@@ -7,9 +7,9 @@ import sys
 import numpy as np
 import pytest
 
+from froude.body.load import load_bvh
 from froude.core.constants import GRAVITY
 from froude.errors import NotARunningMotion
-from froude.io.bvh import load_bvh
 from froude.machine.dynamics import Control, simulate, step
 from froude.machine.fit import fit_machine_detailed, fit_stance_control
 from froude.machine.forces import ground_force, smooth_com

@@ -5,8 +5,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from froude.body.load import load_bvh
 from froude.errors import PlanError
-from froude.io.bvh import load_bvh
 from froude.machine.cycle import find_limit_cycle
 from froude.machine.dynamics import Control, step
 from froude.machine.fit import fit_machine

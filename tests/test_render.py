@@ -11,8 +11,8 @@ pytest.importorskip("matplotlib")
 imageio = pytest.importorskip("imageio")
 
 from froude.apps.cli import main  # noqa: E402
+from froude.body.load import load_bvh  # noqa: E402
 from froude.body.model import BodyModel  # noqa: E402
-from froude.io.bvh import load_bvh  # noqa: E402
 from froude.viz.render import LEFT, RIGHT, build_rig, render_filmstrip, render_video  # noqa: E402
 
 from conftest import clip  # noqa: E402

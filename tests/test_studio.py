@@ -327,7 +327,7 @@ class _Catch:
 def test_bvh_export_options(session, tmp_path):
     pytest.importorskip("viser")
     from froude.apps.studio.app import Studio
-    from froude.io.bvh import load_bvh
+    from froude.body.load import load_bvh
 
     studio = Studio(session.prep, port=_free_port())
     try:

@@ -179,7 +179,7 @@ def test_studio_as_an_animator_uses_it(tmp_path):
     pytest.importorskip("imageio_ffmpeg")
     import imageio.v3 as iio
 
-    from froude.io.bvh import load_bvh
+    from froude.body.load import load_bvh
 
     bandai = clip("dataset-1_dash_feminine_001")  # reaches x1.3 with every bar met (run_tired does not)
     shots = Path(os.environ.get("FROUDE_STUDIO_SHOTS", tmp_path / "shots"))

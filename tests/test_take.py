@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from froude.body.gait import detect_gait, summarize
+from froude.body.load import load_bvh
 from froude.body.model import BodyModel
 from froude.body.take import select_range
 from froude.flow import pipeline
 from froude.flow.speed_range import reachable_speed_range
-from froude.io.bvh import load_bvh
 
 from conftest import BANDAI_RUNS, RUNNING, clip, clip_params
 

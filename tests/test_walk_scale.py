@@ -197,7 +197,7 @@ def test_render_takes_scaled_walks(name, tmp_path, run_cli):
     """Issue 17 acceptance 4: ``render`` takes walks: the child's and the giant's walks in one filmstrip."""
     from PIL import Image
 
-    from froude.io.bvh import load_bvh
+    from froude.body.load import load_bvh
 
     outs = []
     for who in ("child", "giant"):

@@ -13,8 +13,8 @@ import math
 import numpy as np
 import pytest
 
+from froude.body.load import load_bvh
 from froude.errors import FitError
-from froude.io.bvh import load_bvh
 from froude.io.jsonable import jsonable
 from froude.machine.dynamics import Control
 from froude.machine.walk_fit import fit_walking_detailed, force_landmarks, stance_leg_length

@@ -34,7 +34,7 @@ _LAZY = {
     "NotAWalkingMotion": ".errors", "PlanError": ".errors",
     "Gait": ".body.gait", "GaitSummary": ".body.gait", "Stance": ".body.gait", "detect_gait": ".body.gait",
     "summarize": ".body.gait",
-    "load_bvh": ".io.bvh", "save_bvh": ".io.bvh",
+    "load_bvh": ".body.load", "save_bvh": ".io.bvh",
     "Motion": ".core.motion",
     "sample_path": ".io.samples",
     "Skeleton": ".core.skeleton",
@@ -67,6 +67,7 @@ def __dir__():
 if TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from .api import Result, accelerate, fit, ground_reaction_force, info, load, save, scale
     from .body.gait import Gait, GaitSummary, Stance, detect_gait, summarize
+    from .body.load import load_bvh
     from .body.model import BodyModel, JointMapError, find_roles, load_joint_map
     from .core.motion import Motion
     from .core.skeleton import Skeleton
@@ -82,5 +83,5 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real imports
         PlanError,
     )
     from .io.atomic import OutputError
-    from .io.bvh import load_bvh, save_bvh
+    from .io.bvh import save_bvh
     from .io.samples import sample_path

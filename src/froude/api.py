@@ -65,10 +65,10 @@ def load(path: str | os.PathLike, *, length_scale: float | None = None, clean: b
     """
     suffix = Path(path).suffix.lower()
     if suffix in (".glb", ".gltf"):
-        from .io.gltf import load_gltf  # lazy: start-up (import froude and its light verbs load no pipeline)
+        from .body.load import load_gltf  # lazy: start-up (import froude and its light verbs load no pipeline)
 
         return load_gltf(path, fps=fps, clean=clean, length_scale=length_scale)
-    from .io.bvh import load_bvh  # lazy: start-up (import froude and its light verbs load no pipeline)
+    from .body.load import load_bvh  # lazy: start-up (import froude and its light verbs load no pipeline)
 
     return load_bvh(path, length_scale=length_scale, clean=clean)
 

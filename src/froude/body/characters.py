@@ -84,7 +84,7 @@ def load_character(spec: str | Path) -> Character:
             raise CharacterError(f"{path}: no such character file")
         return _from_yaml(path)
     if path.suffix.lower() == ".bvh":
-        from ..io.bvh import load_bvh
+        from .load import load_bvh
 
         target = load_bvh(path)
         return Character(name=path.stem, skeleton=target.skeleton, description=f"skeleton of {path.name}")

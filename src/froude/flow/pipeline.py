@@ -45,7 +45,7 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     time_range: (T0, T1) [s] (either None): model only that part of the take (its speed, cadence and
     strides); the whole take by default. running_only: refuse a walk (NotARunningMotion) before fitting.
     """
-    from ..io.bvh import load_bvh
+    from ..body.load import load_bvh
 
     if isinstance(clip, Motion):
         motion, source = clip, str(clip.meta.get("source", "motion"))

@@ -3,7 +3,8 @@
 Reading accepts any channel order per joint, 3- or 6-channel (or any subset) joints, End Sites, tabs or
 spaces, CRLF, scientific notation and large files. Units are converted to metres and the up axis to +Y at
 this boundary: ``length_scale`` is given, or detected from the motion and reported; the rest of the rig's
-conventions (folded bind pose, translation channels) are read from the motion too (``froude.body.conventions``).
+conventions (folded bind pose, translation channels) are read from the motion too (``froude.body.conventions``):
+``read_bvh`` here reads the file's numbers as they are, ``froude.body.load.load_bvh`` makes them SI and +Y up.
 Writing keeps the input's conventions (unit, up axis, names, channel orders) unless told otherwise. Cleaning (the
 synthetic T-pose first frame of the CMU conversions, invalid leading or trailing rows) is reported in
 ``motion.meta["cleaning"]``, never silent. Every problem raises ``BvhError`` naming file and line.
@@ -20,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..body.conventions import understand
 from ..core import quat
 from ..core.motion import Motion
+from ..core.rig import Z_UP_TO_Y_UP, change_basis
 from ..core.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 from ..errors import BvhError
 from .atomic import atomic_write_text
@@ -309,18 +310,15 @@ def synthetic_pose_frame(rotations: np.ndarray) -> str | None:
     return None
 
 
-def load_bvh(path: str | os.PathLike, *, length_scale: float | None = None, clean: bool = True,
-             joint_map=None, up: str | None = None) -> Motion:
-    """Read a BVH file into a ``Motion`` in SI units (+Y up).
+def read_bvh(path: str | os.PathLike, *, clean: bool = True) -> tuple[Motion, int]:
+    """A BVH file's motion as written: lengths in file units, the file's axes, translation channels kept;
+    and the line of its ROOT (where a problem of the rig as a whole, such as its unit, is reported).
 
-    path: the file.
-    length_scale: metres per file unit; None detects it from the motion (``conventions.choose_unit``:
-        the flight gravity, else the most human stature; meta["units"] says which and why).
-    joint_map: role -> joint name for rigs whose joint names are not recognised (``body.find_roles``).
-    up: "Y" or "Z", the file's up axis; None detects it from the motion (meta["up_axis"]).
+    ``froude.body.load.load_bvh`` reads it in SI units, +Y up (the conventions read from the motion).
     clean: drop (and report in meta["cleaning"]) a synthetic rest/T-pose first frame and invalid
         leading/trailing rows (all-zero, NaN or inf). With clean=False every row is kept and any
         non-finite value is an error.
+    meta: source (the path), cleaning (sentences), first_line (the file line of the first frame kept).
     Raises BvhError (file and line in the message) on anything malformed.
     """
     path = str(path)
@@ -348,8 +346,8 @@ def load_bvh(path: str | os.PathLike, *, length_scale: float | None = None, clea
     root_line = parser.root_line
     del parser  # the text lines
 
-    # Cleaning is about rotations and rows: done in file units; the conventions are then read from the
-    # motion (froude.body.conventions): units, up axis, the rest pose, translation channels.
+    # Cleaning is about rotations and rows: done in file units; the conventions are read from the motion
+    # afterwards (froude.body.conventions): units, up axis, the rest pose, translation channels.
     skel_file = Skeleton(tuple(names), np.array(parents), np.array(offsets, dtype=float), tuple(channels),
                          tuple((j, np.array(o, float)) for j, o in end_sites))
     finite = np.isfinite(values).all(axis=1)
@@ -364,22 +362,8 @@ def load_bvh(path: str | os.PathLike, *, length_scale: float | None = None, clea
             path, skel_file, values, linenos, finite, channel_names, 1.0
         )
     del values
-    raw_motion = Motion(skel_file, root_positions, rotations, frame_time, translations)
-    try:
-        motion, conv = understand(raw_motion, joint_map=joint_map, length_scale=length_scale, up=up)
-    except ValueError as e:
-        raise BvhError(str(e), path, root_line) from None
-    meta = {
-        "source": path,
-        "length_scale": conv["length_scale"],
-        "units": conv["units"],
-        "units_ambiguous": conv["units_ambiguous"],
-        "up_axis": conv["up_axis"],
-        "conventions": conv["notes"],
-        "cleaning": tuple(notes),
-        "first_line": int(linenos[0]),
-    }
-    return motion.with_(meta=meta)
+    meta = {"source": path, "cleaning": tuple(notes), "first_line": int(linenos[0])}
+    return Motion(skel_file, root_positions, rotations, frame_time, translations).with_(meta=meta), root_line
 
 
 def _non_finite_error(path, values, linenos, channel_names, k: int, where: str) -> BvhError:
@@ -509,8 +493,6 @@ def file_convention(motion: Motion, *, length_scale: float | None = None, up: st
     rotations_only drops the position channels of every joint but the root (some readers mishandle
     them); refused when such a joint moves.
     """
-    from ..body.conventions import Z_UP_TO_Y_UP, change_basis
-
     if length_scale is None:
         length_scale = float(motion.meta.get("length_scale", 1.0))
     if not (np.isfinite(length_scale) and length_scale > 0):

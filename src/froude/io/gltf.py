@@ -9,7 +9,7 @@ joint with the inverse of its rest-pose world matrix (every rotation identity, t
 
 The mannequin is one octahedral "bone" per parent→child segment (and per end site), each skinned rigidly
 to the parent joint, so the file shows a body in any viewer. BVH channel orders and the frame rate are kept
-in the scene's ``extras`` so that ``load_gltf`` of a froude file gives back the same BVH layout.
+in the scene's ``extras`` so that reading a froude file gives back the same BVH layout.
 
 pygltflib (the optional extra ``froude[gltf]``) is imported inside the functions.
 """
@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.motion import Motion
+from ..core.rig import is_end_bone, placeholder_end
 from ..core.skeleton import Skeleton
 from ..errors import FroudeError
 from .atomic import atomic_write
@@ -277,9 +278,8 @@ def _frame_time(tracks: dict, extras: dict, fps: float | None) -> tuple[float, s
 def _end_node_sites(motion: Motion, gl, joints: list, end_nodes: set, parents: np.ndarray, new: dict,
                     scale: float) -> tuple[tuple[int, np.ndarray], ...]:
     """End sites (joint index, offset [m] in its frame) from an exporter's chain-end nodes, leaving out the
-    placeholders an importer invented (``body.conventions.placeholder_end``).
+    placeholders an importer invented (``core.rig.placeholder_end``).
     scale: the uniform scale of the nodes above the skeleton."""
-    from ..body.conventions import placeholder_end
     from ..core import quat
     from ..core.kinematics import fk
 
@@ -330,8 +330,6 @@ def _skin_tree(gl, path: Path):
             if c in index:
                 parents[index[c]] = k
     # an exporter's chain-end leaves (Blender's "_leaf", "_end") are end sites, not joints
-    from ..body.conventions import is_end_bone
-
     has_child = np.zeros(len(joints), bool)
     has_child[parents[parents >= 0]] = True
     end_nodes = {k for k in range(len(joints))
@@ -456,44 +454,30 @@ def _channels(saved_channels, J: int, moving: list) -> tuple:
     return tuple(pos + rotc if j == 0 or j in moving else rotc for j in range(J))
 
 
-def _understood(raw: Motion, path: Path, clean: bool, joint_map, length_scale, up, rate_note: str) -> Motion:
-    """raw read as ``load_bvh`` reads a file: a synthetic pose first frame dropped (with clean), then
-    ``body.conventions.understand`` (SI, +Y up), with the meta saying what was done (rate_note: how the frame
-    rate was found)."""
-    from ..body.conventions import understand
+def _cleaned(raw: Motion, clean: bool) -> tuple[Motion, tuple[str, ...]]:
+    """raw with a synthetic pose first frame dropped (with clean) as ``read_bvh`` drops it, and the sentences
+    saying so."""
     from .bvh import synthetic_pose_frame
 
-    cleaning = []
     why = synthetic_pose_frame(raw.rotations) if clean and raw.n_frames > 2 else None
-    if why:
-        raw = raw.cut(1)
-        cleaning.append(f"dropped frame 0: {why}")
-    try:
-        motion, conv = understand(raw, joint_map=joint_map, length_scale=1.0 if length_scale is None else length_scale,
-                                  up=up or "Y")
-    except ValueError as e:
-        raise FroudeError(f"{path}: {e}") from None
-    units = "metres (glTF)" if length_scale is None else conv["units"]
-    meta = {"source": str(path), "units": units, "length_scale": conv["length_scale"], "up_axis": conv["up_axis"],
-            "conventions": conv["notes"] + (rate_note,),
-            "cleaning": tuple(cleaning)}
-    return motion.with_(meta=meta)
+    if not why:
+        return raw, ()
+    return raw.cut(1), (f"dropped frame 0: {why}",)
 
 
-def load_gltf(path: str | os.PathLike, *, fps: float | None = None, clean: bool = True, joint_map=None,
-              length_scale: float | None = None, up: str | None = None) -> Motion:
-    """Read the first skin's skeleton and the first animation of a .glb/.gltf file as a Motion, read as
-    ``froude.load`` reads a BVH file (SI units, +Y up, the conventions of ``body.conventions.understand``).
+def read_gltf(path: str | os.PathLike, *, fps: float | None = None, clean: bool = True) -> Motion:
+    """The first skin's skeleton and the first animation of a .glb/.gltf file as a Motion in the file's
+    units (glTF's: metres) and axes (glTF's: +Y up); ``froude.body.load.load_gltf`` reads it as ``froude.load``
+    reads a BVH file (the conventions of ``body.conventions.understand``).
 
-    The skeleton's offsets are the joints' rest translations [m] (glTF's units); animated rotations (and the
+    The skeleton's offsets are the joints' rest translations (glTF's units); animated rotations (and the
     root's translation) become the motion; the transform of the nodes above the skeleton's root (an
     exporter's armature node: Blender's, with its object's rotation and scale) is applied to the root.
     fps: sampling rate (default: the file's own for froude files, else the animation's key spacing when it
     is even, else 30 Hz); channel orders come from froude's extras or default to ZYX rotations. A
-    synthetic pose first frame is dropped as ``load_bvh`` does unless clean=False. Joints' rest rotations
-    (bind orientations) are kept: the body is then measured in a standing frame of the motion. joint_map,
-    length_scale (metres per file unit; default 1: glTF is in metres) and up (default "Y", glTF's) as for
-    ``load_bvh``.
+    synthetic pose first frame is dropped as ``read_bvh`` does unless clean=False. Joints' rest rotations
+    (bind orientations) are kept.
+    meta: source (the path), conventions (a sentence saying how the frame rate was found), cleaning.
     Raises FroudeError (one line) for files froude cannot read as a skeletal animation.
     """
     path = Path(path)
@@ -523,4 +507,5 @@ def load_gltf(path: str | os.PathLike, *, fps: float | None = None, clean: bool 
         raw = raw.with_(skeleton=skel.with_(end_sites=_end_node_sites(raw, gl, joints, end_nodes, parents, new,
                                                                      above_scale)))
     rate_note = f"frame rate {1 / frame_time:.6g} Hz ({rate_how})"
-    return _understood(raw, path, clean, joint_map, length_scale, up, rate_note)
+    raw, cleaning = _cleaned(raw, clean)
+    return raw.with_(meta={"source": str(path), "conventions": (rate_note,), "cleaning": cleaning})

@@ -11,7 +11,7 @@ in world axes, a joint's local rotation is the change of its bone's world rotati
 to its parent's. A leaf bone's tail is an ``End Site`` (Blender's BVH importer puts a file's end sites
 there and its exporter writes them from there), unless it is a placeholder the importer made for an End
 Site of zero length. Leaf bones that exporters add to mark a chain's end
-(``*_end``, Mixamo's ``*_End``, ``*_leaf``: ``body.conventions.is_end_bone``) are end sites too, not joints.
+(``*_end``, Mixamo's ``*_End``, ``*_leaf``: ``core.rig.is_end_bone``) are end sites too, not joints.
 
 Pose bones are similarities (rotation and one uniform scale): the new action scales each bone by the
 change of length of its own segment (a child's shorter legs are shorter bones, a mesh skinned to them
@@ -25,10 +25,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...body.conventions import Z_UP_TO_Y_UP, is_end_bone, placeholder_end, understand
+from ...body.conventions import understand
 from ...core import quat
 from ...core.kinematics import fk
 from ...core.motion import Motion
+from ...core.rig import Z_UP_TO_Y_UP, is_end_bone, placeholder_end
 from ...core.skeleton import POSITION_CHANNELS, Skeleton
 from ...errors import FroudeError
 from ...io.bvh import synthetic_pose_frame
@@ -154,7 +155,7 @@ def armature_motion(arm: Armature, pose_world: np.ndarray, frame_time_s: float, 
 
 def _end_sites(arm: Armature, joints: np.ndarray, h_rest: np.ndarray) -> tuple[tuple[int, np.ndarray], ...]:
     """End sites [BU, world axes]: an end bone's head for its parent joint, else a leaf joint's tail, unless
-    it is an importer's placeholder (``body.conventions.placeholder_end``)."""
+    it is an importer's placeholder (``core.rig.placeholder_end``)."""
     end = arm.end_bones()
     index = {int(b): k for k, b in enumerate(joints)}
     _, _, heads = _similarity(arm.rest_world, "rest matrix", arm.names)

@@ -235,11 +235,11 @@ def load_clip(path: str, length_scale: float | None = None, keep_all: bool = Fal
 
     jm = load_joint_map(joint_map) if joint_map else None
     if Path(path).suffix.lower() in (".glb", ".gltf"):
-        from ...io.gltf import load_gltf  # lazy: start-up (froude --help imports every verb module and no NumPy)
+        from ...body.load import load_gltf  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
         motion = load_gltf(path, length_scale=length_scale, clean=not keep_all, joint_map=jm, up=up)
     else:
-        from ...io.bvh import load_bvh  # lazy: start-up (froude --help imports every verb module and no NumPy)
+        from ...body.load import load_bvh  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
         motion = load_bvh(path, length_scale=length_scale, clean=not keep_all, joint_map=jm, up=up)
     say_loaded(motion, path, quiet)

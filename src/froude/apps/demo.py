@@ -19,6 +19,8 @@ from ..io.atomic import atomic_write_text
 from ..io.bvh import save_bvh
 from ..io.samples import sample_path
 from ..report.metrics import physics_report, write_report
+from ..viz.fit_plot import plot_fit
+from ..viz.render import render_filmstrip, render_video
 
 
 @dataclass(frozen=True)
@@ -59,7 +61,6 @@ def run_demo(outdir: str | Path, clip: str | Path | None = None, *, strides: int
     m = prep.machine
     files["machine"] = out / "machine.json"
     m.save(files["machine"])
-    from ..viz.fit_plot import plot_fit
 
     files["fig2"] = out / "fig2_fit.png"
     plot_fit(prep.fit, files["fig2"], title=f"{clip.name}: simple machine fit (Pollard 1999, Fig. 2)")
@@ -97,7 +98,6 @@ def run_demo(outdir: str | Path, clip: str | Path | None = None, *, strides: int
         say(f"      {label:<16} {res.motion.n_frames:>4} frames, {res.report.mean_speed_m_s:.2f} m/s")
 
     say("[3/5] drawing filmstrips (Figure 3 style, snapshots every 0.066 s) ...")
-    from ..viz.render import render_filmstrip, render_video
 
     fig3_motions = [ref_motion] + [results[k].motion for k in ("fast", "decel", "troll", "child")]
     fig3_labels = [r.label for r in rows[:5]]

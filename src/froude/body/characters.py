@@ -31,6 +31,7 @@ import numpy as np
 
 from ..core.skeleton import Skeleton
 from ..errors import CharacterError, FroudeError
+from .load import load_bvh
 from .model import SIDES, BodyModel
 from .presets import HEIGHT_RANGE_M, MASS_RANGE_KG, PART_SCALE_RANGE, PRESET_DIR, list_presets
 
@@ -84,8 +85,6 @@ def load_character(spec: str | Path) -> Character:
             raise CharacterError(f"{path}: no such character file")
         return _from_yaml(path)
     if path.suffix.lower() == ".bvh":
-        from .load import load_bvh
-
         target = load_bvh(path)
         return Character(name=path.stem, skeleton=target.skeleton, description=f"skeleton of {path.name}")
     raise CharacterError(

@@ -15,10 +15,13 @@ import numpy as np
 
 from ..core import quat
 from ..core.constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
+from ..core.kinematics import forward_kinematics
 from ..core.motion import Motion
 from ..core.rig import Z_UP_TO_Y_UP, change_basis
 from ..core.skeleton import Skeleton
 from .com_force import flight_gravity
+from .gait import _close_gaps, _runs
+from .model import BodyModel, JointMapError, find_roles
 
 #: Length units a BVH file may be in: (name, metres per file unit). CMU's ASF->BVH conversions use
 #: 1/0.45 inch.
@@ -118,8 +121,6 @@ def _analysed(motion: Motion) -> Motion:
 
 def role_positions(motion: Motion, joints) -> np.ndarray:
     """(F, len(joints), 3) world positions (file units) of some joints over the analysed frames."""
-    from ..core.kinematics import forward_kinematics
-
     m = _analysed(motion)
     p, _ = forward_kinematics(m.skeleton, m.root_positions, m.rotations, m.translations)
     return p[:, list(joints)]
@@ -166,8 +167,6 @@ def flight_gravity_units(com: np.ndarray, foot_low: np.ndarray, leg_length: floa
     curvature is fitted by ``com_force.flight_gravity`` (one gravity shared by every flight, each its own
     height and vertical speed). Flights cut by the clip's edges are left out (a jump off or a stumble).
     """
-    from .gait import _runs
-
     ground = np.percentile(foot_low.min(axis=1), 5)
     air = (foot_low > ground + 0.03 * leg_length).all(axis=1)
     if planted is not None:  # a foot resting on a floor that rises by a few centimetres is not in the air
@@ -226,8 +225,6 @@ def step_frequency_hz(foot_xyz: np.ndarray, com: np.ndarray, frame_time: float) 
     scale-free test (heights are not used: floors in captures tilt and drift by a few centimetres). A
     plant interrupted for less than 0.05 s (a marker's jitter at a high frame rate) is one plant.
     """
-    from .gait import _close_gaps, _runs
-
     dt = frame_time
     v_com = np.linalg.norm((com[-1] - com[0])[HORIZONTAL_AXES]) / (dt * (len(com) - 1))
     if not v_com > 0:
@@ -321,8 +318,6 @@ def understand(motion: Motion, *, joint_map=None, length_scale: float | None = N
     units_ambiguous, up_axis, notes (list of sentences).
     Raises ValueError when the unit cannot be told; JointMapError for a bad joint map.
     """
-    from .model import BodyModel, JointMapError, find_roles
-
     motion, notes = fold_translations(motion)
     if joint_map:
         motion = replace(motion, skeleton=replace(motion.skeleton, joint_map=tuple(sorted(joint_map.items()))))

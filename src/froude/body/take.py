@@ -11,10 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core import quat
 from ..core.constants import GRAVITY, UP_AXIS
 from ..core.motion import Motion
 from ..errors import FitError, FroudeError
-from .gait import Gait, GaitSummary, detect_gait
+from .gait import Gait, GaitSummary, detect_gait, ground_velocity, stride_speeds
 from .model import BodyModel
 from .path import TakePath, is_straight, straighten, take_path, turn_note
 
@@ -57,8 +58,6 @@ def modelled_part(motion: Motion, summary: GaitSummary, com: np.ndarray, gait: G
 
     Returns (description, note or None): "0.00-2.40 s of the take: 3.150 m/s, 2.930 steps/s".
     """
-    from .gait import stride_speeds
-
     t0, t1 = motion.meta.get("time_range_s", (0.0, motion.duration))
     loop = motion.meta.get("loop")
     part = (f"a {loop['frames'] * motion.frame_time:.2f} s loop ({loop['frames']} frames, unrolled x{loop['copies']})"
@@ -98,8 +97,6 @@ def unroll_loop(motion: Motion, body: BodyModel) -> tuple[Motion, str] | None:
     loop's horizontal COM travel, so a root-motion loop runs on and an in-place loop stays in place.
     Returns (motion, note) or None when the take does not loop.
     """
-    from ..core import quat
-
     F = motion.n_frames
     if F < 4:
         return None
@@ -140,8 +137,6 @@ def add_travel(motion: Motion, body: BodyModel, markers: np.ndarray | None = Non
     The running velocity is minus the feet's velocity on the ground (``gait.ground_velocity``); the root
     then moves at it. Returns (motion, note), or None when the take travels or its feet do not slide.
     """
-    from .gait import ground_velocity
-
     com = body.com(motion)
     L = body.leg_length
     travel = com[-1] - com[0]

@@ -4,6 +4,8 @@ Internal units are SI (m, s, kg, rad, N). The world up axis is +Y (BVH, glTF con
 """
 import numpy as np
 
+from ..errors import FitError
+
 #: Magnitude of gravitational acceleration [m/s^2].
 GRAVITY = 9.81
 #: Index of the up axis in world coordinates (+Y).
@@ -28,8 +30,6 @@ def heading_frame(heading: np.ndarray) -> np.ndarray:
     fwd[UP_AXIS] = 0.0
     n = np.linalg.norm(fwd)
     if not n > 0:
-        from ..errors import FitError
-
         raise FitError("no horizontal travel direction: cannot define the heading frame")
     fwd /= n
     return np.stack([fwd, UP, np.cross(fwd, UP)])

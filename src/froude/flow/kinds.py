@@ -16,6 +16,8 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from ..body.gait import GaitSummary, require_running, walks
+from ..machine.fit import fit_machine_detailed
+from ..machine.speed import machine_at_speed
 from ..synthesis.cycle import extract_cycle
 from ..synthesis.phases import fit_events
 from ..synthesis.timewarp import machine_path
@@ -93,8 +95,6 @@ class Running:
         return summary.kind == "running"
 
     def fit_detailed(self, motion, body, *, mass: float, source: str):
-        from ..machine.fit import fit_machine_detailed
-
         return fit_machine_detailed(motion, body, mass=mass, source=source)
 
     def fit(self, motion, body, com, markers, gait, source: str, mass: float):
@@ -102,8 +102,6 @@ class Running:
         return fit, extract_cycle(motion, body, gait, com, markers, events=fit_events(fit.machine, motion))
 
     def machine_at_speed(self, prep, speed: float, memo: dict):
-        from ..machine.speed import machine_at_speed
-
         hit = memo.get(speed)
         if hit is None:
             hit = memo[speed] = machine_at_speed(prep.machine, speed, prep.law_cadence)

@@ -18,17 +18,19 @@ import numpy as np
 
 from ..body.characters import Retarget
 from ..body.gait import summarize
+from ..body.load import load_bvh
 from ..body.model import BodyModel
 from ..body.path import unstraighten
 from ..body.take import analysed_take, modelled_part, said_on_turn, select_range
 from ..core.motion import Motion
 from ..errors import FroudeError
+from ..ik.correct import correct, tile_stride
 from ..report.metrics import BARS, physics_report, source_rest_heights
 from ..synthesis.bend import bend
 from ..synthesis.targets import build_targets, raised, stance_only
 from ..synthesis.timewarp import MachinePath, machine_path
 from .kinds import choose_kind
-from .naive import naive_clip
+from .naive import naive_clip, naive_cycle, naive_take
 from .prepared import Prepared
 from .result import Output, report_path, write_result
 from .speed_change import output_steps, speed_range_notes
@@ -45,8 +47,6 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     time_range: (T0, T1) [s] (either None): model only that part of the take (its speed, cadence and
     strides); the whole take by default. running_only: refuse a walk (NotARunningMotion) before fitting.
     """
-    from ..body.load import load_bvh
-
     if isinstance(clip, Motion):
         motion, source = clip, str(clip.meta.get("source", "motion"))
     else:
@@ -137,8 +137,6 @@ def plan_scale(
     notes += speed_range_notes(speed)
     n_steps = output_steps(strides, duration, m_scaled.step_time * m_scaled.time_unit)
     if method == "naive":
-        from .naive import naive_cycle, naive_take
-
         if prep.turn is not None:
             # the cycle is of the take straightened along its turn: repeating it would walk straight, which is
             # not what engines do with a turning take (they play it, and it turns)
@@ -221,8 +219,6 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
     the IK of one stride only, sampled PERIODIC_OVERSAMPLE times finer, and tile it (the result is
     periodic too; ``ik.correct.tile_stride``).
     """
-    from ..ik.correct import correct, tile_stride
-
     targets, path = targets_of(prep, path, retarget)
     n_strides = len(path.foot_of_step) / 2
     if periodic is not None and n_strides > PERIODIC_MIN_STRIDES and prep.turn is None:

@@ -12,7 +12,12 @@ from ..body.characters import Retarget
 from ..core.constants import UP_AXIS
 from ..core.motion import Motion
 from ..errors import FroudeError
+from ..io.atomic import atomic_group
+from ..io.formats import save
+from ..io.framedata import write_frame_data
+from ..report.frames import frame_table
 from ..report.metrics import Report, write_report
+from ..report.path_report import path_rows
 from ..synthesis.targets import Targets
 from ..synthesis.timewarp import MachinePath
 from .kinds import kind_named
@@ -58,8 +63,6 @@ class Output:
              f"{f(r.max_joint_jump_deg, '.1f')} deg (reference {f(r.reference_max_joint_jump_deg, '.1f')})"),
         ]
         if "path_vs_clip" in r.extras:
-            from ..report.path_report import path_rows
-
             rows += path_rows(r.extras["path_vs_clip"])
         return rows + kind_named(r.extras.get("machine")).summary_rows(r)
 
@@ -122,9 +125,6 @@ def write_result(result: Output, out_path, data=None, in_place: bool | None = No
     in-place take gives in-place outputs). The report is always that of the travelling motion (its speed,
     skate and gravity are physical there) and says which was written.
     """
-    from ..io.atomic import atomic_group
-    from ..io.formats import save
-
     out_path = Path(out_path)
     rp = report_path(out_path)
     if in_place is None:
@@ -139,8 +139,6 @@ def write_result(result: Output, out_path, data=None, in_place: bool | None = No
         write_report(result.report, rp)
         if data is None:
             return out_path, rp
-        from ..io.framedata import write_frame_data
-        from ..report.frames import frame_table
 
         table = frame_table(result.motion, result.retarget.body, machine_path=result.path)
         return out_path, rp, write_frame_data(table, data)

@@ -11,7 +11,9 @@ import numpy as np
 from ..body.model import BodyModel
 from ..core.constants import HORIZONTAL_AXES, UP_AXIS
 from ..core.motion import Motion
-from ..synthesis.targets import COM_WEIGHT, Targets
+from ..errors import IkError
+from ..synthesis.cycle import nlerp_rows
+from ..synthesis.targets import COM_WEIGHT, STANCE_MARKER_WEIGHT, WEIGHT_RAMP_S, Targets, min_jerk
 from .solver import DEFAULT_MAX_ERROR, solve_ik
 from .tasks import DEFAULT_JOINT_WEIGHT, ComTask, MarkerTask, PostureTask, RootTask
 
@@ -83,8 +85,6 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag", repair_
     res = _replace(res, motion=res.motion.with_(root_positions=res.motion.root_positions + shift),
                    com_error=np.zeros(len(shift)), com=targets.com.copy())
     if on_failure == "raise" and not res.ok:
-        from ..errors import IkError
-
         f = int(np.flatnonzero(res.failed)[0])
         assert res.com_error is not None  # the ComTask is always given
         raise IkError(f"IK cannot reach its targets at frame {f} (COM error {1000 * res.com_error[f]:.1f} mm)")
@@ -223,7 +223,6 @@ def _hold_on_floor(targets: Targets, body: BodyModel, res):
     """
     if targets.floor_top is None:
         return targets, res
-    from ..synthesis.targets import STANCE_MARKER_WEIGHT, WEIGHT_RAMP_S, min_jerk
 
     per_size = (targets.com_weight / COM_WEIGHT)[:, None, None]  # (F, 1, 1)
     hold = FLOOR_HOLD_WEIGHT * STANCE_MARKER_WEIGHT * per_size
@@ -425,8 +424,6 @@ def tile_stride(one: Motion, stride_period: float, dense_fps: float, targets: Ta
     ``correct``. The work is then that of one stride whatever the length, which is what makes long outputs
     (an hour of running) cheap in time and memory.
     """
-    from ..synthesis.cycle import nlerp_rows
-
     T2 = stride_period
     stride = stride.copy()
     stride[UP_AXIS] = 0.0

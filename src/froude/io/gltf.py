@@ -20,11 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core import quat
+from ..core.kinematics import fk
 from ..core.motion import Motion
 from ..core.rig import is_end_bone, placeholder_end
 from ..core.skeleton import Skeleton
 from ..errors import FroudeError
 from .atomic import atomic_write
+from .bvh import synthetic_pose_frame
 
 #: glTF component types and accessor types used here.
 _FLOAT, _USHORT, _UINT, _UBYTE = 5126, 5123, 5125, 5121
@@ -239,7 +242,6 @@ def _node_matrix(node) -> np.ndarray:
     """(4, 4) a glTF node's local transform T · R · S (or its matrix)."""
     if node.matrix:
         return np.array(node.matrix, float).reshape(4, 4).T  # column-major in the file
-    from ..core import quat
 
     m = np.eye(4)
     x, y, z, w = node.rotation or [0.0, 0.0, 0.0, 1.0]
@@ -280,9 +282,6 @@ def _end_node_sites(motion: Motion, gl, joints: list, end_nodes: set, parents: n
     """End sites (joint index, offset [m] in its frame) from an exporter's chain-end nodes, leaving out the
     placeholders an importer invented (``core.rig.placeholder_end``).
     scale: the uniform scale of the nodes above the skeleton."""
-    from ..core import quat
-    from ..core.kinematics import fk
-
     # judged in the rest pose (the nodes' own rotations), where an importer's copy lies along its parent bone
     kept = sorted(new, key=lambda k: new[k])
     rest_rot = np.array([gl.nodes[joints[k]].rotation or [0.0, 0.0, 0.0, 1.0] for k in kept])
@@ -405,8 +404,6 @@ def _sample_track(tracks: dict, key, default, times):
 def _sampled_pose(tracks: dict, times, offsets, rest_rot):
     """(rotations (n, J, 4) froude (w, x, y, z), root position (n, 3) [m], joints with animated translation,
     their translations (n, J, 3) [m] or None) of the tracks at times (n,) [s]."""
-    from ..core import quat
-
     n, J = len(times), len(offsets)
     rot = np.empty((n, J, 4))
     for j in range(J):
@@ -426,8 +423,6 @@ def _apply_above_root(above, root, rot, offsets, translations, path: Path):
     """The pose with the transform (4, 4) of the nodes above the skeleton's root applied to its root (an
     exporter's armature node: rotation and uniform scale): (root (n, 3) [m], rot (n, J, 4), offsets (J, 3)
     [m], translations, that scale). FroudeError for a sheared or unevenly scaled transform."""
-    from ..core import quat
-
     if np.allclose(above, np.eye(4), atol=1e-9):
         return root, rot, offsets, translations, 1.0
     lin = above[:3, :3]
@@ -457,8 +452,6 @@ def _channels(saved_channels, J: int, moving: list) -> tuple:
 def _cleaned(raw: Motion, clean: bool) -> tuple[Motion, tuple[str, ...]]:
     """raw with a synthetic pose first frame dropped (with clean) as ``read_bvh`` drops it, and the sentences
     saying so."""
-    from .bvh import synthetic_pose_frame
-
     why = synthetic_pose_frame(raw.rotations) if clean and raw.n_frames > 2 else None
     if not why:
         return raw, ()

@@ -19,6 +19,8 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import FitError
+from .dynamics import N_PER_STANCE
+from .fit import _cycle_search
 from .model import SimpleMachine
 from .speed_law import law_step
 
@@ -61,9 +63,6 @@ def _solve_at(machine: SimpleMachine, s: float, f_clip: float, start: SimpleMach
               s_start: float = 1.0) -> SimpleMachine:
     """The cycle search at s × the speed of ``machine`` (the law's step and stance times), started from
     the cycle ``start`` solved at s_start × the speed."""
-    from .dynamics import N_PER_STANCE
-    from .fit import _cycle_search
-
     law = law_step(s, f_clip, machine.step_time, machine.t_stance, machine.t_flight, machine.mean_speed)
     if not law.t_flight > 0:
         raise FitError(f"a stance of {law.t_stance:.3f} leaves no flight in a step of {law.step_time:.3f}")

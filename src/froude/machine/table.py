@@ -26,6 +26,8 @@ from froude.errors import PlanError
 from froude.io.jsonable import dumps
 from froude.machine.dynamics import N_PER_STANCE, Control, fall_time, step
 
+from ..io.atomic import atomic_write
+
 __all__ = ["TABLE_VERSION", "TableGrid", "TransitionTable", "TableLookup", "grid_around",
            "build_table", "load_or_build_table", "table_key", "default_cache_dir"]
 
@@ -214,7 +216,6 @@ class TransitionTable:
                 "grid": [list(map(float, self.grid.U)), list(map(float, self.grid.H)),
                          list(map(float, self.grid.theta0))],
                 "n_per_stance": int(self.n_per_stance), "key": self.key}
-        from ..io.atomic import atomic_write
 
         def write(tmp):
             with open(tmp, "wb") as fh:

@@ -34,7 +34,7 @@ from ..errors import FitError
 from ..io.atomic import atomic_write_text
 from ..io.jsonable import dumps
 from .units import speed_unit, time_unit
-from .walking import PULSES_OFF, ControlPulses, WalkControl, WalkState
+from .walking import PULSES_OFF, ControlPulses, WalkControl, WalkState, simulate_walk
 
 __all__ = ["WALK_SCHEMA", "WalkingMachine", "load_walking_machine"]
 
@@ -149,8 +149,6 @@ class WalkingMachine(ControlPulses):
           (NaN off the ground); step (N,) int, the step each time belongs to.
         This is what synthesis needs of the machine: where the COM goes and which foot is down where.
         """
-        from .walking import simulate_walk
-
         T, L = self.time_unit, self.l0
         t = np.asarray(times_s, float) / T
         if t.ndim != 1 or not np.all(np.isfinite(t)) or (t.size and t.min() < 0):

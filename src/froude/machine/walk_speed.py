@@ -29,7 +29,9 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import FitError
+from .walk_fit import _VARS, _cycle_search
 from .walk_model import WalkingMachine
+from .walking import N_PER_STANCE
 
 __all__ = ["WALK_RUN_U", "STEP_TIME_EXPONENT", "walking_machine_at_speed",
            "walking_machines_at_speeds",
@@ -91,9 +93,6 @@ def _resolve(base: WalkingMachine, start: WalkingMachine, s: float,
              exponent: float = STEP_TIME_EXPONENT) -> WalkingMachine:
     """The cycle at s × base's speed (targets from ``base``, step time × s^exponent), searched from
     ``start``'s cycle."""
-    from .walk_fit import _VARS, _cycle_search
-    from .walking import N_PER_STANCE
-
     k = s ** exponent
     t_step, t_double = base.t_step * k, base.t_double * k
     T_c = base.T_c * k

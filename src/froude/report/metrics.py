@@ -25,8 +25,10 @@ from ..body.path import TakePath, is_straight, take_path
 from ..core import quat
 from ..core.constants import GRAVITY, HORIZONTAL_AXES, UP_AXIS
 from ..core.motion import Motion, max_joint_jump_deg
+from ..io.atomic import atomic_write_text
 from ..io.jsonable import dumps, jsonable
 from ..machine.speed_law import STEP_MAX_PER_STATURE
+from .path_report import path_comparison
 
 #: The project's physics bars (docs/architecture.md, "Quality bars").
 BARS = {
@@ -464,8 +466,6 @@ def physics_report(
         path = take_path(motion, body, com, gait, window_strides=window_strides)
         rep.extras["path"] = path.to_dict()
         if reference_path is not None:
-            from .path_report import path_comparison
-
             ref_L = L if reference_leg_length is None else float(reference_leg_length)
             rep.extras["path_vs_clip"] = path_comparison(reference_path, path, ref_L, L)
     if source_rest_heights is not None:
@@ -524,6 +524,4 @@ def _stiffness(com: np.ndarray, gait: Gait, fz_bw: np.ndarray, body: BodyModel) 
 
 def write_report(report: Report, path) -> None:
     """Write a report as JSON, atomically."""
-    from ..io.atomic import atomic_write_text
-
     atomic_write_text(path, report.to_json() + "\n")

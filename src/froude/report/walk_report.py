@@ -8,7 +8,10 @@ import math
 
 import numpy as np
 
+from ..body.gait import detect_gait
+from ..machine.walk_fit import PROFILE_SAMPLES, force_landmarks
 from ..synthesis.walking import walking_events
+from .metrics import _with_ground, vertical_force_bw
 
 __all__ = ["walking_extras", "walking_report", "walking_rows"]
 
@@ -42,9 +45,6 @@ def walking_report(com: np.ndarray, gait, frame_time: float) -> dict:
     """The walking figures of a motion's report (issue 17): double-support fraction, the vertical force's
     two peaks and trough over a stance [BW] and their stance phases, from the COM (eq. 1, the project's
     one differentiation) averaged over the complete stances. com: (F, 3) [m]. NaN when not measurable."""
-    from ..machine.walk_fit import PROFILE_SAMPLES, force_landmarks
-    from .metrics import vertical_force_bw
-
     F = com.shape[0]
     out = {"double_support_fraction": _double_support_fraction(gait, F)}
     full = [s for s in gait.full_stances]
@@ -82,9 +82,6 @@ def walking_extras(prep, res, report) -> dict:
     similarity and the walking speed law, ``_expected_and_naive_cadence``), naive (engines keep the clip's
     timing, played faster with the speed) and its error against the expected one.
     """
-    from ..body.gait import detect_gait
-    from .metrics import _with_ground
-
     body = res.retarget.body
     com, markers = body.com_and_markers(res.motion)
     gait = _with_ground(detect_gait(res.motion, body, markers), 0.0)

@@ -12,6 +12,7 @@ from ..body.com_force import vertical_force_bw
 from ..body.gait import Gait
 from ..core.motion import Motion
 from ..errors import FitError
+from ..machine.forces import _crossing
 
 
 @dataclass(frozen=True)
@@ -141,8 +142,6 @@ def loaded_events(gait: Gait, com: np.ndarray, frame_time: float) -> list[FootEv
     0.17 s flight played the clip's 0.03-0.08 s flights and its grounded poses fell in the air: knee flips
     of 47-90° against the clip's 25°. gait: the clip's marker contacts; com: (F, 3) [m]; frame_time [s].
     """
-    from ..machine.forces import _crossing
-
     fy_bw = vertical_force_bw(com, frame_time)
     w = int(round(LOADED_EVENT_SEARCH_S / frame_time))
     ev = []

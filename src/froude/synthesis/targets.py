@@ -115,7 +115,7 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     # target at all may land anywhere the posture puts it (a toe 0.2 m off at lift-off, 09_01 at 1.3x).
     weight = np.maximum(weight, SWING_MARKER_WEIGHT * (OUT_OF_REACH_SWING + (1.0 - OUT_OF_REACH_SWING) * reach))
     if cyc.order == "walking":  # a walking foot lands and leaves with a straight knee: guide it there
-        from .walking import soften_swing_weights
+        from .walking import soften_swing_weights  # lazy: a run's scale never loads the walking machine
 
         weight = soften_swing_weights(path, weight, SWING_MARKER_WEIGHT)
     # Weights are per (leg length)^2, so the trade-off between a position error and a joint angle is the

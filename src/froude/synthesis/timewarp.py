@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.constants import GRAVITY, UP_AXIS
+from ..machine.dynamics import simulate
 from .cycle import ReferenceCycle, sample_cycle
 
 
@@ -78,8 +79,6 @@ def machine_path(
     if theta0 is None and controls is None and start_state is None:
         tr = _periodic_trajectory(m, n_steps, dt)
     else:
-        from ..machine.dynamics import simulate
-
         th = np.full(n_steps, m.theta0) if theta0 is None else np.asarray(theta0, float)
         U0, H0 = (m.U, m.H) if start_state is None else start_state
         tr = simulate(U0, H0, th, m.control if controls is None else controls, dt)
@@ -135,8 +134,6 @@ def _periodic_trajectory(m, n_steps: int, dt: float) -> _Tiled:
 
     The cycle is periodic to 1e-9, so this equals simulating every step while costing one stride.
     """
-    from ..machine.dynamics import simulate
-
     T2, dx = 2.0 * m.step_time, 2.0 * m.step_length
     n_frames = int(math.floor(n_steps * m.step_time / dt + 1e-9)) + 1
     t = np.arange(n_frames) * dt

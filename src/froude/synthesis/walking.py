@@ -19,9 +19,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.constants import UP_AXIS
-from .cycle import sample_cycle
+from ..errors import FroudeError
+from ..machine.walk_fit import fit_walking_detailed
+from ..machine.walk_speed import check_walking_speed, walking_machines_at_speeds
+from .cycle import extract_cycle, sample_cycle
 from .feet import min_jerk
 from .phases import FootEvent
+from .timewarp import MachinePath
 
 __all__ = ["StepPlan", "contact_from_com", "fit_walk", "plan_walk_speed_change", "soften_swing_weights", "steps_path",
            "walk_machine_path", "walking_events"]
@@ -59,9 +63,6 @@ def fit_walk(motion, body, com, markers, gait, source: str, mass: float):
 
     Returns (WalkFitResult, ReferenceCycle)."""
     from pathlib import Path
-
-    from ..machine.walk_fit import fit_walking_detailed
-    from .cycle import extract_cycle
 
     fit = fit_walking_detailed(motion, body, mass=mass, source=Path(source).name)
     events = walking_events(gait, motion.frame_time, motion.n_frames)
@@ -162,8 +163,6 @@ def walk_scale_path(prep, retarget, speed: float, *, n_steps: int, fps: float):
     """The machine path and method name of a walk's ``scale``: faster by the re-solved walking cycle, slower
     by §5.2's stretch (below the clip's speed the re-solved cycle does not exist: ``machine.walk_speed``);
     past Froude 0.5 refused (``check_walking_speed``)."""
-    from ..machine.walk_speed import check_walking_speed
-
     walk = prep.machine  # a WalkingMachine (prepare chose it for the walk)
     check_walking_speed(walk.scaled(retarget.L, retarget.M), speed)
     if speed > 1.0 + 1e-9:  # longer and quicker steps
@@ -177,8 +176,6 @@ def walk_scale_path(prep, retarget, speed: float, *, n_steps: int, fps: float):
 def steps_path(prep, retarget, plan: StepPlan, fps: float):
     """A walk of ``plan``'s steps in the world (a ``pipeline.MachinePath``), time-warped and placed like
     ``walk_machine_path`` (which is this with one machine for every step)."""
-    from .timewarp import MachinePath
-
     cyc = prep.cycle
     n_steps = len(plan.machines)
     t, p, f_sag, lead, trail, k, t_td, t_double, t_stance, x_td, x_at = _stitch(plan, fps)
@@ -282,9 +279,6 @@ def plan_walk_speed_change(prep, retarget, *, to_speed=None, to_factor=None, ste
     as fit in ``within`` seconds) changing, then hold_steps at the goal. Returns (MachinePath, plan dict for
     the report's extras).
     """
-    from ..errors import FroudeError
-    from ..machine.walk_speed import check_walking_speed, walking_machines_at_speeds
-
     m = prep.machine.scaled(retarget.L, retarget.M)
     start = m.mean_speed * m.speed_unit
     if (to_speed is None) == (to_factor is None):

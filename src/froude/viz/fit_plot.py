@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..io.atomic import atomic_write
+
 
 def plot_fit(res, path, title: str = "") -> None:
     """Write the three-panel figure of a FitResult (froude.machine.fit) to a PNG, atomically."""
@@ -72,7 +74,6 @@ def plot_fit(res, path, title: str = "") -> None:
     a2.legend(fontsize=8)
     fig.suptitle(f"{title or m.source}: simple machine fit  (K = {m.K:.1f}, θ0 = {np.degrees(m.theta0):.1f}°, "
                  f"{m.mean_speed * m.speed_unit:.2f} m/s)")
-    from ..io.atomic import atomic_write
 
     try:
         atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))

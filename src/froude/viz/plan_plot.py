@@ -3,6 +3,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..machine.table import grid_around, load_or_build_table
+from .table_plot import plot_speed_profile, plot_table
+
 
 def plan_plot_paths(path) -> list[Path]:
     """The files ``plot_plan(result, path)`` writes: PATH and PATH-table.png."""
@@ -15,9 +18,6 @@ def plot_plan(result, path) -> list[Path]:
 
     result: a pipeline Output from ``accelerate`` (its ``plan`` and the prepared machine's control).
     """
-    from ..machine.table import grid_around, load_or_build_table
-    from .table_plot import plot_speed_profile, plot_table
-
     path = Path(path)
     plan = result.plan
     plot_speed_profile(plan, path, title=f"{result.retarget.character.name}: apex speed per step "

@@ -30,6 +30,7 @@ import numpy as np
 from ..core.constants import UP_AXIS
 from ..core.motion import Motion
 from ..errors import FroudeError
+from ..io.atomic import atomic_write
 from .draw import (
     _DPI,
     _TEXT,
@@ -174,8 +175,6 @@ def _check_path(path, allowed: tuple[str, ...]) -> Path:
 
 def _atomic(path: Path, write: Callable[[str], None]) -> None:
     """Run write(temp_path) on a temp file beside ``path`` (same extension), then move it into place."""
-    from ..io.atomic import atomic_write
-
     atomic_write(path, write)
 
 

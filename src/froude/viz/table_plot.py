@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..io.atomic import atomic_write
+
 __all__ = ["plot_table", "plot_speed_profile"]
 
 
@@ -19,8 +21,6 @@ def _pyplot():
 
 
 def _save(fig, path):
-    from ..io.atomic import atomic_write
-
     return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120))
 
 

@@ -9,6 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..io.atomic import atomic_write
+from ..machine.walk_fit import stance_leg_length
+
 
 def plot_walk_fit(res, path, title: str = "") -> None:
     """Write the three-panel figure of a WalkFitResult (froude.machine.walk_fit) to a PNG, atomically."""
@@ -16,8 +19,6 @@ def plot_walk_fit(res, path, title: str = "") -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from ..machine.walk_fit import stance_leg_length
 
     m = res.machine
     T = m.time_unit
@@ -62,7 +63,6 @@ def plot_walk_fit(res, path, title: str = "") -> None:
     a2.legend(fontsize=8)
     fig.suptitle(f"{title or m.source}: walking machine fit  (K = {m.K:.1f}, θ0 = {np.degrees(m.theta0):.1f}°, "
                  f"{m.mean_speed * m.speed_unit:.2f} m/s, double support {100 * m.double_support_fraction:.0f}%)")
-    from ..io.atomic import atomic_write
 
     try:
         atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))

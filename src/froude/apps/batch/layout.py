@@ -36,7 +36,10 @@ def _task_params(task: Task, plan: Plan) -> dict:
 
 def read_done(outdir, task: Task, plan: Plan) -> dict | None:
     """The index row stored by a complete earlier run of ``task``, or None (missing, partial or stale)."""
+    # lazy: start-up (the batch modules load no NumPy: a plan is read and checked before the pipeline)
     from ...flow.pipeline import report_path
+
+    # lazy: start-up (the batch modules load no NumPy: a plan is read and checked before the pipeline)
     from ...io.jsonable import jsonable
 
     bvh = Path(outdir) / task.output
@@ -52,6 +55,7 @@ def read_done(outdir, task: Task, plan: Plan) -> dict | None:
 def is_temporary(name: str) -> bool:
     """True for a file name ``atomic_write`` uses while it writes (``io.atomic.is_temporary``), never the
     driver's lock (batch outputs never start with '.')."""
+    # lazy: start-up (the batch modules load no NumPy: a plan is read and checked before the pipeline)
     from ...io.atomic import is_temporary as atomic_temporary
 
     return name != LOCK_NAME and atomic_temporary(name)
@@ -123,6 +127,7 @@ def _cell(v) -> str:
 
 def write_index(outdir, rows) -> Path:
     """index.csv (atomically); index.parquet too when pyarrow is installed."""
+    # lazy: start-up (the batch modules load no NumPy: a plan is read and checked before the pipeline)
     from ...io.bvh import atomic_write_text
 
     path = Path(outdir) / INDEX_NAME
@@ -138,6 +143,7 @@ def write_parquet(outdir, rows) -> Path | None:
         import pyarrow.parquet as pq
     except ImportError:
         return None
+    # lazy: start-up (the batch modules load no NumPy: a plan is read and checked before the pipeline)
     from ...io.atomic import atomic_write
 
     table = pacsv.read_csv(pa.py_buffer(index_text(rows).encode()))

@@ -105,6 +105,7 @@ def load_plan(path) -> Plan:
 
 def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
     """A Plan from the parsed YAML mapping; every problem is one BatchError line naming the key."""
+    # lazy: start-up (the batch modules load no NumPy: a plan is read and checked before the pipeline)
     from ...body.characters import list_presets, resolve_character
 
     def bad(where, msg):
@@ -293,6 +294,7 @@ def _spec_path(spec: str, presets, base_dir) -> str:
 def _speed(s, where, bad) -> tuple[str, tuple]:
     """A speed entry → (id part, scale kwargs) in froude's one speed syntax (``froude.flow.speed_goal``):
     0.8 / '0.8x' a factor, '3.5m/s' an absolute speed."""
+    # lazy: start-up (the batch modules load no NumPy: a plan is read and checked before the pipeline)
     from ...flow.speed_goal import parse_speed
 
     try:

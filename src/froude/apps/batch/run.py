@@ -14,6 +14,7 @@ from ...errors import FroudeError
 if TYPE_CHECKING:
     from ...flow.prepared import Prepared
 
+from ..signals import ignoring, interrupt_on_signals, restore_signals
 from .layout import (
     INDEX_NAME,
     LOCK_NAME,
@@ -47,7 +48,7 @@ class Prepped:
 
 def prepare_clip(path: str, mass: float, sex: str, length_scale) -> Prepped:
     """Worker task: ``pipeline.prepare`` of one clip (fit once; its result feeds all the clip's variations)."""
-    from ...flow import pipeline
+    from ...flow import pipeline  # lazy: workers only (the client process never loads the pipeline)
 
     t0 = time.perf_counter()
     try:
@@ -59,9 +60,9 @@ def prepare_clip(path: str, mass: float, sex: str, length_scale) -> Prepped:
 
 def run_task(prepped: Prepped, task: Task, plan: Plan, outdir: str) -> dict:
     """Worker task: one variation of one prepared clip → BVH + report (atomic), done-marker last; its index row."""
-    from ...flow import pipeline
-    from ...io.bvh import atomic_write_text
-    from ...io.jsonable import dumps
+    from ...flow import pipeline  # lazy: workers only (the client process never loads the pipeline)
+    from ...io.bvh import atomic_write_text  # lazy: workers only (the client process never loads the pipeline)
+    from ...io.jsonable import dumps  # lazy: workers only (the client process never loads the pipeline)
 
     t0, c0 = time.perf_counter(), time.process_time()
     row = base_row(task)
@@ -189,8 +190,6 @@ def start_client(scheduler: str | None = None, n_workers: int | None = None):
     import logging
     import signal
 
-    from ..signals import ignoring
-
     n = n_workers or default_workers()
     env = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **WORKER_ENV}
     # Ctrl-C reaches the whole foreground process group: the worker processes ignore it (they inherit
@@ -210,7 +209,7 @@ def warm_up(client) -> None:
 
 
 def _import_pipeline() -> None:
-    import froude.flow.pipeline  # noqa: F401
+    import froude.flow.pipeline  # noqa: F401  # lazy: run on each worker by warm_up: its point is to import there
     import froude.machine.fit  # noqa: F401
 
 
@@ -304,8 +303,6 @@ def _interrupt_handlers():
     one arrives; returns what ``_restore_handlers`` puts back."""
     import logging
 
-    from ..signals import interrupt_on_signals
-
     levels = {n: logging.getLogger(n).level for n in _NOISY_LOGGERS}
 
     def quiet():
@@ -317,8 +314,6 @@ def _interrupt_handlers():
 
 def _restore_handlers(handlers) -> None:
     import logging
-
-    from ..signals import restore_signals
 
     if handlers is None:  # stopped before they were installed
         return

@@ -22,6 +22,10 @@ from typing import Any
 import bpy
 import numpy as np
 
+import froude
+
+from ...body.model import load_joint_map
+from ...body.presets import list_presets
 from ...core import quat
 from ...errors import FroudeError
 from .adapter import (
@@ -213,8 +217,6 @@ def read_motion(context):
     obj, action = active_armature(context)
     joint_map = None
     if st.joint_map.strip():
-        from ...body.model import load_joint_map
-
         joint_map = load_joint_map(bpy.path.abspath(st.joint_map))
     unit = context.scene.unit_settings.scale_length if st.length_unit == "SCENE" else None
     spacing = float(np.diff(frames).mean())  # scene frames per sample
@@ -419,8 +421,6 @@ class FROUDE_OT_scale(_FroudeOperator):
     what = "scale"
 
     def compute(self, context, motion):
-        import froude
-
         st = context.scene.froude
         return froude.scale(motion, speed=typed(st.speed_factor), strides=st.strides, reference_mass=typed(st.mass_kg),
                             **_character_kwargs(st))
@@ -438,8 +438,6 @@ class FROUDE_OT_accelerate(_FroudeOperator):
     what = "accelerate"
 
     def compute(self, context, motion):
-        import froude
-
         st = context.scene.froude
         return froude.accelerate(motion, to_factor=typed(st.to_factor), steps=st.steps,
                                  reference_mass=typed(st.mass_kg),
@@ -461,8 +459,6 @@ class FROUDE_OT_info(bpy.types.Operator):
         return _FroudeOperator.poll(context)
 
     def execute(self, context):
-        import froude
-
         st = context.scene.froude
         st.error = ""
         progress = _Progress(context, "info")
@@ -561,8 +557,6 @@ class FROUDE_PT_panel(bpy.types.Panel):
 
 
 def _character_items(self, context):
-    from ...body.presets import list_presets
-
     return [(SAME_BODY, "Same body", "the action's own body")] + [(p, p, f"froude's '{p}' preset")
                                                                   for p in list_presets()]
 

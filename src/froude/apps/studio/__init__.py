@@ -16,7 +16,7 @@ __all__ = ["Params", "Session", "Studio", "serve"]
 
 def __getattr__(name):  # viser only when the UI is wanted
     if name in ("Studio", "serve"):
-        from . import app
+        from . import app  # lazy: start-up (viser only when the UI is wanted)
 
         return getattr(app, name)
     raise AttributeError(name)

@@ -30,11 +30,16 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import FroudeError
+from ...flow import pipeline
+from ...flow.speed_range import SearchStopped, reachable_speed_range
+from ..signals import interrupt_on_signals, restore_signals
+from . import guard
 from .export import _Export
+from .guard import reachable_addresses
 from .layout import MAX_CLIP_BYTES, _Layout, _page_script
 from .playback import COLOR_NAIVE, COLOR_PREVIEW, COLOR_REFERENCE, COLOR_RESULT, DISPLAY_HZ, _Playback, _Runner
 from .session import LIMITS, Params, Session, Solved, with_character, with_report
-from .tracks import naive_track
+from .tracks import motion_hash, naive_track
 
 #: A change whose IK result is expected to take longer than this [s] (the last result of its mode, per
 #: stride) first shows a preview — the machine's motion on the new body, no IK — and waits DEBOUNCE_S of
@@ -118,7 +123,6 @@ class Tab(_Layout, _Playback, _Export):
     def _atomic(self):
         return self.client.atomic() if self.client is not None else self.studio.server.atomic()
 
-
     def _wire_gui(self) -> None:
         """Each control's handler (called by ``_build_gui`` once the controls exist)."""
         self.gui_play.on_click(self._on_play)
@@ -178,8 +182,6 @@ class Tab(_Layout, _Playback, _Export):
         The search gives way to the user: a change (or the tab closing) that comes in meanwhile stops it
         after the output being checked, and the change is computed next; the outputs already checked are
         kept, and the search resumes from them when this preset's result is next on screen (apply)."""
-        from ...flow.speed_range import SearchStopped, reachable_speed_range
-
         rng = self.session.speed_ranges.get(character)
         lim = LIMITS["speed"]
         if rng is None:
@@ -210,7 +212,6 @@ class Tab(_Layout, _Playback, _Export):
             self.gui_speed.min, self.gui_speed.max = round(lo, 2), round(hi, 2)
         self.gui_status.content = self._status_md()
         self._flush()
-
 
     def _on_naive(self, event) -> None:
         if event.client is None:
@@ -282,7 +283,6 @@ class Tab(_Layout, _Playback, _Export):
                              f"{MAX_CLIP_BYTES >> 20} MB limit; trim the clip or use the command line")
             return
         self._post(("clip", name, bytes(data)))
-
 
     # ---- recompute
     def request(self, params: Params) -> None:
@@ -390,8 +390,6 @@ class Tab(_Layout, _Playback, _Export):
 
     def _solve_naive(self) -> None:
         """The engine-style naive retarget of the current result (scale only), drawn beside it."""
-        from ...flow import pipeline
-
         p = self.good.params
         if p.mode != "scale":
             self.naive = None
@@ -403,7 +401,6 @@ class Tab(_Layout, _Playback, _Export):
         res = pipeline.scale(self.session.prep, spec, speed=p.speed, strides=p.strides, method="naive", **nums)
         track = naive_track(res, self.session.prep)
         track.capsules  # noqa: B018
-        from .tracks import motion_hash
 
         self.naive = Solved(p, track, res, False, time.perf_counter() - t0, motion_hash(res.motion),
                             res.motion.n_frames)
@@ -421,8 +418,6 @@ class Tab(_Layout, _Playback, _Export):
     def open_clip(self, name: str, data: bytes) -> bool:
         """Prepare an uploaded clip (checked, fitted) and make it this tab's reference. A bad clip says
         why in one line and the current clip stays."""
-        from ...flow import pipeline
-
         self._work_since, self._work_what = time.perf_counter(), f"opening {name} (loading, checking, fitting)"
         self._set_status(None)  # the progress line says what is going on
         try:
@@ -524,8 +519,6 @@ class Studio:
                  clip_name: str | None = None):
         import viser  # optional extra froude[studio]
 
-        from . import guard
-
         self.session = Session(prep)
         self.clip_name = clip_name or (Path(prep.source).name if prep.source else "clip")
         params = (params or Params()).check(self.session.presets)
@@ -587,8 +580,6 @@ class Studio:
     @property
     def urls(self) -> list[str]:
         """Every address a browser can open (bound to all interfaces: this machine's network addresses)."""
-        from .guard import reachable_addresses
-
         port = self.server.get_port()
         return [f"http://{f'[{a}]' if ':' in a else a}:{port}" for a in reachable_addresses(self.server.get_host())]
 
@@ -627,8 +618,6 @@ class Studio:
 def serve(prep, *, host: str = "127.0.0.1", port: int = 8080, params: Params | None = None,
           open_browser: bool = False, announce=print) -> int:
     """Run the studio until Ctrl-C (or SIGTERM); returns 0 after a clean shutdown."""
-    from ..signals import interrupt_on_signals, restore_signals
-
     old = interrupt_on_signals()  # Ctrl-C and SIGTERM both stop cleanly (apps.signals)
     studio = None
     try:

@@ -7,7 +7,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ...errors import FroudeError
-from ...flow.result import Output
+from ...flow.result import Output, in_place_motion
+from ...io.bvh import bvh_text
+from ...viz.render import render_video
 from .session import with_report
 
 if TYPE_CHECKING:  # a part of Tab: its methods use the attributes Tab.__init__ sets
@@ -41,9 +43,6 @@ class _Export(_TabPart):
         """The result as BVH: in the clip's units or metres/centimetres, at the clip's rate or another, with
         its root motion or in place (the CLI's ``in_place_motion``: only the forward progression between
         touchdowns comes off the root, so the sway and the surge within each step stay)."""
-        from ...flow.result import in_place_motion
-        from ...io.bvh import bvh_text
-
         units, rate, root = str(self.gui_bvh_units.value), str(self.gui_bvh_fps.value), str(self.gui_bvh_root.value)
         if units not in BVH_UNITS or rate not in BVH_RATES or root not in BVH_ROOT:  # crafted values
             self._show_error("BVH export options must be chosen from their lists")
@@ -63,8 +62,9 @@ class _Export(_TabPart):
     def _on_download_csv(self, event) -> None:
         """Per-frame data (COM, ground force, contacts, machine path) through ``froude.io.framedata``."""
         try:
+            # lazy: optional: a build without per-frame data says so instead
             from ...io.framedata import write_frame_data
-            from ...report.frames import frame_table
+            from ...report.frames import frame_table  # lazy: optional: a build without per-frame data says so instead
         except ImportError:
             self._show_error("per-frame CSV needs froude.io.framedata, which this build does not have")
             return
@@ -82,8 +82,6 @@ class _Export(_TabPart):
     def _on_download_mp4(self, event) -> None:
         """Render the reference and the result (and the naive one when shown) with ``froude render``'s
         capsules and this camera, then send the file. Takes seconds: the status says so."""
-        from ...viz.render import render_video
-
         motions = [self.session.prep.motion, self._good_result.motion]
         labels = ["reference", f"physical ({self.good.params.character})"]
         if self.gui_show_naive.value and self.naive is not None and self.naive.result is not None:

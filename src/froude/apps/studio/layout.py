@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ...io.jsonable import dumps
 from .export import BVH_RATES, BVH_ROOT, BVH_UNITS
 from .playback import (
     CAMERAS,
@@ -74,8 +75,6 @@ def _page_script(title: str) -> str:
     return f'<img src="/froude-no-image" alt="" style="display:none" onerror="{html.escape(js, quote=True)}">'
 
 def _js_str(s: str) -> str:
-    from ...io.jsonable import dumps
-
     return dumps(s).replace("<", "\\u003c")
 
 

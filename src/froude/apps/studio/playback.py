@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...core.constants import UP_AXIS
+from ...viz.rig import LEFT, RIGHT
 from .tracks import Track, capsule_instances
 
 if TYPE_CHECKING:  # a part of Tab: its methods use the attributes Tab.__init__ sets
@@ -68,8 +69,6 @@ SPHERE = _unit_sphere()
 
 def _shades(track: Track, color) -> np.ndarray:
     """(B+1, 3) uint8 capsule colours: the left side darker, the right lighter (render's convention)."""
-    from ...viz.rig import LEFT, RIGHT
-
     base = np.asarray(color, float)
     side = np.append(np.asarray(track.rig.bone_side), -1)
     k = np.where(side == LEFT, 0.7, np.where(side == RIGHT, 1.15, 1.0))[:, None]

@@ -17,8 +17,10 @@ import numpy as np
 
 from ...body.path import unstraighten, unstraighten_points
 from ...core.constants import GRAVITY, UP_AXIS
-from ...core.kinematics import fk_soa, to_soa
+from ...core.kinematics import fk, fk_soa, to_soa
 from ...core.motion import Motion
+from ...report.metrics import vertical_force_bw
+from ...viz.rig import build_rig
 
 if TYPE_CHECKING:
     from ...body.model import BodyModel
@@ -71,8 +73,6 @@ class Track:
     @functools.cached_property
     def rig(self):
         """The capsules of this skeleton (``froude render``'s): the same widths, head and sides."""
-        from ...viz.rig import build_rig
-
         assert self.body is not None, "a track without a body model is drawn as lines"
         return build_rig(self.body)
 
@@ -95,8 +95,6 @@ class Track:
 
     def exact_rig(self) -> None:
         """Replace a borrowed rig by this body's own (and redo the capsules)."""
-        from ...viz.rig import build_rig
-
         assert self.body is not None, "a track without a body draws lines only"
         self.__dict__["rig"] = build_rig(self.body)
         self.__dict__.pop("capsules", None)
@@ -193,8 +191,6 @@ def bone_segments(motion: Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def capsule_ends(motion: Motion, rig) -> np.ndarray:
     """(F, B+1, 2, 3) float32 end points [m] of a rig's capsules per frame; the head is the last, a
     zero-length capsule at the head centre."""
-    from ...core.kinematics import fk
-
     p, R = fk(motion)
     pts = rig.points(p, R)  # (F, P, 3)
     ends = np.stack([pts[:, rig.bone_a], pts[:, rig.bone_b]], axis=2)  # (F, B, 2, 3)
@@ -253,8 +249,6 @@ def path_stance_contacts(path, n_frames: int) -> np.ndarray:
 
 def body_force_bw(com: np.ndarray, frame_time: float) -> np.ndarray:
     """(F,) vertical ground force [body weights] implied by a COM path; NaN when it is too short."""
-    from ...report.metrics import vertical_force_bw
-
     try:
         return vertical_force_bw(com, frame_time)
     except Exception:  # a too-short or degenerate path: no curve rather than no studio

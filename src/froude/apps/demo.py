@@ -146,7 +146,7 @@ def report_markdown(rows, prep, clip, seconds: float) -> str:
         f"Reference: `{clip.name}` (CMU motion capture, subject 09). Fitted machine: U = {m.U:.3f}, "
         f"H = {m.H:.3f}, θ0 = {np.degrees(m.theta0):.1f}°, K = {m.K:.1f} (k = {m.k / 1000:.1f} kN/m), "
         f"l0 = {m.l0:.3f} m; stance {m.t_stance * m.time_unit:.3f} s, flight {m.t_flight * m.time_unit:.3f} s, "
-        f"{m.mean_speed * m.speed_unit:.2f} m/s.",
+        f"{m.mean_speed_m_s:.2f} m/s.",
         "",
         "| row | what | speed [m/s] | Froude U | step freq [Hz] | stance / flight [s] | flight gravity [m/s²] "
         "| COM tracking RMS / max [mm] | foot skate [mm] | penetration [mm] | joint jump [°] | bars |",

@@ -132,7 +132,7 @@ def plan_scale(
         raise FroudeError(f"fps must be > 0, got {fps}")
     notes = list(prep.notes)
     m_scaled = prep.machine.scaled(retarget.L, retarget.M)
-    base_m_s = m_scaled.mean_speed * m_scaled.speed_unit  # the character's speed at x1
+    base_m_s = m_scaled.mean_speed_m_s  # the character's speed at x1
     speed = scale_factor(speed, target_speed, base_m_s)
     notes += speed_range_notes(speed)
     n_steps = output_steps(strides, duration, m_scaled.step_time * m_scaled.time_unit)

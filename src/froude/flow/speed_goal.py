@@ -32,6 +32,11 @@ class SpeedGoal:
     def __str__(self) -> str:
         return f"{self.factor:g}x" if self.factor is not None else f"{self.m_s:g} m/s"
 
+    def factor_of(self, base_m_s: float) -> float:
+        """The goal as a speed factor [-] of ``base_m_s`` [m/s], the speed at factor 1 (``mean_speed_m_s`` of
+        the machine scaled to the character)."""
+        return self.factor if self.factor is not None else self.m_s / base_m_s  # type: ignore[operator]
+
 
 def parse_speed(text, what: str = "speed") -> SpeedGoal:
     """``'1.2x'`` or ``'1.2'`` -> factor 1.2; ``'3.5m/s'`` -> 3.5 m/s; numbers are factors.

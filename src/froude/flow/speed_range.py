@@ -120,7 +120,7 @@ def reachable_speed_range(prep: Prepared, character=None, *, stop=None, unlimite
         return hit
     rt = prep.retarget(character, **character_numbers)
     m = prep.machine.scaled(rt.L, rt.M)
-    base = m.mean_speed * m.speed_unit
+    base = m.mean_speed_m_s
     top = None if unlimited else prep.kind.human_top(prep, rt)
     human_top = None if top is None else top.factor
     search = (SPEED_SEARCH_RANGE[0],

@@ -112,6 +112,12 @@ class SimpleMachine:
         return speed_unit(self.l0, self.g)
 
     @property
+    def mean_speed_m_s(self) -> float:
+        """The cycle's mean forward speed [m/s] (mean_speed × √(g l0)): for a machine scaled to a character, the
+        character's speed at factor 1, the base every speed factor multiplies."""
+        return self.mean_speed * self.speed_unit
+
+    @property
     def control(self) -> Control:
         """The dimensionless stance control (K, a, b, c, T_c)."""
         return Control(K=self.K, a=self.a, b=self.b, c=self.c, T_c=self.T_c)
@@ -129,7 +135,7 @@ class SimpleMachine:
             "theta0_deg": math.degrees(self.theta0), "apex_speed_m_s": self.U * V, "apex_height_m": self.H * L,
             "T_c_s": self.T_c * T, "stance_time_s": self.t_stance * T, "flight_time_s": self.t_flight * T,
             "step_time_s": self.step_time * T, "step_length_m": self.step_length * L,
-            "mean_speed_m_s": self.mean_speed * V, "peak_force_N": self.peak_force * self.mass * self.g,
+            "mean_speed_m_s": self.mean_speed_m_s, "peak_force_N": self.peak_force * self.mass * self.g,
         }
 
     # ---- dynamic similarity (§5.1, Table 1) ----------------------------------------------------------

@@ -107,6 +107,12 @@ class WalkingMachine(ControlPulses):
         return speed_unit(self.l0, self.g)
 
     @property
+    def mean_speed_m_s(self) -> float:
+        """The cycle's mean forward speed [m/s] (mean_speed × √(g l0)): for a machine scaled to a character, the
+        character's speed at factor 1, the base every speed factor multiplies."""
+        return self.mean_speed * self.speed_unit
+
+    @property
     def control(self) -> WalkControl:
         return WalkControl(**{k: getattr(self, k) for k in WalkControl.NAMES})
 
@@ -132,12 +138,12 @@ class WalkingMachine(ControlPulses):
 
     def si(self) -> dict:
         """The cycle in SI."""
-        T, L, V = self.time_unit, self.l0, self.speed_unit
+        T, L = self.time_unit, self.l0
         return {"k_N_m": self.K * self.mass * self.g / L, "l0_m": L, "theta0_deg": math.degrees(self.theta0),
                 "touchdown_leg_m": self.l_td * L, "roll_m": self.roll * L, "stance_time_s": self.t_stance * T,
                 "double_support_s": self.t_double * T, "step_time_s": self.t_step * T,
                 "step_frequency_hz": 1.0 / (self.t_step * T), "step_length_m": self.step_length * L,
-                "mean_speed_m_s": self.mean_speed * V, "double_support_fraction": self.double_support_fraction}
+                "mean_speed_m_s": self.mean_speed_m_s, "double_support_fraction": self.double_support_fraction}
 
     def path(self, times_s) -> dict:
         """The periodic walk of this machine at times ``times_s`` (N,) [s] ≥ 0, in SI, sagittal.

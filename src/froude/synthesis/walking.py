@@ -280,7 +280,7 @@ def plan_walk_speed_change(prep, retarget, *, to_speed=None, to_factor=None, ste
     the report's extras).
     """
     m = prep.machine.scaled(retarget.L, retarget.M)
-    start = m.mean_speed * m.speed_unit
+    start = m.mean_speed_m_s
     if (to_speed is None) == (to_factor is None):
         raise FroudeError("give exactly one goal: a target speed [m/s] or a factor of the start speed")
     target = to_speed if to_speed is not None else to_factor * start

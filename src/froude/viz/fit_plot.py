@@ -73,7 +73,7 @@ def plot_fit(res, path, title: str = "") -> None:
     a2.set_title(f"leg force (stance fit r² = {ft.r2:.3f})")
     a2.legend(fontsize=8)
     fig.suptitle(f"{title or m.source}: simple machine fit  (K = {m.K:.1f}, θ0 = {np.degrees(m.theta0):.1f}°, "
-                 f"{m.mean_speed * m.speed_unit:.2f} m/s)")
+                 f"{m.mean_speed_m_s:.2f} m/s)")
 
     try:
         atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))

@@ -62,7 +62,7 @@ def plot_walk_fit(res, path, title: str = "") -> None:
     a2.set_title("vertical force over a stance (marks: peaks, trough)")
     a2.legend(fontsize=8)
     fig.suptitle(f"{title or m.source}: walking machine fit  (K = {m.K:.1f}, θ0 = {np.degrees(m.theta0):.1f}°, "
-                 f"{m.mean_speed * m.speed_unit:.2f} m/s, double support {100 * m.double_support_fraction:.0f}%)")
+                 f"{m.mean_speed_m_s:.2f} m/s, double support {100 * m.double_support_fraction:.0f}%)")
 
     try:
         atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))

@@ -64,7 +64,7 @@ def fit_table(res) -> str:
         f"        stance {m.t_stance * T:.3f} s (measured {ref['stance_time_s']:.3f}, "
         f"{100 * q['stance_time_error']:+.1f}%)  flight {m.t_flight * T:.3f} s (measured {ref['flight_time_s']:.3f}, "
         f"{100 * q['flight_time_error']:+.1f}%)",
-        f"        mean speed {m.mean_speed * m.speed_unit:.3f} m/s (measured {ref['mean_speed_m_s']:.3f}, "
+        f"        mean speed {m.mean_speed_m_s:.3f} m/s (measured {ref['mean_speed_m_s']:.3f}, "
         f"{100 * q['mean_speed_error']:+.1f}%)  COM height RMS vs reference over a stride "
         f"{100 * q['com_rms_m']:.2f} cm",
         f"forces  flight residual {ref['flight_residual_bw']:.3f} BW RMS; share of stance force captured: "
@@ -148,7 +148,7 @@ def walk_table(res) -> str:
         f"stance [s]           {ref['stance_time_s']:6.3f}     {st:6.3f}  {pct(q['stance_time_error'])}",
         f"double support [s]   {ref['double_support_s']:6.3f}     {m.t_double * T:6.3f}  "
         f"{pct(q['double_support_error'])}",
-        f"speed [m/s]          {ref['mean_speed_m_s']:6.3f}     {m.mean_speed * m.speed_unit:6.3f}  "
+        f"speed [m/s]          {ref['mean_speed_m_s']:6.3f}     {m.mean_speed_m_s:6.3f}  "
         f"{pct(q['mean_speed_error'])}",
         f"step time [s]        {ref['step_time_s']:6.3f}     {m.t_step * T:6.3f}",
     ]

@@ -93,8 +93,7 @@ def _start_factor(prep, args) -> float:
     factor = goal.factor
     if factor is None:
         rt = prep.retarget(None if args.character == "same" else args.character)
-        m = prep.machine.scaled(rt.L, rt.M)
-        factor = goal.m_s / (m.mean_speed * m.speed_unit)
+        factor = goal.factor_of(prep.machine.scaled(rt.L, rt.M).mean_speed_m_s)
     lo, hi = VIEW_SPEED_RANGE
     if not lo <= factor <= hi:
         raise FroudeError(f"--speed {goal} is a factor of {factor:.2f}; the studio's slider spans {lo:g}x to {hi:g}x")

@@ -207,7 +207,7 @@ class Session:
         spec, nums = params.character_args()
         rt = self.prep.retarget(spec, **nums)
         m = self.prep.machine.scaled(rt.L, rt.M)
-        v = params.speed * m.mean_speed * m.speed_unit
+        v = params.speed * m.mean_speed_m_s
         return self.prep.kind.speed_refusal(params.character, params.speed, v, err)
 
     def _accelerate_message(self, params: Params, err: FroudeError) -> str:

@@ -220,20 +220,21 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
     periodic too; ``ik.correct.tile_stride``).
     """
     targets, path = targets_of(prep, path, retarget)
+    rest_bar_m = BARS["rest_height_L"] * retarget.body.leg_length  # the report's bar on where a foot rests
     n_strides = len(path.foot_of_step) / 2
     if periodic is not None and n_strides > PERIODIC_MIN_STRIDES and prep.turn is None:
         machine, stretch, fps = periodic
         m = machine.scaled(retarget.L, retarget.M)
         dense_fps = PERIODIC_OVERSAMPLE * fps
         one_path = machine_path(prep.cycle, m, retarget.L, prep.origin, stretch=stretch, n_steps=2, fps=dense_fps)
-        one = correct(targets_of(prep, one_path, retarget)[0], retarget.body).motion
+        one = correct(targets_of(prep, one_path, retarget)[0], retarget.body, rest_bar_m=rest_bar_m).motion
         stride = path.contacts[2] - path.contacts[0] if len(path.contacts) > 2 else np.zeros(3)
         motion = tile_stride(one, 2.0 * m.step_time * m.time_unit, dense_fps, targets, path.times, stride,
                              retarget.body)
     else:
         ik = correct(targets, retarget.body, repair_rounds=prep.kind.repair_rounds,
                      joint_jump_bar_deg=BARS["joint_jump_ratio"] * prep.cycle.max_joint_jump_deg,
-                     skate_bar_m=1e-3 * BARS["foot_skate_floor_mm"])
+                     skate_bar_m=1e-3 * BARS["foot_skate_floor_mm"], rest_bar_m=rest_bar_m)
         if not ik.ok:
             bad = np.flatnonzero(ik.failed)
             notes = list(notes) + [f"IK best effort: {bad.size} frame(s) above tolerance (first frame {bad[0]})"]

@@ -46,6 +46,11 @@ RETRY_MARKER_ERROR = 3e-3
 #: ones only guide a swinging foot and may stay centimetres off (their floor is SWING_MARKER_WEIGHT): that
 #: is neither a reason to solve again nor a failure.
 HELD_MARKER_WEIGHT = 1.0
+#: ... and from this fraction of the output's rest-height bar (``correct``'s rest_bar_m) when that is the
+#: smaller: a held marker's error at a stance's lowest point is that stance's rest error, and a small
+#: character's bar (0.3 % of L: 1.8 mm for CMU 02_01's child) lies under RETRY_MARKER_ERROR, so a tip left
+#: 2.2 mm under its target as the heel rises was never solved again (02_01 child, frame 113: rest 0.375 % L).
+REST_BAR_SHARE = 0.5
 
 
 #: The physics report's stricter skate bar [m] (``report.metrics.BARS["foot_skate_floor_mm"]``; the pipeline
@@ -55,7 +60,7 @@ SKATE_BAR_M = 5e-3
 
 
 def correct(targets: Targets, body: BodyModel, on_failure: str = "flag", repair_rounds: int = 1,
-            joint_jump_bar_deg: float = np.inf, skate_bar_m: float = SKATE_BAR_M):
+            joint_jump_bar_deg: float = np.inf, skate_bar_m: float = SKATE_BAR_M, rest_bar_m: float = np.inf):
     """§6: whole-body IK toward the machine COM and the foot targets, pulled toward the reference pose.
 
     All frames are solved together with the solver's fast chord iterations. Then one repair pass solves
@@ -67,6 +72,8 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag", repair_
     two starts and keep the best pose, judged on both neighbours (``_repair_later``). Finally the COM is made
     exact by a root translation. joint_jump_bar_deg [deg]: the output's joint-jump bar (the physics report's,
     1.5 x the clip's largest jump), one of the bars a repaired pose is judged on (``_bar_misses``).
+    rest_bar_m [m]: the output's rest-height bar (the physics report's, 0.3 % of L): a held marker is solved
+    again from REST_BAR_SHARE of it when that is under RETRY_MARKER_ERROR (``_frames_to_retry``).
     """
     res = _fast_pass(targets, body)
     targets, res = _hold_on_floor(targets, body, res)
@@ -74,9 +81,10 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag", repair_
     res = _replace(res, failed=_missed(res, held, DEFAULT_MAX_ERROR))
     assert res.com_error is not None and res.com is not None  # the ComTask is always given
     init_jump = _largest_joint_angle_deg(targets.initial.rotations[1:], targets.initial.rotations[:-1])
-    res, _ = _repair(res, targets, body, held, init_jump, joint_jump_bar_deg, skate_bar_m)
+    retry_m = min(RETRY_MARKER_ERROR, REST_BAR_SHARE * rest_bar_m)
+    res, _ = _repair(res, targets, body, held, init_jump, joint_jump_bar_deg, skate_bar_m, retry_m)
     for _ in range(repair_rounds - 1):
-        res, n_bad = _repair_later(res, targets, body, held, init_jump, joint_jump_bar_deg, skate_bar_m)
+        res, n_bad = _repair_later(res, targets, body, held, init_jump, joint_jump_bar_deg, skate_bar_m, retry_m)
         if not n_bad:
             break
     # Make the COM exact: the remaining sub-millimetre error is removed by a root translation (the COM
@@ -92,9 +100,9 @@ def correct(targets: Targets, body: BodyModel, on_failure: str = "flag", repair_
 
 
 def _repair(res, targets: Targets, body: BodyModel, held: np.ndarray, init_jump: np.ndarray,
-            jump_bar: float = np.inf, skate_bar_m: float = SKATE_BAR_M):
+            jump_bar: float = np.inf, skate_bar_m: float = SKATE_BAR_M, retry_m: float = RETRY_MARKER_ERROR):
     """One repair pass of ``correct``: the frames whose COM or held foot markers (held (F, 6)) stayed above
-    RETRY_COM_ERROR / RETRY_MARKER_ERROR, or that jumped to another branch (a joint changing more than
+    RETRY_COM_ERROR / retry_m [m], or that jumped to another branch (a joint changing more than
     BRANCH_JUMP_DEG more than the reference pose's init_jump (F-1,) [deg]), solved again with a fresh
     Jacobian at every step, warm-started from their own solution (from the previous frame's where they
     jumped); a frame keeps the new pose only where it is better (``_better``): missing the held-marker,
@@ -102,7 +110,7 @@ def _repair(res, targets: Targets, body: BodyModel, held: np.ndarray, init_jump:
     them (``_bar_misses``), then by the smaller jump where it jumped, else by the smaller held error, and
     never further over the joint-jump bar. Returns (result, frames tried)."""
     rot = res.motion.rotations
-    bad, flip = _frames_to_retry(res, held, init_jump)
+    bad, flip = _frames_to_retry(res, held, init_jump, retry_m)
     if not bad.size:
         return res, 0
     src = np.where(flip[bad], bad - 1, bad)  # a jumped frame starts from its neighbour's solution
@@ -125,7 +133,7 @@ def _repair(res, targets: Targets, body: BodyModel, held: np.ndarray, init_jump:
 
 
 def _repair_later(res, targets: Targets, body: BodyModel, held: np.ndarray, init_jump: np.ndarray,
-                  jump_bar: float = np.inf, skate_bar_m: float = SKATE_BAR_M):
+                  jump_bar: float = np.inf, skate_bar_m: float = SKATE_BAR_M, retry_m: float = RETRY_MARKER_ERROR):
     """A further repair pass (a walk's, ``correct``'s repair_rounds): the frames that still jump to another
     branch or miss their COM or held foot markers, each solved from its own pose and from the previous
     frame's. A pose is judged by how far it misses the bars in all, in bar units, then how many
@@ -138,7 +146,7 @@ def _repair_later(res, targets: Targets, body: BodyModel, held: np.ndarray, init
     of such passes). Returns (result, frames tried)."""
     rot = res.motion.rotations
     F = len(rot)
-    bad, _ = _frames_to_retry(res, held, init_jump)
+    bad, _ = _frames_to_retry(res, held, init_jump, retry_m)
     if not bad.size:
         return res, 0
     sub = _rows_of(targets, bad)
@@ -291,15 +299,16 @@ def _merge_rows(res, rows: np.ndarray, again, take=slice(None)):
     return _replace(res, motion=res.motion.with_(root_positions=root, rotations=rot), **out)
 
 
-def _frames_to_retry(res, held: np.ndarray, init_jump: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _frames_to_retry(res, held: np.ndarray, init_jump: np.ndarray,
+                     retry_m: float = RETRY_MARKER_ERROR) -> tuple[np.ndarray, np.ndarray]:
     """(frame indices, flip (F,) bool) of the frames a repair pass solves again: those whose COM or held
-    foot markers (held (F, 6)) are above RETRY_COM_ERROR / RETRY_MARKER_ERROR, or that jumped to another
+    foot markers (held (F, 6)) are above RETRY_COM_ERROR / retry_m [m], or that jumped to another
     branch (flip: a joint turning more than BRANCH_JUMP_DEG beyond the reference pose's init_jump (F-1,)
     [deg] from the frame before)."""
     rot = res.motion.rotations
     flip = np.zeros(len(rot), bool)
     flip[1:] = _largest_joint_angle_deg(rot[1:], rot[:-1]) > init_jump + BRANCH_JUMP_DEG
-    bad = np.flatnonzero(flip | (res.com_error > RETRY_COM_ERROR) | _missed(res, held, RETRY_MARKER_ERROR))
+    bad = np.flatnonzero(flip | (res.com_error > RETRY_COM_ERROR) | _missed(res, held, retry_m))
     return bad, flip
 
 

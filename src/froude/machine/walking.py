@@ -341,8 +341,11 @@ class _Machine:
                     del slack[i]
                     acc = self.accel_fn(legs, armed)
                     break
+            # The event at the new node is e1 unless a leg was armed inside the step (which moves the node):
+            # evaluating it again cost a sixth of the walking fit (issue 29).
+            same_node = h_taken == h
             s, t = s1, t + h_taken
-            e0 = event(s, t)
+            e0 = e1 if same_node else event(s, t)
             if nodes is not None:
                 nodes.append((t, *s))
             if s[1] <= MIN_COM_HEIGHT:

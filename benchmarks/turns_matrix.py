@@ -20,7 +20,7 @@ from the output motion alone). Per output, one row against acceptance 1 (bars in
 - lean: largest difference of a turning step's lean from the one asked [deg] (2 pure scaling, 3 speed change);
 - bars: the physics bars missed (``Report.check_bars``, the path, lean and force bars and the stricter skate
   ``foot_skate_floor_mm`` <= 5 mm among them).
-Prints the rows and how many outputs meet every point.
+Prints the rows, how many outputs meet every point, and per point how many miss it (and miss it alone).
 """
 from __future__ import annotations
 
@@ -111,11 +111,28 @@ def row(prep, label: str, kw: dict) -> dict:
         "skate_floor_mm": skate,
         "bars": rep.check_bars(),
     }
-    ok = (abs(out["dH"]) <= 3 and out["dH_step"] <= 3 and (out["r_pct"] is None or abs(out["r_pct"]) <= 5)
-          and abs(out["face"]) <= 5 and abs(out["v_pct"]) <= 2 and (out["f_pct"] is None or abs(out["f_pct"]) <= 2)
-          and (out["lean"] is None or out["lean"] <= out["lean_tol"]) and not out["bars"])
-    out["ok"] = ok
+    out["missed"] = [name for name, met in _points(out).items() if not met]
+    out["ok"] = not out["missed"]
     return out
+
+
+def _points(r: dict) -> dict[str, bool]:
+    """Each point of acceptance 1 and 2 (the module's list) for one row: met or not."""
+    return {"heading": abs(r["dH"]) <= 3, "heading/step": r["dH_step"] <= 3,
+            "radius/step": r["r_pct"] is None or abs(r["r_pct"]) <= 5, "facing": abs(r["face"]) <= 5,
+            "speed": abs(r["v_pct"]) <= 2, "cadence": r["f_pct"] is None or abs(r["f_pct"]) <= 2,
+            "lean": r["lean"] is None or r["lean"] <= r["lean_tol"], "bars": not r["bars"]}
+
+
+def _breakdown(rows: dict) -> str:
+    """Per point: how many of the outputs made miss it, and how many miss it alone."""
+    made = [r for r in rows.values() if "missed" in r]
+    lines = [f"per point, of {len(made)} outputs made: missed (missed alone)"]
+    for name in _points(made[0]) if made else ():
+        n = sum(name in r["missed"] for r in made)
+        alone = sum(r["missed"] == [name] for r in made)
+        lines.append(f"  {name:13s} {n:3d} ({alone})")
+    return "\n".join(lines)
 
 
 def _fmt(v, spec="+.1f"):
@@ -165,6 +182,7 @@ def main(argv=None) -> int:
                   f"{_fmt(r['lean'], '.1f'):>5s}  {'OK' if r['ok'] else bars}", flush=True)
         print(f"   ({time.time() - t0:.0f} s)", flush=True)
     print(f"\n{n_ok} of {n_out} outputs meet every point of acceptance 1 and 2 ({time.time() - t_all:.0f} s)")
+    print(_breakdown(rows))
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1, default=str))
     return 0 if n_ok == n_out else 1

@@ -176,6 +176,7 @@ def test_fit_takes_the_machine_info_names(name, run_cli, tmp_path, monkeypatch):
 
     monkeypatch.setattr("froude.machine.walk_fit.fit_walking_detailed", record("walking"))
     monkeypatch.setattr("froude.machine.fit.fit_machine_detailed", record("running"))
+    monkeypatch.setattr("froude.flow.kinds.fit_machine_detailed", record("running"))  # bound at import there
     assert cli_fit  # the CLI imports the fitters when it runs
     code, out, err = run_cli("fit", clip(name), "-o", tmp_path / "m.json")
     assert code == 2

@@ -172,6 +172,7 @@ def test_speed_control_bounded_to_what_is_reachable(session, monkeypatch):
     """The speed slider spans the factors whose outputs meet every physics bar (pipeline's
     reachable_speed_range), and the server refuses a value beyond them whatever sent it."""
     pytest.importorskip("viser")
+    from froude.apps.studio import app
     from froude.apps.studio.app import Studio
 
     studio = Studio(session.prep, port=_free_port())
@@ -207,7 +208,7 @@ def test_speed_control_bounded_to_what_is_reachable(session, monkeypatch):
         def stopped(*args, **kwargs):
             raise speed_range.SearchStopped()
 
-        monkeypatch.setattr(speed_range, "reachable_speed_range", stopped)
+        monkeypatch.setattr(app, "reachable_speed_range", stopped)  # the name the studio calls
         tab._bound_speed("troll")
         assert "troll" not in tab.session.speed_ranges
         assert (tab.gui_speed.min, tab.gui_speed.max) == (0.5, 2.0)

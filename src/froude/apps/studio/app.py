@@ -211,6 +211,7 @@ class Tab(_Layout, _Playback, _Export):
         if (self.gui_speed.min, self.gui_speed.max) != (round(lo, 2), round(hi, 2)):
             self.gui_speed.min, self.gui_speed.max = round(lo, 2), round(hi, 2)
         self.gui_status.content = self._status_md()
+        self.gui_state.content = self._state_md()  # its speed_reach= changes with the range
         self._flush()
 
     def _on_naive(self, event) -> None:

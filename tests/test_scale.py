@@ -13,7 +13,7 @@ from froude.body.characters import list_presets
 from froude.core import quat
 from froude.core.constants import GRAVITY
 from froude.flow import pipeline
-from froude.ik.correct import correct
+from froude.ik.correct import correct, stride_samples
 from froude.report.metrics import BARS, physics_report
 
 from conftest import RUNNING, clip, clip_params, matrix_group
@@ -107,20 +107,36 @@ def test_ten_strides_no_seam(prepared, name):
 
 def test_long_output_is_the_tiled_cycle(prepared):
     """A steady output longer than PERIODIC_MIN_STRIDES is solved on one stride and tiled; it must agree
-    with the frame-by-frame solution and still meet the bars."""
+    with the frame-by-frame solution and still meet the bars.
+
+    The two routes solve slightly different targets: a contact's rest is set by its lowest target in a window
+    (synthesis.targets._rest_on_floor), found among the samples of each route, and a toe's dip at push-off
+    lasts about a frame at 120 Hz (the troll's tip on 09_03: each contact of the frame-by-frame route moved
+    by 6.3-9.9 mm, the tiled stride's by 7.1). So the solutions agree to 2 mm beyond where their targets
+    differ, and the targets of a loaded foot differ by less than the report's rest-height bar."""
     prep = prepared["09_03"]
-    long = pipeline.scale(prep, "troll", strides=pipeline.PERIODIC_MIN_STRIDES + 2)
-    short_path = long.path
+    plan = pipeline.plan_scale(prep, "troll", strides=pipeline.PERIODIC_MIN_STRIDES + 2)
+    long = plan.finish()
+    assert plan.periodic is not None  # solved on one stride and tiled
     body = long.retarget.body  # solved as the tiled stride is: its repair aims under the rest-height bar
     direct = correct(long.targets, body, rest_bar_m=BARS["rest_height_L"] * body.leg_length).motion
     p_long = long.retarget.body.foot_markers(long.motion)
     p_direct = long.retarget.body.foot_markers(direct)
     d = np.linalg.norm(p_long - p_direct, axis=-1)
+    # the tiled route's own targets at the output's times, as tile_stride places its poses
+    one, period, dense_fps = pipeline.stride_targets(prep, long.retarget, plan.periodic)
+    n, i0, w = stride_samples(long.path.times, period, dense_fps, len(one.com))
+    stride = long.path.contacts[2] - long.path.contacts[0]
+    stride[1] = 0.0
+    w4 = w[:, None, None, None]
+    tiled_targets = one.markers[i0] * (1 - w4) + one.markers[i0 + 1] * w4 + n[:, None, None, None] * stride
+    d_targets = np.linalg.norm(tiled_targets - long.targets.markers, axis=-1)
     loaded = long.targets.marker_weight >= 0.5 * long.targets.marker_weight.max()
-    assert d[loaded].max() < 0.002  # feet on the ground: the same to 2 mm
+    assert d_targets[loaded].max() < BARS["rest_height_L"] * body.leg_length
+    assert (d - d_targets)[loaded].max() < 0.002  # feet on the ground: the same to 2 mm where the targets are
     assert d.max() < 0.03  # swinging feet (weakly guided, several near-equal poses): within 3 cm
     assert not long.report.check_bars()
-    assert len(short_path.foot_of_step) == 2 * (pipeline.PERIODIC_MIN_STRIDES + 2)
+    assert len(long.path.foot_of_step) == 2 * (pipeline.PERIODIC_MIN_STRIDES + 2)
 
 
 def test_output_file_and_report(tmp_path, prepared):

@@ -27,7 +27,7 @@ from ..errors import FroudeError
 from ..ik.correct import correct, tile_stride
 from ..report.metrics import BARS, physics_report, source_rest_heights
 from ..synthesis.bend import bend
-from ..synthesis.targets import build_targets, raised, stance_only
+from ..synthesis.targets import Targets, build_targets, raised, stance_only
 from ..synthesis.timewarp import MachinePath, machine_path
 from .kinds import choose_kind
 from .naive import naive_clip, naive_cycle, naive_take
@@ -207,8 +207,19 @@ PERIODIC_OVERSAMPLE = 4
 def targets_of(prep: Prepared, path: MachinePath, retarget: Retarget):
     """(targets, path) where an output is solved (IK) and previewed: the cycle on the machine (build_targets),
     along a turning take's path (bend), on the floor y = 0 as the clip stands on its own (raised)."""
-    targets = build_targets(prep.cycle, path, retarget, prep.body.leg_length, prep.output_meta)
+    targets = build_targets(prep.cycle, path, retarget, prep.body, prep.output_meta)
+    path = _replace(path, com=targets.com)  # the machine's COM as the character carries it (posture_com_offset)
     return raised(*bend(targets, path, prep.turn, retarget.L, prep.origin), retarget.L * prep.cycle.floor_clearance)
+
+
+def stride_targets(prep: Prepared, retarget: Retarget, periodic: tuple) -> tuple[Targets, float, float]:
+    """(targets of one stride of a steady output sampled PERIODIC_OVERSAMPLE times finer, its period [s], that
+    rate [Hz]): what ``finish`` solves and tiles; periodic: ScalePlan.periodic (machine, stretch, fps)."""
+    machine, stretch, fps = periodic
+    m = machine.scaled(retarget.L, retarget.M)
+    dense_fps = PERIODIC_OVERSAMPLE * fps
+    one_path = machine_path(prep.cycle, m, retarget.L, prep.origin, stretch=stretch, n_steps=2, fps=dense_fps)
+    return targets_of(prep, one_path, retarget)[0], 2.0 * m.step_time * m.time_unit, dense_fps
 
 
 def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, notes, method: str, plan=None,
@@ -223,14 +234,10 @@ def finish(prep: Prepared, path: MachinePath, retarget: Retarget, speed: float, 
     rest_bar_m = BARS["rest_height_L"] * retarget.body.leg_length  # the report's bar on where a foot rests
     n_strides = len(path.foot_of_step) / 2
     if periodic is not None and n_strides > PERIODIC_MIN_STRIDES and prep.turn is None:
-        machine, stretch, fps = periodic
-        m = machine.scaled(retarget.L, retarget.M)
-        dense_fps = PERIODIC_OVERSAMPLE * fps
-        one_path = machine_path(prep.cycle, m, retarget.L, prep.origin, stretch=stretch, n_steps=2, fps=dense_fps)
-        one = correct(targets_of(prep, one_path, retarget)[0], retarget.body, rest_bar_m=rest_bar_m).motion
+        one_targets, period, dense_fps = stride_targets(prep, retarget, periodic)
+        one = correct(one_targets, retarget.body, rest_bar_m=rest_bar_m).motion
         stride = path.contacts[2] - path.contacts[0] if len(path.contacts) > 2 else np.zeros(3)
-        motion = tile_stride(one, 2.0 * m.step_time * m.time_unit, dense_fps, targets, path.times, stride,
-                             retarget.body)
+        motion = tile_stride(one, period, dense_fps, targets, path.times, stride, retarget.body)
     else:
         ik = correct(targets, retarget.body, repair_rounds=prep.kind.repair_rounds,
                      joint_jump_bar_deg=BARS["joint_jump_ratio"] * prep.cycle.max_joint_jump_deg,

@@ -115,7 +115,7 @@ def _repair(res, targets: Targets, body: BodyModel, held: np.ndarray, init_jump:
         return res, 0
     src = np.where(flip[bad], bad - 1, bad)  # a jumped frame starts from its neighbour's solution
     start = res.motion.with_(root_positions=res.motion.root_positions[src], rotations=rot[src])
-    sub = _rows_of(targets, bad)
+    sub = targets.rows(bad)
     again = _solve_from(sub, start, body, IK_UNFLIP_ITERS if flip[bad].any() else IK_REPAIR_ITERS)
     again = _replace(again, failed=_missed(again, held[bad], DEFAULT_MAX_ERROR))
     prev = rot[np.maximum(bad - 1, 0)]
@@ -149,7 +149,7 @@ def _repair_later(res, targets: Targets, body: BodyModel, held: np.ndarray, init
     bad, _ = _frames_to_retry(res, held, init_jump, retry_m)
     if not bad.size:
         return res, 0
-    sub = _rows_of(targets, bad)
+    sub = targets.rows(bad)
     prev, nxt = rot[np.maximum(bad - 1, 0)], rot[np.minimum(bad + 1, F - 1)]
     ref = np.concatenate([[0.0], init_jump, [0.0]])  # the reference pose's jumps into and out of each frame
     limit = np.maximum(ref[bad], ref[bad + 1]) + BRANCH_JUMP_DEG
@@ -257,7 +257,7 @@ def _hold_on_floor(targets: Targets, body: BodyModel, res):
         weight = np.maximum(targets.marker_weight, hold * want)
         rows = np.flatnonzero(np.any(weight > targets.marker_weight, axis=(1, 2)))
         targets = _replace(targets, marker_weight=weight)
-        res = _merge_rows(res, rows, _fast_pass(_rows_of(targets, rows), body))
+        res = _merge_rows(res, rows, _fast_pass(targets.rows(rows), body))
     return targets, res
 
 
@@ -275,14 +275,6 @@ def _horizontal_speed(markers: np.ndarray, dt: float) -> np.ndarray:
     out = np.zeros(markers.shape[:3])
     out[1:] = np.linalg.norm(np.diff(markers[..., HORIZONTAL_AXES], axis=0), axis=-1) / dt
     return out
-
-
-def _rows_of(targets: Targets, rows: np.ndarray) -> Targets:
-    """The targets of some frames (rows: frame indices)."""
-    return Targets(targets.initial.with_(root_positions=targets.initial.root_positions[rows],
-                                         rotations=targets.initial.rotations[rows]),
-                   targets.com[rows], targets.markers[rows], targets.marker_weight[rows], targets.com_weight[rows],
-                   None if targets.floor_top is None else targets.floor_top[rows])
 
 
 def _merge_rows(res, rows: np.ndarray, again, take=slice(None)):
@@ -433,15 +425,20 @@ def tile_stride(one: Motion, stride_period: float, dense_fps: float, targets: Ta
     ``correct``. The work is then that of one stride whatever the length, which is what makes long outputs
     (an hour of running) cheap in time and memory.
     """
-    T2 = stride_period
     stride = stride.copy()
     stride[UP_AXIS] = 0.0
-    t = path_times
-    n = np.floor(t / T2 + 1e-9)
-    x = (t - n * T2) * dense_fps  # fractional dense sample
-    i0 = np.clip(np.floor(x).astype(int), 0, one.n_frames - 2)
-    w = (x - i0)[:, None]
-    root = one.root_positions[i0] * (1 - w) + one.root_positions[i0 + 1] * w + n[:, None] * stride
-    rot = nlerp_rows(one.rotations, i0, i0 + 1, w[:, 0])
+    n, i0, w = stride_samples(path_times, stride_period, dense_fps, one.n_frames)
+    root = one.root_positions[i0] * (1 - w[:, None]) + one.root_positions[i0 + 1] * w[:, None] + n[:, None] * stride
+    rot = nlerp_rows(one.rotations, i0, i0 + 1, w)
     motion = targets.initial.with_(root_positions=root, rotations=rot)
     return motion.with_(root_positions=root + (targets.com - body.com(motion)))
+
+
+def stride_samples(path_times: np.ndarray, stride_period: float, dense_fps: float, n_dense: int):
+    """Where each output time falls in one stride sampled at dense_fps [Hz] (n_dense samples from 0): (n (T,)
+    the stride it is in, i0 (T,) the dense sample before it, w (T,) the weight of the sample after);
+    path_times (T,) [s], stride_period [s]."""
+    n = np.floor(path_times / stride_period + 1e-9)
+    x = (path_times - n * stride_period) * dense_fps  # fractional dense sample
+    i0 = np.clip(np.floor(x).astype(int), 0, n_dense - 2)
+    return n, i0, x - i0

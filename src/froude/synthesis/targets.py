@@ -47,15 +47,45 @@ class Targets:
     #: report does not watch there. None: no such band (the IK's repair then leaves released markers alone).
     floor_top: np.ndarray | None = None
 
+    def rows(self, idx: np.ndarray) -> Targets:
+        """The targets of some frames (idx: frame indices or a mask)."""
+        return Targets(self.initial.with_(root_positions=self.initial.root_positions[idx],
+                                          rotations=self.initial.rotations[idx]),
+                       self.com[idx], self.markers[idx], self.marker_weight[idx], self.com_weight[idx],
+                       None if self.floor_top is None else self.floor_top[idx])
 
-def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, reference_leg_length: float,
+
+def posture_com_offset(cyc: ReferenceCycle, reference_body: BodyModel, retarget: Retarget) -> np.ndarray:
+    """(3,) [m, world]: where the character carries its COM relative to its hips, minus where the reference
+    carries its own, scaled by L; the mean over the reference cycle's poses (both bodies in the same poses).
+
+    The machine's COM path is the reference's scaled by L. A body of other proportions carries its COM
+    elsewhere over its hips: the troll's heavy trunk and arms 0.13 L above them, the child's large head 0.10 L,
+    the reference's 0.05 L (the Bandai walk). Put on the machine's path as it is, such a body walks with its hips
+    0.06-0.09 L lower than the reference's, scaled: knees bent 20 deg more through every stance, and at the end
+    of a stance the IK reached the COM only by turning the pelvis and the swing knee in one frame (a 46 deg knee
+    jump, the Bandai walks as a troll). Carried higher by this offset, the character's hips travel where the
+    reference's travel, scaled, and so do its legs. A constant offset changes no force (the machine's dynamics
+    hold for any constant shift of its COM path); 0 for a uniformly scaled body.
+    """
+
+    def com_from_hips(body: BodyModel) -> np.ndarray:
+        pose = Motion(body.skeleton, np.zeros((cyc.n_samples, 3)), cyc.rotations, 1.0, None, {})
+        hips = body.joint_positions(pose, [body.roles["left_hip"], body.roles["right_hip"]]).mean(axis=1)
+        return (body.com(pose) - hips).mean(axis=0)
+
+    return com_from_hips(retarget.body) - retarget.L * com_from_hips(reference_body)
+
+
+def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, reference_body: BodyModel,
                   meta: dict) -> Targets:
     """Time-warp the reference cycle onto the machine's steps and set the COM and foot targets.
 
-    reference_leg_length: the reference body's leg length [m] (the weights are per (leg length)²);
-    meta: the output motion's provenance (source, length_scale).
+    reference_body: the clip's (weights are per (leg length)²; the COM target is the machine's path as the
+    character's posture carries it, posture_com_offset); meta: the output's provenance (source, length_scale).
     """
     L = retarget.L
+    com = path.com + posture_com_offset(cyc, reference_body, retarget)  # (T, 3) [m]
     Rh = path.frame
     phi = np.mod(path.psi, 1.0)
     rot, data = sample_cycle(cyc, phi)
@@ -84,14 +114,7 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     with_body[..., UP_AXIS] = np.maximum(on_ground[..., UP_AXIS], below_com)
     w = w_ground[:, :, None, None]
     markers = w * on_ground + (1.0 - w) * with_body
-    root = path.com + (L * data["root_from_com"]) @ Rh
-    initial = Motion(retarget.skeleton, root, rot, float(path.frame_time), None, dict(meta))
-    # The reference's root-to-COM offset × L is where the root goes for a body of the reference's
-    # proportions. A character with other proportions (a troll's trunk) carries its COM elsewhere relative
-    # to the root, and when the root is a static reference joint far from the pelvis (the Bandai rig's
-    # joint_Root, metres from the body through the pelvis offset) the error is metres: the IK would start
-    # with the feet out of reach. So the initial pose is translated to put its own COM on the machine's.
-    initial = initial.with_(root_positions=root + (path.com - retarget.body.com(initial)))
+    initial = _initial_pose(retarget, path.com + (L * data["root_from_com"]) @ Rh, rot, com, path, meta)
     body = retarget.body
     hips = body.joint_positions(initial, [body.roles["left_hip"], body.roles["right_hip"]])  # (T, 2, 3) [m]
     # A walk's landing foot is raised only beyond the time-warped reference pose's own foot: a walking leg
@@ -120,14 +143,28 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
         weight = soften_swing_weights(path, weight, SWING_MARKER_WEIGHT)
     # Weights are per (leg length)^2, so the trade-off between a position error and a joint angle is the
     # same for a child and a giant (errors in metres grow with size, joint angles do not).
-    per_size = (reference_leg_length / retarget.body.leg_length) ** 2
+    per_size = (reference_body.leg_length / retarget.body.leg_length) ** 2
     floor_top = _floor_top(markers, retarget.body.leg_length, float(path.frame_time))
     # ... and then each foot where the clip's rests relative to the ground level (one foot's lowest point may
     # rest higher than the other's: CMU 09_01's left toe end site 11 mm above the right's)
     markers = markers.copy()
     markers[..., UP_AXIS] += L * foot_low[None, :, None]
     floor_top = floor_top + L * foot_low[None, :, None]
-    return Targets(initial, path.com, markers, weight * per_size, np.full(T, COM_WEIGHT * per_size), floor_top)
+    return Targets(initial, com, markers, weight * per_size, np.full(T, COM_WEIGHT * per_size), floor_top)
+
+
+def _initial_pose(retarget: Retarget, root: np.ndarray, rot: np.ndarray, com: np.ndarray, path: MachinePath,
+                  meta: dict) -> Motion:
+    """The time-warped reference pose (rot (T, J, 4)) on the character, its COM on the COM target com (T, 3) [m].
+
+    root (T, 3) [m]: the reference's root-to-COM offset × L from the machine's COM, where the root goes for a
+    body of the reference's proportions. A character with other proportions (a troll's trunk) carries its COM
+    elsewhere relative to the root, and when the root is a static reference joint far from the pelvis (the
+    Bandai rig's joint_Root, metres from the body through the pelvis offset) the error is metres: the IK would
+    start with the feet out of reach. So the pose is translated to put its own COM on the target.
+    """
+    initial = Motion(retarget.skeleton, root, rot, float(path.frame_time), None, dict(meta))
+    return initial.with_(root_positions=root + (com - retarget.body.com(initial)))
 
 
 def _floor_top(markers: np.ndarray, leg_length: float, frame_time: float) -> np.ndarray:

@@ -1,6 +1,6 @@
 """Issue 28 acceptance 1 and 2 on every shared turning clip: scale to child, giant, speed x0.8 and x1.2.
 
-    PYTHONPATH=src python benchmarks/turns_matrix.py                       # every turning clip (~20 min, one core)
+    PYTHONPATH=src python benchmarks/turns_matrix.py                       # every turning clip (35 s here)
     PYTHONPATH=src python benchmarks/turns_matrix.py --only 16_51,left_normal_001 --json out.json
 
 The clips: ../shared/data/bandai-locomotion/turns/dataset-2_walk-turn-* and ../shared/data/cmu-turns (found as

@@ -301,3 +301,20 @@ def test_walk_report_expects_the_cadence_of_the_cycle_walked_past_the_first_law(
     c = r.extras["cadence"]
     assert c["expected_step_frequency_hz"] > 1.05 * c["clip_step_frequency_hz"] * 1.5 ** -STEP_TIME_EXPONENT
     assert r.step_frequency_hz == pytest.approx(c["expected_step_frequency_hz"], rel=0.02)
+
+
+@pytest.mark.slow
+def test_a_brisk_walk_goes_faster_with_its_stance_leg_loaded():
+    """Issue 29 acceptance 1, walk_active_002 at x1.2 (1.66 m/s, U 0.59): its fitted cycle's single-support
+    force falls to 0.004 body weights by x1.12 and the stance leg unloads past x1.125 with either step time
+    law, so it was refused ("out of reach ... x0.30-1.11"). The continuation goes on holding the machine's
+    force trough at FLIGHT_FORCE_BW (machine.walk_speed.LAWS): every physics bar met, cadence as expected, no
+    flight in the output's COM force."""
+    from froude.body.gait import FLIGHT_FORCE_BW
+
+    prep = pipeline.prepare(clip("bandai-locomotion/walks/dataset-2_walk_active_002"))
+    r = pipeline.scale(prep, None, speed=1.2).report
+    assert r.check_bars() == []
+    assert r.mean_speed_m_s == pytest.approx(1.2 * prep.machine.mean_speed * prep.machine.speed_unit, rel=0.02)
+    assert r.step_frequency_hz == pytest.approx(r.extras["cadence"]["expected_step_frequency_hz"], rel=0.02)
+    assert r.extras["walking"]["trough_bw"] >= FLIGHT_FORCE_BW

@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..body.com_force import acceleration_response, force_landmarks
-from ..body.gait import detect_gait, summarize, walks
+from ..body.gait import FLIGHT_FORCE_BW, detect_gait, summarize, walks
 from ..body.model import BodyModel
 from ..core.constants import GRAVITY, UP_AXIS
 from ..core.motion import Motion
@@ -69,6 +69,7 @@ from .walking import (
     desired_leg_length,
     record_step,
     simulate_walk,
+    single_support_trough,
     walk_step,
 )
 
@@ -216,14 +217,15 @@ class WalkFitResult:
 START_SPEED_FACTORS = (0.95, 0.9, 0.85, 0.8, 0.7)
 
 
-def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40 * 32):
+def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40 * 32, extra_row=None):
     """The periodic walking cycle matching targets nearest the priors (``machine.orbit.solve_orbit``, see
     the module doc): Newton with a fresh Jacobian every iteration at ``n_per_stance``, one candidate at a
     time (the walking step map has no batched path), a rejected step halved up to 30 times.
 
     z0: (11,) priors; T_c held; targets (t_stance, t_double, mean_speed) dimensionless. max_iter counts
     evaluations of the iterates and of their Jacobians (40 Newton iterations of a point, a Jacobian and
-    up to 30 halvings).
+    up to 30 halvings). extra_row: None, or f(z, n) → one more residual (float) that the cycle must zero
+    (``walk_speed`` holds the single-support force trough with it).
     Returns (z, WalkStep, simulator evaluations, residual max-norm).
     """
     s = _scales(z0)
@@ -236,15 +238,28 @@ def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40 *
             return None, w
         nx = w.next
         assert nx is not None  # a valid step has its next state
-        return np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3],
-                         (w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
-                         (w.step_length / w.t_step - tgt[2]) / tgt[2]]), w
+        rows = [nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3],
+                (w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
+                (w.step_length / w.t_step - tgt[2]) / tgt[2]]
+        return np.array(rows if extra_row is None else [*rows, extra_row(z, n)]), w
 
     z0 = _valid_start(z0, T_c, roll, n_per_stance)
-    z, rows, calls, R = solve_orbit(rowwise(evaluate, 7), z0, s, h, tol=tol, max_iter=max_iter,
+    n_rows = 7 if extra_row is None else 8
+    z, rows, calls, R = solve_orbit(rowwise(evaluate, n_rows), z0, s, h, tol=tol, max_iter=max_iter,
                                     resolutions=(n_per_stance, n_per_stance), chord=False, batched=False,
                                     max_halvings=30, what="walking cycle", reasons=REASONS)
     return z, rows.items[0], calls, float(np.max(np.abs(R)))
+
+
+def trough_held_row(T_c: float, roll: float):
+    """The ``extra_row`` of :func:`_cycle_search` that holds the machine's lowest vertical force in single
+    support at ``body.gait.FLIGHT_FORCE_BW`` (the force below which froude reads a body as in flight):
+    f(z, n) → that trough [m g] − FLIGHT_FORCE_BW. For a brisk walk whose vault unloads the stance leg
+    near the clip's cycle, it keeps Newton's iterates on walking steps (see the module doc)."""
+    def row(z, n):
+        rec = record_step(WalkState(*z[:4]), z[4], _control(z, T_c), roll=roll, l_td=z[9], n_per_stance=n)
+        return single_support_trough(rec) - FLIGHT_FORCE_BW
+    return row
 
 
 def _valid_start(z0, T_c, roll, n_per_stance):
@@ -500,6 +515,16 @@ def _shape_fit_nearest(candidates, T_c, roll, targets, n_per_stance, errors):
     return None
 
 
+def _start_passes(n_per_stance: int) -> tuple:
+    """The passes over the starts, each (simulator resolution of the start's cycle search and shape fit,
+    whether the search holds the single-support force trough: :func:`trough_held_row`), each only where
+    every start of the passes before failed: the shape fit's resolution; the simulation's (walk_active_002:
+    every start fails at 120 steps a stance); the shape fit's with the trough held (a brisk walk whose
+    starts vault off the stance leg, walk_active_009: the search stalls on the unloading boundary). The
+    held trough shapes the start only: the exact cycle after the shape fit is the plain one."""
+    return tuple(dict.fromkeys(((SHAPE_N_PER_STANCE, False), (n_per_stance, False), (SHAPE_N_PER_STANCE, True))))
+
+
 # Long because, like fit.fit_machine_detailed, the walking fit is one sequential pass whose intermediates
 # all end up in the WalkFitResult.
 def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: float = 70.0, *,
@@ -611,13 +636,14 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     errors: list[str] = []
     pulses_off = tuple(PULSES_OFF[k] for k in PULSE_VARS)
     best = None
-    for n_shape in dict.fromkeys((SHAPE_N_PER_STANCE, n_per_stance)):  # the fine one only where all failed
+    for n_shape, held in _start_passes(n_per_stance):
         candidates = []
+        extra = trough_held_row(T_c, roll) if held else None
         for ctl0 in starts:
             for pulses, free in ((pulses_off, ()), (pulses_on, ("p", "q"))):
                 z0 = np.array([u0, v0, d0, step_time / T, th0, *ctl0, 1.0, 0.0, *pulses])
                 try:
-                    z1, _, it1, _ = _cycle_search(z0, T_c, roll, targets, n_shape, tol=START_TOL)
+                    z1, _, it1, _ = _cycle_search(z0, T_c, roll, targets, n_shape, tol=START_TOL, extra_row=extra)
                 except FitError as e:
                     errors.append(str(e))
                     continue

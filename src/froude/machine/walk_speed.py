@@ -16,7 +16,14 @@ people walk faster with longer *and* quicker steps. Here the fitted walking mach
 * the share of the step spent in double support kept (the reference's own; it shrinks a little with
   speed in people, which the machine may then show through its own dynamics);
 * the leg control's stance time T_c scaled like the step time, the touchdown geometry, control and roll
-  free to move as the search needs.
+  free to move as the search needs;
+* where neither law finds a cycle because the stance leg unloads (a brisk walk's single-support force
+  already near zero at the clip's speed: Bandai walk_active_002 by ×1.13), the continuation goes on with
+  one more equation: the lowest vertical force in single support held at ``body.gait.FLIGHT_FORCE_BW`` (0.2
+  body weights), the force below which froude reads the body as in flight (``walk_fit.trough_held_row``).
+  Walking faster, people flatten the COM's vault rather than leave the ground; the machine's control is
+  free to do the same, and the minimum-norm search then finds the cycle nearest the last one whose vault
+  keeps the foot loaded.
 
 Past a Froude number U ≈ 0.7 (Fr = U² ≈ 0.5) people break into a run (Alexander & Jayes 1983): a walk
 is not asked to go there; the message says the fastest walking speed in m/s.
@@ -29,7 +36,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import FitError
-from .walk_fit import _VARS, _cycle_search
+from .walk_fit import _VARS, _cycle_search, trough_held_row
 from .walk_model import WalkingMachine
 from .walking import N_PER_STANCE
 
@@ -70,6 +77,10 @@ def check_walking_speed(machine: WalkingMachine, s: float, what: str = "walk") -
 
 #: Largest change of the speed factor per cycle search: farther targets are reached by continuation.
 CONTINUATION_STEP = 0.05
+#: The laws tried in turn as the continuation climbs, (step time exponent, single-support force trough held
+#: at FLIGHT_FORCE_BW): once a law finds no cycle, the next one carries on (the profile's cadence keeps
+#: rising with speed, and a vault that unloads the leg stays unloaded faster).
+LAWS = ((STEP_TIME_EXPONENT, False), (FAST_STEP_TIME_EXPONENT, False), (FAST_STEP_TIME_EXPONENT, True))
 
 
 def walking_machine_at_speed(machine: WalkingMachine, s: float) -> WalkingMachine:
@@ -90,9 +101,10 @@ def walking_machine_at_speed(machine: WalkingMachine, s: float) -> WalkingMachin
 
 
 def _resolve(base: WalkingMachine, start: WalkingMachine, s: float,
-             exponent: float = STEP_TIME_EXPONENT) -> WalkingMachine:
-    """The cycle at s × base's speed (targets from ``base``, step time × s^exponent), searched from
-    ``start``'s cycle."""
+             law: tuple = LAWS[0]) -> WalkingMachine:
+    """The cycle at s × base's speed (targets from ``base``, step time × s^exponent, the force trough held
+    or not: ``law`` is one of LAWS), searched from ``start``'s cycle."""
+    exponent, trough_held = law
     k = s ** exponent
     t_step, t_double = base.t_step * k, base.t_double * k
     T_c = base.T_c * k
@@ -104,7 +116,8 @@ def _resolve(base: WalkingMachine, start: WalkingMachine, s: float,
     z0[_VARS.index("u")] *= s * base.mean_speed / start.mean_speed
     z0[_VARS.index("s")] *= r
     try:
-        z, w, it, _ = _cycle_search(z0, T_c, base.roll, targets, N_PER_STANCE)
+        z, w, it, _ = _cycle_search(z0, T_c, base.roll, targets, N_PER_STANCE,
+                                    extra_row=trough_held_row(T_c, base.roll) if trough_held else None)
     except FitError as e:
         raise FitError(f"no walking cycle at x{s:.2f} the clip's speed: {e}") from None
     nx = w.next
@@ -124,7 +137,7 @@ def walking_machines_at_speeds(machine: WalkingMachine, speeds, cache: dict | No
     cache = {} if cache is None else cache
     out = {}
     cur, f_cur = machine, 1.0
-    exponent = STEP_TIME_EXPONENT
+    law = 0  # index into LAWS
     for s in sorted({float(v) for v in speeds}):
         check_walking_speed(machine, s)
         if s in cache:
@@ -133,16 +146,19 @@ def walking_machines_at_speeds(machine: WalkingMachine, speeds, cache: dict | No
             continue
         n = max(1, int(math.ceil((s - f_cur) / CONTINUATION_STEP - 1e-9)))
         for f in np.linspace(f_cur, s, n + 1)[1:]:
-            try:
-                cur = _resolve(machine, cur, float(f), exponent)
-            except FitError:
-                if exponent == FAST_STEP_TIME_EXPONENT:
-                    raise
-                # no cycle with the first law here: the faster-cadence law from here on (the profile's
-                # cadence keeps rising with speed)
-                exponent = FAST_STEP_TIME_EXPONENT
-                cur = _resolve(machine, cur, float(f), exponent)
+            cur, law = _next_cycle(machine, cur, float(f), law)
         cur = replace(cur, source=machine.source + f" (re-solved at x{s:g} speed)")
         out[s] = cache[s] = cur
         f_cur = s
     return out
+
+
+def _next_cycle(machine: WalkingMachine, cur: WalkingMachine, f: float, law: int) -> tuple[WalkingMachine, int]:
+    """(the cycle at f × the machine's speed searched from ``cur``, the index of the law in LAWS that found
+    it): LAWS[law] first, then each later one; the last one's FitError when none does."""
+    for k in range(law, len(LAWS) - 1):
+        try:
+            return _resolve(machine, cur, f, LAWS[k]), k
+        except FitError:
+            continue
+    return _resolve(machine, cur, f, LAWS[-1]), len(LAWS) - 1

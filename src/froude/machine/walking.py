@@ -615,6 +615,27 @@ def record_step(state: WalkState, theta0: float, control: Control, *, roll: floa
     return RecordedStep(state, theta0, control, n_per_stance, roll, l_td)
 
 
+#: Samples of the single-support phase at which :func:`single_support_trough` looks for the force minimum.
+TROUGH_SAMPLES = 400
+
+
+def single_support_trough(rec: RecordedStep) -> float:
+    """The lowest total vertical ground force [m g] in the single support of a recorded step (trailing
+    liftoff → next touchdown); nan where the step is invalid.
+
+    The minimum of TROUGH_SAMPLES samples refined by the parabola through it and its neighbours: a bare
+    sample minimum jumps as the trough moves between samples, and the cycle search differentiates this
+    value by finite differences."""
+    w = rec.step
+    if not w.valid:
+        return math.nan
+    f = rec.sample(np.linspace(w.t_double, w.t_step, TROUGH_SAMPLES)).total_force[:, 1]
+    i = int(np.clip(np.argmin(f), 1, f.size - 2))
+    lo, mid, hi = f[i - 1], f[i], f[i + 1]
+    curv = lo - 2.0 * mid + hi
+    return float(mid - 0.125 * (hi - lo) ** 2 / curv) if curv > 0 else float(f.min())
+
+
 def simulate_walk(state: WalkState, theta0: float, control: Control, times, *, roll: float = 0.0,
                   l_td: float = 1.0, n_per_stance: int = N_PER_STANCE) -> WalkTrajectory:
     """Dense samples of one step at ``times`` (S,) in [0, t_step] [√(l0/g)] (clipped).

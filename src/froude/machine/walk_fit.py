@@ -50,51 +50,38 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..body.com_force import acceleration_response, force_landmarks
-from ..body.gait import FLIGHT_FORCE_BW, detect_gait, summarize, walks
+from ..body.gait import detect_gait, summarize, walks
 from ..body.model import BodyModel
 from ..core.constants import GRAVITY, UP_AXIS
 from ..core.motion import Motion
 from ..errors import FitError, NotAWalkingMotion
 from .forces import CUTOFF_HZ, clip_com
 from .gauss_newton import constrained_gauss_newton
-from .orbit import rowwise, solve_orbit
+from .walk_cycle import (
+    _VARS,
+    CYCLE_SCALES,
+    PULSE_VARS,
+    _control,
+    _cycle_search,
+    _scales,
+    trough_held_row,
+)
 from .walk_model import WalkingMachine
 from .walk_stance import measure_stance
 from .walking import (
     N_PER_STANCE,
     PULSES_OFF,
-    REASONS,
-    WalkControl,
     WalkState,
     desired_leg_length,
     record_step,
     simulate_walk,
-    single_support_trough,
-    walk_step,
 )
 
 __all__ = ["WalkFitResult", "fit_walking_detailed", "CYCLE_SCALES", "force_landmarks", "PROFILE_SAMPLES"]
 
-_VARS = ("u", "v", "d", "s", "theta0", "K", "a", "b", "c", "l_td", "e", "p", "tau_p", "w_p", "q", "tau_q", "w_q")
-#: The two control pulses' variables (``WalkControl``): held in the cycle search; the shape fit fits
-#: their amplitudes p and q.
-PULSE_VARS = tuple(PULSES_OFF)
-#: Scales of the cycle variables for the minimum-norm search (K relative to its prior); a pulse variable
-#: is free only where a search frees it (:func:`_scales`).
-CYCLE_SCALES = {"u": 0.05, "v": 0.02, "d": 0.02, "s": 0.05, "theta0": 0.03, "K": 0.1, "a": 0.01, "b": 0.02,
-                "c": 0.02, "l_td": 0.01, "e": 0.02, "p": 0.01, "tau_p": 0.02, "w_p": 0.01, "q": 0.01, "tau_q": 0.02,
-                "w_q": 0.01}
 #: The start of the fit with pulses: amplitudes p, q [l0], the push-off pulse's centre past the other
 #: foot's touchdown (dtau_p, stance phase) and both widths (half the support, stance phase).
 PULSE_START = {"p": 0.03, "dtau_p": 0.007, "w_p": 0.04, "q": 0.02, "w_q": 0.075}
-
-
-def _scales(z0, free=()):
-    """(17,) scales of the cycle variables z0 (``_VARS``): CYCLE_SCALES, K's relative to its value, the
-    pulse variables 0 (held) unless named in ``free``."""
-    s = np.array([CYCLE_SCALES[v] if (v not in PULSE_VARS or v in free) else 0.0 for v in _VARS])
-    s[5] *= abs(z0[5])
-    return s
 
 
 #: The second start of the cycle search: a plain spring leg, Geyer et al.'s K ≈ 20 (k = 20 kN/m, m = 80 kg,
@@ -212,75 +199,6 @@ class WalkFitResult:
     steps: np.ndarray
 
 
-#: Touchdown speeds (× the measured) the cycle search starts from when the measured touchdown state gives no
-#: valid machine step.
-START_SPEED_FACTORS = (0.95, 0.9, 0.85, 0.8, 0.7)
-
-
-def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40 * 32, extra_row=None):
-    """The periodic walking cycle matching targets nearest the priors (``machine.orbit.solve_orbit``, see
-    the module doc): Newton with a fresh Jacobian every iteration at ``n_per_stance``, one candidate at a
-    time (the walking step map has no batched path), a rejected step halved up to 30 times.
-
-    z0: (11,) priors; T_c held; targets (t_stance, t_double, mean_speed) dimensionless. max_iter counts
-    evaluations of the iterates and of their Jacobians (40 Newton iterations of a point, a Jacobian and
-    up to 30 halvings). extra_row: None, or f(z, n) → one more residual (float) that the cycle must zero
-    (``walk_speed`` holds the single-support force trough with it).
-    Returns (z, WalkStep, simulator evaluations, residual max-norm).
-    """
-    s = _scales(z0)
-    h = 1e-7 * np.maximum(np.abs(z0), 1.0)
-    tgt = np.asarray(targets, float)
-
-    def evaluate(z, n):
-        w = walk_step(WalkState(*z[:4]), z[4], _control(z, T_c), roll=roll, l_td=z[9], n_per_stance=n)
-        if not w.valid:
-            return None, w
-        nx = w.next
-        assert nx is not None  # a valid step has its next state
-        rows = [nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3],
-                (w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
-                (w.step_length / w.t_step - tgt[2]) / tgt[2]]
-        return np.array(rows if extra_row is None else [*rows, extra_row(z, n)]), w
-
-    z0 = _valid_start(z0, T_c, roll, n_per_stance)
-    n_rows = 7 if extra_row is None else 8
-    z, rows, calls, R = solve_orbit(rowwise(evaluate, n_rows), z0, s, h, tol=tol, max_iter=max_iter,
-                                    resolutions=(n_per_stance, n_per_stance), chord=False, batched=False,
-                                    max_halvings=30, what="walking cycle", reasons=REASONS)
-    return z, rows.items[0], calls, float(np.max(np.abs(R)))
-
-
-def trough_held_row(T_c: float, roll: float):
-    """The ``extra_row`` of :func:`_cycle_search` that holds the machine's lowest vertical force in single
-    support at ``body.gait.FLIGHT_FORCE_BW`` (the force below which froude reads a body as in flight):
-    f(z, n) → that trough [m g] − FLIGHT_FORCE_BW. For a brisk walk whose vault unloads the stance leg
-    near the clip's cycle, it keeps Newton's iterates on walking steps (see the module doc)."""
-    def row(z, n):
-        rec = record_step(WalkState(*z[:4]), z[4], _control(z, T_c), roll=roll, l_td=z[9], n_per_stance=n)
-        return single_support_trough(rec) - FLIGHT_FORCE_BW
-    return row
-
-
-def _valid_start(z0, T_c, roll, n_per_stance):
-    """z0 (17,), or z0 at a slower touchdown speed (``START_SPEED_FACTORS``), where the machine takes a valid
-    step; FitError with the first reason when none does."""
-    def step(z):
-        return walk_step(WalkState(*z[:4]), z[4], _control(z, T_c), roll=roll, l_td=z[9], n_per_stance=n_per_stance)
-
-    w0 = step(z0)
-    if w0.valid:
-        return z0
-    for slower in START_SPEED_FACTORS:
-        # A brisk walk's measured touchdown state can vault the machine off its stance leg (the clip's
-        # own force nearly unloads in single support): start slower; the fit restores the speed.
-        z_try = z0.copy()
-        z_try[0] *= slower
-        if step(z_try).valid:
-            return z_try
-    raise FitError(f"the walking machine has no valid step at the clip's measured step: {REASONS[w0.reason]}")
-
-
 def stance_force_profile(rec, tau, *, frame_time=None, cutoff_hz=CUTOFF_HZ, time_unit=1.0):
     """Total vertical force [m g] of the periodic machine over one leg's stance at phases tau (N,).
 
@@ -387,11 +305,6 @@ def _clearance_shortfall(rec, theta0: float, l_td: float, n_samples: int = 200) 
         return 0.0
     c = float(np.min(pos[:-1, 1][turn])) - l_td * math.cos(theta0)
     return max(0.0, MIN_CLEARANCE - c) / MIN_CLEARANCE
-
-
-def _control(z, T_c) -> WalkControl:
-    """The leg control of the cycle variables z (``_VARS``) with T_c [√(l0/g)]."""
-    return WalkControl(T_c=T_c, **{k: float(v) for k, v in zip(_VARS, z) if k in WalkControl.NAMES})
 
 
 def _shape_problem(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_unit, tau_landmarks, free=(),
@@ -635,8 +548,11 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
                  PULSE_START["q"], lm_ref["tau_peak1"], PULSE_START["w_q"])
     errors: list[str] = []
     pulses_off = tuple(PULSES_OFF[k] for k in PULSE_VARS)
-    best = None
+    best, reason = None, None
     for n_shape, held in _start_passes(n_per_stance):
+        # A refusal gives the plain passes' last reason: the held trough is a last resort, and its own failure
+        # (a residual) says less about the clip and moves with the last bits of the input.
+        reason = errors[-1] if held and reason is None and errors else reason
         candidates = []
         extra = trough_held_row(T_c, roll) if held else None
         for ctl0 in starts:
@@ -654,7 +570,7 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         if best is not None:
             break
     if best is None:  # what the clip is (the gait's decision, as info says it), then why it is refused
-        raise FitError(f"{src}: {summary.kind} that the walking machine cannot follow: {errors[-1]}")
+        raise FitError(f"{src}: {summary.kind} that the walking machine cannot follow: {reason or errors[-1]}")
     z, cost, w, iters, z0 = best
     state = WalkState(*map(float, z[:4]))
     th, ctl = float(z[4]), _control(z, T_c)

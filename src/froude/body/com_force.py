@@ -180,6 +180,28 @@ def flight_gravity(com: np.ndarray, frame_time: float, flights,
     return float(sol[-1]), [float(x) for x in gs], float(np.sqrt(np.mean(np.square(acc_h))))
 
 
+#: Least prominence [BW] of a local maximum of the vertical force that counts as a peak: a tenth of the
+#: walking acceptance's force tolerance on the landmarks (0.1 BW), so a ripple that the tolerance cannot see
+#: does not move a landmark's time.
+MIN_PEAK_PROMINENCE_BW = 0.01
+
+
+def prominence_bw(fy_bw: np.ndarray) -> np.ndarray:
+    """(N,) prominence [BW] of each sample of fy_bw (N,) that is a local maximum (≥ both neighbours; 0
+    elsewhere and at the ends): its height above the higher of the lowest values on each side before the
+    force rises above it again (or the profile ends), as ``scipy.signal.peak_prominences`` defines it
+    (written here: importing scipy.signal costs more than a second of start-up)."""
+    y = np.asarray(fy_bw, float)
+    out = np.zeros(y.size)
+    for i in np.flatnonzero((y[1:-1] >= y[:-2]) & (y[1:-1] >= y[2:])) + 1:
+        higher_left = np.flatnonzero(y[:i] > y[i])
+        higher_right = np.flatnonzero(y[i + 1:] > y[i])
+        left = y[(higher_left[-1] + 1 if higher_left.size else 0):i + 1].min()
+        right = y[i:(i + 1 + higher_right[0] if higher_right.size else y.size)].min()
+        out[i] = y[i] - max(left, right)
+    return out
+
+
 def force_landmarks(tau: np.ndarray, fy_bw: np.ndarray, tau_double: float) -> dict:
     """The two peaks and the trough of the vertical force over one stance.
 
@@ -193,9 +215,10 @@ def force_landmarks(tau: np.ndarray, fy_bw: np.ndarray, tau_double: float) -> di
     """
     w = min(max(2.0 * tau_double, 0.15), 0.45)
     # A peak is a local maximum: the force at the stance's very start or end is the tail of the other
-    # foot's peak (the profile of a periodic walk wraps around), not this stance's.
-    interior = np.zeros(tau.size, bool)
-    interior[1:-1] = (fy_bw[1:-1] >= fy_bw[:-2]) & (fy_bw[1:-1] >= fy_bw[2:])
+    # foot's peak (the profile of a periodic walk wraps around), not this stance's. One that stands less
+    # than MIN_PEAK_PROMINENCE_BW above the force around it is a ripple on a rising or falling flank (a
+    # brisk walk's machine, seen through the clip's filter, shows 0.003 BW ones), not a peak.
+    interior = prominence_bw(fy_bw) >= MIN_PEAK_PROMINENCE_BW
     first = tau <= w
     last = tau >= 1.0 - w
     first = first & interior if (first & interior).any() else first

@@ -43,16 +43,17 @@ def _data(kind: str) -> Path | None:
     return None
 
 
-def clips() -> list[tuple[str, Path]]:
-    """(name, path) of every clip of the matrix that is present."""
+def clips(cmu=CMU, bandai_glob: str = "*.bvh", loco_subs=("runs", "walks")) -> list[tuple[str, Path]]:
+    """(name, path) of every clip of the matrix that is present: the CMU clips named, the Bandai dataset-1
+    clips matching bandai_glob, every clip of the bandai-locomotion sub-folders named."""
     out = []
     mocap, bandai, loco = _data("mocap"), _data("bandai"), _data("bandai-locomotion")
     if mocap:
-        out += [(n, mocap / f"{n}.bvh") for n in CMU if (mocap / f"{n}.bvh").is_file()]
+        out += [(n, mocap / f"{n}.bvh") for n in cmu if (mocap / f"{n}.bvh").is_file()]
     if bandai:
-        out += [(p.stem, p) for p in sorted(bandai.glob("*.bvh"))]
+        out += [(p.stem, p) for p in sorted(bandai.glob(bandai_glob))]
     if loco:
-        for sub in ("runs", "walks"):
+        for sub in loco_subs:
             out += [(p.stem, p) for p in sorted((loco / sub).glob("*.bvh"))]
     return out
 

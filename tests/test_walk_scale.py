@@ -310,7 +310,7 @@ def test_a_brisk_walk_goes_faster_with_its_stance_leg_loaded():
     law, so it was refused ("out of reach ... x0.30-1.11"). The continuation goes on holding the machine's
     force trough at FLIGHT_FORCE_BW (machine.walk_speed.LAWS): every physics bar met, cadence as expected, no
     flight in the output's COM force. And on to x1.3 (1.80 m/s): the held-trough search there stalls at a
-    residual of 3e-7, which walk_cycle.EXTRA_ROW_ACCEPT takes (it was refused as out of reach above x1.23)."""
+    residual of 3e-7, which walk_cycle.TROUGH_HELD_ACCEPT takes (it was refused as out of reach above x1.23)."""
     from froude.body.gait import FLIGHT_FORCE_BW
 
     prep = pipeline.prepare(clip("bandai-locomotion/walks/dataset-2_walk_active_002"))

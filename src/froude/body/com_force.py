@@ -229,11 +229,11 @@ def force_landmarks(tau: np.ndarray, fy_bw: np.ndarray, tau_double: float) -> di
     it = mid[np.argmin(fy_bw[mid])]
     out = {}
     for key, i in (("peak1", i1), ("trough", it), ("peak2", i2)):
-        out[key], out["tau_" + key] = _vertex(tau, fy_bw, int(i))
+        out[key], out["tau_" + key] = parabola_vertex(tau, fy_bw, int(i))
     return out
 
 
-def _vertex(x, y, i):
+def parabola_vertex(x, y, i):
     """(y, x) at the vertex of the parabola through samples i − 1, i, i + 1 of an extremum (evenly spaced
     x), so a landmark is not quantised to the sample grid; the sample itself at an end or when the vertex
     would leave the three samples."""

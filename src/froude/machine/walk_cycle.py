@@ -4,8 +4,10 @@ the walking fit (:mod:`froude.machine.walk_fit`) and the speed re-solve (:mod:`f
 
 z = (u, v, d, s, θ0, K, a, b, c, l_td, e) and the control's two pulses (six more, held unless freed) must
 make the step map periodic (4 equations) and reproduce the target step time, double-support time and mean
-speed (3), optionally one more equation (``extra_row``: :func:`trough_held_row` holds the single-support
-force trough at ``body.gait.FLIGHT_FORCE_BW``).
+speed (3), and with ``hold_trough`` one more: the machine's lowest vertical force in single support equal to
+``body.gait.FLIGHT_FORCE_BW`` (0.2 body weights, the force below which froude reads a body as in flight). For
+a brisk walk whose vault unloads the stance leg near the clip's cycle, that keeps Newton's iterates on walking
+steps; the fit and the speed re-solve take it only where the plain search fails.
 """
 from __future__ import annotations
 
@@ -16,7 +18,7 @@ from ..errors import FitError
 from .orbit import rowwise, solve_orbit
 from .walking import PULSES_OFF, REASONS, WalkControl, WalkState, record_step, single_support_trough, walk_step
 
-__all__ = ["CYCLE_SCALES", "PULSE_VARS", "START_SPEED_FACTORS", "trough_held_row"]
+__all__ = ["CYCLE_SCALES", "PULSE_VARS", "START_SPEED_FACTORS"]
 
 _VARS = ("u", "v", "d", "s", "theta0", "K", "a", "b", "c", "l_td", "e", "p", "tau_p", "w_p", "q", "tau_q", "w_q")
 #: The two control pulses' variables (``WalkControl``): held in the cycle search; the shape fit fits
@@ -37,24 +39,23 @@ def _scales(z0, free=()):
     return s
 
 
-#: Residual [max-norm] to which a search with an ``extra_row`` may end when it stalls above its tolerance: the
+#: Residual [max-norm] to which a search holding the trough may end when it stalls above its tolerance: the
 #: held trough is a sampled minimum refined by a parabola, smooth only between the samples it moves across, and
 #: Newton stalls near 1e-7 there (walk_active_002 at x1.25: 3e-7, 0.3 µm of periodicity per metre of leg).
-EXTRA_ROW_ACCEPT = 1e-6
+TROUGH_HELD_ACCEPT = 1e-6
 #: Touchdown speeds (× the measured) the cycle search starts from when the measured touchdown state gives no
 #: valid machine step.
 START_SPEED_FACTORS = (0.95, 0.9, 0.85, 0.8, 0.7)
 
 
-def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40 * 32, extra_row=None):
+def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40 * 32, hold_trough=False):
     """The periodic walking cycle matching targets nearest the priors (``machine.orbit.solve_orbit``, see
     the module doc): Newton with a fresh Jacobian every iteration at ``n_per_stance``, one candidate at a
     time (the walking step map has no batched path), a rejected step halved up to 30 times.
 
     z0: (11,) priors; T_c held; targets (t_stance, t_double, mean_speed) dimensionless. max_iter counts
     evaluations of the iterates and of their Jacobians (40 Newton iterations of a point, a Jacobian and
-    up to 30 halvings). extra_row: None, or f(z, n) → one more residual (float) that the cycle must zero
-    (:func:`trough_held_row`).
+    up to 30 halvings). hold_trough: the single-support force trough is held too (see the module doc).
     Returns (z, WalkStep, simulator evaluations, residual max-norm).
     """
     s = _scales(z0)
@@ -62,7 +63,10 @@ def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40 *
     tgt = np.asarray(targets, float)
 
     def evaluate(z, n):
-        w = walk_step(WalkState(*z[:4]), z[4], _control(z, T_c), roll=roll, l_td=z[9], n_per_stance=n)
+        args = (WalkState(*z[:4]), z[4], _control(z, T_c))
+        # the trough needs the step's nodes: one recorded integration gives both the step and its force
+        rec = record_step(*args, roll=roll, l_td=z[9], n_per_stance=n) if hold_trough else None
+        w = rec.step if rec is not None else walk_step(*args, roll=roll, l_td=z[9], n_per_stance=n)
         if not w.valid:
             return None, w
         nx = w.next
@@ -70,28 +74,18 @@ def _cycle_search(z0, T_c, roll, targets, n_per_stance, tol=1e-10, max_iter=40 *
         rows = [nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3],
                 (w.t_step - tgt[0]) / tgt[0], (w.t_double - tgt[1]) / tgt[1],
                 (w.step_length / w.t_step - tgt[2]) / tgt[2]]
-        return np.array(rows if extra_row is None else [*rows, extra_row(z, n)]), w
+        if rec is not None:
+            rows.append(single_support_trough(rec) - FLIGHT_FORCE_BW)
+        return np.array(rows), w
 
     z0 = _valid_start(z0, T_c, roll, n_per_stance)
-    n_rows = 7 if extra_row is None else 8
-    # With an extra row the search may end at EXTRA_ROW_ACCEPT; both resolutions are one here, so the switch
+    # Holding the trough the search may end at TROUGH_HELD_ACCEPT; both resolutions are one here, so the switch
     # only starts the record of the best point that ``accept`` reads.
-    ends = {} if extra_row is None else {"accept": EXTRA_ROW_ACCEPT, "switch": EXTRA_ROW_ACCEPT}
-    z, rows, calls, R = solve_orbit(rowwise(evaluate, n_rows), z0, s, h, tol=tol, max_iter=max_iter,
+    ends = {"accept": TROUGH_HELD_ACCEPT, "switch": TROUGH_HELD_ACCEPT} if hold_trough else {}
+    z, rows, calls, R = solve_orbit(rowwise(evaluate, 8 if hold_trough else 7), z0, s, h, tol=tol, max_iter=max_iter,
                                     resolutions=(n_per_stance, n_per_stance), chord=False, batched=False,
                                     max_halvings=30, what="walking cycle", reasons=REASONS, **ends)
     return z, rows.items[0], calls, float(np.max(np.abs(R)))
-
-
-def trough_held_row(T_c: float, roll: float):
-    """The ``extra_row`` of :func:`_cycle_search` that holds the machine's lowest vertical force in single
-    support at ``body.gait.FLIGHT_FORCE_BW`` (the force below which froude reads a body as in flight):
-    f(z, n) → that trough [m g] − FLIGHT_FORCE_BW. For a brisk walk whose vault unloads the stance leg
-    near the clip's cycle, it keeps Newton's iterates on walking steps (see the module doc)."""
-    def row(z, n):
-        rec = record_step(WalkState(*z[:4]), z[4], _control(z, T_c), roll=roll, l_td=z[9], n_per_stance=n)
-        return single_support_trough(rec) - FLIGHT_FORCE_BW
-    return row
 
 
 def _valid_start(z0, T_c, roll, n_per_stance):

@@ -64,7 +64,6 @@ from .walk_cycle import (
     _control,
     _cycle_search,
     _scales,
-    trough_held_row,
 )
 from .walk_model import WalkingMachine
 from .walk_stance import measure_stance
@@ -430,7 +429,7 @@ def _shape_fit_nearest(candidates, T_c, roll, targets, n_per_stance, errors):
 
 def _start_passes(n_per_stance: int) -> tuple:
     """The passes over the starts, each (simulator resolution of the start's cycle search and shape fit,
-    whether the search holds the single-support force trough: :func:`trough_held_row`), each only where
+    whether the search holds the single-support force trough: ``walk_cycle``), each only where
     every start of the passes before failed: the shape fit's resolution; the simulation's (walk_active_002:
     every start fails at 120 steps a stance); the shape fit's with the trough held (a brisk walk whose
     starts vault off the stance leg, walk_active_009: the search stalls on the unloading boundary). The
@@ -548,18 +547,18 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
                  PULSE_START["q"], lm_ref["tau_peak1"], PULSE_START["w_q"])
     errors: list[str] = []
     pulses_off = tuple(PULSES_OFF[k] for k in PULSE_VARS)
-    best, reason = None, None
+    best, plain_reason = None, None
     for n_shape, held in _start_passes(n_per_stance):
-        # A refusal gives the plain passes' last reason: the held trough is a last resort, and its own failure
-        # (a residual) says less about the clip and moves with the last bits of the input.
-        reason = errors[-1] if held and reason is None and errors else reason
+        if held:
+            # A refusal gives the plain passes' last reason: the held trough is a last resort, and its own
+            # failure (a residual) says less about the clip and moves with the last bits of the input.
+            plain_reason = errors[-1] if errors else None
         candidates = []
-        extra = trough_held_row(T_c, roll) if held else None
         for ctl0 in starts:
             for pulses, free in ((pulses_off, ()), (pulses_on, ("p", "q"))):
                 z0 = np.array([u0, v0, d0, step_time / T, th0, *ctl0, 1.0, 0.0, *pulses])
                 try:
-                    z1, _, it1, _ = _cycle_search(z0, T_c, roll, targets, n_shape, tol=START_TOL, extra_row=extra)
+                    z1, _, it1, _ = _cycle_search(z0, T_c, roll, targets, n_shape, tol=START_TOL, hold_trough=held)
                 except FitError as e:
                     errors.append(str(e))
                     continue
@@ -570,7 +569,7 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         if best is not None:
             break
     if best is None:  # what the clip is (the gait's decision, as info says it), then why it is refused
-        raise FitError(f"{src}: {summary.kind} that the walking machine cannot follow: {reason or errors[-1]}")
+        raise FitError(f"{src}: {summary.kind} that the walking machine cannot follow: {plain_reason or errors[-1]}")
     z, cost, w, iters, z0 = best
     state = WalkState(*map(float, z[:4]))
     th, ctl = float(z[4]), _control(z, T_c)

@@ -20,7 +20,7 @@ people walk faster with longer *and* quicker steps. Here the fitted walking mach
 * where neither law finds a cycle because the stance leg unloads (a brisk walk's single-support force
   already near zero at the clip's speed: Bandai walk_active_002 by ×1.13), the continuation goes on with
   one more equation: the lowest vertical force in single support held at ``body.gait.FLIGHT_FORCE_BW`` (0.2
-  body weights), the force below which froude reads the body as in flight (``walk_cycle.trough_held_row``).
+  body weights), the force below which froude reads the body as in flight (``walk_cycle``).
   Walking faster, people flatten the COM's vault rather than leave the ground; the machine's control is
   free to do the same, and the minimum-norm search then finds the cycle nearest the last one whose vault
   keeps the foot loaded.
@@ -36,7 +36,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import FitError
-from .walk_cycle import _VARS, _cycle_search, trough_held_row
+from .walk_cycle import _VARS, _cycle_search
 from .walk_model import WalkingMachine
 from .walking import N_PER_STANCE
 
@@ -116,8 +116,7 @@ def _resolve(base: WalkingMachine, start: WalkingMachine, s: float,
     z0[_VARS.index("u")] *= s * base.mean_speed / start.mean_speed
     z0[_VARS.index("s")] *= r
     try:
-        z, w, it, _ = _cycle_search(z0, T_c, base.roll, targets, N_PER_STANCE,
-                                    extra_row=trough_held_row(T_c, base.roll) if trough_held else None)
+        z, w, it, _ = _cycle_search(z0, T_c, base.roll, targets, N_PER_STANCE, hold_trough=trough_held)
     except FitError as e:
         raise FitError(f"no walking cycle at x{s:.2f} the clip's speed: {e}") from None
     nx = w.next

@@ -45,6 +45,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from ..body.com_force import parabola_vertex
 from ..errors import PlanError
 from .dynamics import Control, _hermite
 
@@ -623,17 +624,15 @@ def single_support_trough(rec: RecordedStep) -> float:
     """The lowest total vertical ground force [m g] in the single support of a recorded step (trailing
     liftoff → next touchdown); nan where the step is invalid.
 
-    The minimum of TROUGH_SAMPLES samples refined by the parabola through it and its neighbours: a bare
-    sample minimum jumps as the trough moves between samples, and the cycle search differentiates this
-    value by finite differences."""
+    The minimum of TROUGH_SAMPLES samples refined by the parabola through it and its neighbours
+    (``body.com_force.parabola_vertex``): a bare sample minimum jumps as the trough moves between samples,
+    and the cycle search differentiates this value by finite differences."""
     w = rec.step
     if not w.valid:
         return math.nan
-    f = rec.sample(np.linspace(w.t_double, w.t_step, TROUGH_SAMPLES)).total_force[:, 1]
-    i = int(np.clip(np.argmin(f), 1, f.size - 2))
-    lo, mid, hi = f[i - 1], f[i], f[i + 1]
-    curv = lo - 2.0 * mid + hi
-    return float(mid - 0.125 * (hi - lo) ** 2 / curv) if curv > 0 else float(f.min())
+    t = np.linspace(w.t_double, w.t_step, TROUGH_SAMPLES)
+    f = rec.sample(t).total_force[:, 1]
+    return parabola_vertex(t, f, int(np.argmin(f)))[0]
 
 
 def simulate_walk(state: WalkState, theta0: float, control: Control, times, *, roll: float = 0.0,

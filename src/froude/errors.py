@@ -33,6 +33,12 @@ class FitError(FroudeError):
     """The simple machine could not be fitted to the motion."""
 
 
+class PastWalkRunTransition(FitError):
+    """A walk asked past the walk-run transition (Froude number U > 0.7): people run there. The message says
+    the fastest walking speed in m/s; known from the machine alone, so a refusal needs no search of the
+    reachable speeds."""
+
+
 class IkError(FroudeError):
     """Inverse kinematics could not reach its targets; the message names frame and residual."""
 

@@ -35,7 +35,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..errors import FitError
+from ..errors import FitError, PastWalkRunTransition
 from .walk_cycle import _VARS, _cycle_search
 from .walk_model import WalkingMachine
 from .walking import N_PER_STANCE
@@ -58,7 +58,8 @@ FAST_STEP_TIME_EXPONENT = -0.7
 
 
 def check_walking_speed(machine: WalkingMachine, s: float, what: str = "walk") -> None:
-    """Raise FitError (one line, in m/s) when s × the machine's speed is past the walk-run transition.
+    """Raise PastWalkRunTransition (one line, in m/s) when s × the machine's speed is past the walk-run
+    transition; FitError for a speed factor that is not a positive number.
 
     machine: the (scaled) walking machine whose speed unit √(g l0) gives m/s; s: speed factor [-].
     """
@@ -68,7 +69,7 @@ def check_walking_speed(machine: WalkingMachine, s: float, what: str = "walk") -
     if U > WALK_RUN_U:
         v = U * machine.speed_unit
         v_max = WALK_RUN_U * machine.speed_unit
-        raise FitError(
+        raise PastWalkRunTransition(
             f"a {what} at {v:.2f} m/s (x{s:g}) is past the walk-run transition for this character "
             f"(Froude number U = {U:.2f} > {WALK_RUN_U}, Fr = U^2 = {U * U:.2f} > 0.5, leg {machine.l0:.2f} m): "
             f"people run there; ask at most {v_max:.2f} m/s (x{WALK_RUN_U / machine.mean_speed:.2f}) "

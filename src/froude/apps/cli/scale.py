@@ -99,7 +99,13 @@ def run(args) -> int:
     goal = args.speed
     t0 = time.perf_counter()
 
-    from ...errors import FitError, FroudeError, NotARunningMotion, NotAWalkingMotion  # lazy: start-up
+    from ...errors import (  # lazy: start-up
+        FitError,
+        FroudeError,
+        NotARunningMotion,
+        NotAWalkingMotion,
+        PastWalkRunTransition,
+    )
     from ...flow import pipeline  # lazy: start-up (froude --help imports every verb module and no NumPy)
 
     try:
@@ -116,6 +122,8 @@ def run(args) -> int:
                              target_speed=goal.m_s if goal else None, strides=args.strides,
                              duration=args.duration, fps=args.fps, method=args.method, unlimited=args.unlimited,
                              **character_kwargs(args))
+    except PastWalkRunTransition as e:  # its message says the fastest walk: no search of the reachable speeds
+        raise PastWalkRunTransition(f"{Path(args.clip).name}: {e}") from None
     except FitError as e:
         if args.method != "physical":
             raise

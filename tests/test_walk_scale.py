@@ -13,7 +13,7 @@ import pytest
 
 from froude.flow import pipeline
 
-from conftest import BANDAI_WALKS, MOCAP, WALKING, clip, clip_params
+from conftest import BANDAI_WALKS, LOCO_RUNS, LOCO_WALKS, MOCAP, WALKING, clip, clip_params
 
 CHARACTERS = ("child", "troll", "giant")
 
@@ -328,3 +328,29 @@ def test_a_brisk_walk_goes_faster_with_its_stance_leg_loaded():
         assert r.mean_speed_m_s == pytest.approx(v_asked, rel=0.02)
         assert r.step_frequency_hz == pytest.approx(r.extras["cadence"]["expected_step_frequency_hz"], rel=0.02)
         assert r.extras["walking"]["trough_bw"] >= FLIGHT_FORCE_BW
+
+
+@pytest.mark.parametrize("name", LOCO_WALKS + LOCO_RUNS)
+def test_every_locomotion_walk_keeps_its_double_support_as_a_giant(name, walks):
+    """Issue 29 acceptance 1 (issue 17's double-support share, within 2 points under pure scaling) on every
+    walk and grounded "elderly run" of the locomotion sample, as the giant (where it was worst), with every
+    physics bar. The reference anchors set off and arrived half a frame after the walking machine's sub-frame
+    events, and the output's feet stood 16 ms longer than its stances (walk_elderly_001: +3.5 points; 7 of
+    the 16 walking clips over the bar); ``synthesis.feet.foot_anchors(subframe=True)``. The runs with flights are
+    scaled by the running machine: they have no double support, and every bar."""
+    r = pipeline.scale(walks(name), "giant").report
+    if "_run_masculine_" in name:
+        assert r.extras["machine"] == "running" and "walking" not in r.extras
+    else:
+        w = r.extras["walking"]
+        assert abs(w["double_support_fraction"] - w["clip"]["double_support_fraction"]) <= 0.02
+    assert r.check_bars() == [] and r.foot_skate_floor_mm <= 5.0
+
+
+def test_a_slowed_walk_lifts_its_foot_where_it_stood(walks):
+    """Slowed to 0.7x, walk_elderly_005's toe was put 60 mm behind its lift-off point one 30 Hz frame after
+    it (a 22 mm skate): the machine carries the COM over the contact other than the reference did, and a walk's
+    swing took up the body-relative path at once. It is joined to the ground path as a run's is
+    (``synthesis.targets._body_path_correction``)."""
+    r = pipeline.accelerate(walks("bandai-locomotion/walks/dataset-2_walk_elderly_005"), None, to_factor=0.7).report
+    assert r.foot_skate_mm <= 5.0 and r.check_bars() == []

@@ -118,8 +118,10 @@ def extract_cycle(
     ground = float(np.nanmedian(_stance_grounds(gait, F)))
     clearance, rest = rest_above(gait, markers, body.leg_length, ground)
 
-    # Per-frame anchors of each foot: stance contact point or a min-jerk blend between contacts.
-    anchors, anchor_ok = foot_anchors(gait, psi, speed * T * Rh[0], F)  # one stride along the heading [m]
+    # Per-frame anchors of each foot: stance contact point or a min-jerk blend between contacts, over one
+    # stride along the heading [m]; a walk's swings between its sub-frame events, as its machine's (a run's
+    # output swings between the cycle's marker contact phases, which are sample-rounded: left as they were)
+    anchors, anchor_ok = foot_anchors(gait, psi, speed * T * Rh[0], F, subframe=order == "walking")
     rel = np.einsum("ij,fpkj->fpki", Rh, markers - anchors[:, :, None, :])  # heading frame
     from_com = np.einsum("ij,fpkj->fpki", Rh, markers - com[:, None, None, :])
     from_com[..., 1] = markers[..., UP_AXIS] - ground

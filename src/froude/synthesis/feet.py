@@ -97,13 +97,21 @@ def swing_anchor(psi, psi_off, psi_on, c_off, c_on) -> tuple[np.ndarray, np.ndar
     return c_off * (1 - w) + c_on * w, u
 
 
-def foot_anchors(gait: Gait, psi: np.ndarray, stride: np.ndarray, F: int):
+def foot_anchors(gait: Gait, psi: np.ndarray, stride: np.ndarray, F: int, subframe: bool = False):
     """Anchor point of each foot per frame (F, 2, 3) [m] and whether it is known (F, 2).
 
     In stance the anchor is the stance's contact point (on its ground); in swing it moves from the
     previous contact to the next one with min-jerk progress in stride phase. A swing cut by the clip's
     edge gets a virtual contact one stride (``stride`` (3,) [m], horizontal) before the first or after
     the last contact of that foot, one stride phase earlier or later: the cycle is periodic.
+
+    subframe: a swing runs from the stance's sub-frame liftoff to the next sub-frame touchdown
+    (``Stance.t_off``, ``t_on``) rather than from its first frame off the ground to its first frame on it.
+    An output's anchor swings between the machine's events, and a walking machine's events are the gait's
+    sub-frame ones: a reference anchor that set off and arrived half a frame later on average left that
+    half frame of anchor motion in the cycle's foot offsets, and the output's foot, its anchor already
+    arrived, slowed to a stop 0.3 frames before its planned touchdown (walk_elderly_001 scaled to itself:
+    stances 16 ms longer than the machine's, double support +3 points of the cycle).
     """
     anchors = np.zeros((F, 2, 3))
     ok = np.zeros((F, 2), bool)
@@ -119,8 +127,10 @@ def foot_anchors(gait: Gait, psi: np.ndarray, stride: np.ndarray, F: int):
             pts.append(c)
             anchors[s.start : s.stop, foot] = c
             ok[s.start : s.stop, foot] = True
-            psi_on.append(psi[s.start])
-            psi_off.append(psi[min(s.stop, F - 1)])
+            a = s.t_on if subframe and s.start > 0 and np.isfinite(s.t_on) else s.start
+            b = s.t_off if subframe and s.stop < F and np.isfinite(s.t_off) else min(s.stop, F - 1)
+            psi_on.append(float(np.interp(a, frames, psi)))
+            psi_off.append(float(np.interp(b, frames, psi)))
         # virtual neighbours (a stance cut at the edge has an unknown start or end: use its known end)
         pts = [pts[0] - stride] + pts + [pts[-1] + stride]
         psi_off = [psi_off[0] - 1.0] + psi_off + [psi_off[-1] + 1.0]

@@ -99,12 +99,13 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     com_rel = L * data["marker_from_com"]
     com_rel[..., 1] = L * data["marker_rel"][..., 1]  # heights above the ground as in the anchored path
     with_body = path.com[:, None, None, :] + np.einsum("fpki,ij->fpkj", com_rel, Rh)
-    # ... and meets the ground path where the foot is near the floor (_body_path_correction; not in a walk,
-    # whose feet roll from contact to contact: it moved the Bandai walk giant's double support 0.024 from the
-    # clip's, over the 0.02 it keeps)
-    if cyc.order != "walking":
-        with_body += _body_path_correction(cyc, path, L, swings, on_ground[..., UP_AXIS].min(axis=2),
-                                           retarget.body.leg_length)
+    # ... and meets the ground path where the foot is near the floor (_body_path_correction). A walk needs it
+    # as a run does: slowed down, its machine carries the COM over the contact other than the reference did,
+    # and walk_elderly_005 accelerated to 0.7x put its toe 60 mm behind the lift-off point one 30 Hz frame
+    # after it (a 22 mm skate). (It was once left out of walks because it moved a giant's double support; the
+    # cause was the reference anchors' event timing, ``feet.foot_anchors(subframe=True)``.)
+    with_body += _body_path_correction(cyc, path, L, swings, on_ground[..., UP_AXIS].min(axis=2),
+                                       retarget.body.leg_length)
     # In mid-swing the foot keeps at least its reference height below the COM: a machine whose COM flies
     # higher than the reference's at that phase (a faster cycle: shorter stance, longer flight) would
     # otherwise leave the swinging foot at the reference's height above the ground, out of the leg's reach,

@@ -17,6 +17,7 @@ import pytest
 
 from froude.body.path import direction_of, heading_change, smooth_path, unsmooth_path, wrap_angle, yaw_of
 from froude.core.constants import UP
+from froude.errors import FroudeError
 from froude.flow import pipeline
 
 from conftest import BANDAI_LOCO, CMU_TURN_CLIPS, CMU_TURNS, LOCO_TURNS, clip, oracle_fk, read_bvh_oracle
@@ -268,15 +269,40 @@ def test_the_output_leans_into_the_turn_and_its_force_closes(prepared, turn_gian
     assert [r for r in cmp["lean_per_turning_step"] if not r["met"]] == []
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "issue 28: the giant's left tip slides 5.5 mm (bar 5) at the end of its stance over frames 100-126, in the "
-    "double support: with both feet and the COM held the IK leaves the tip 4.5-5.8 mm off its target while the "
-    "ankle is 25 mm off its own. The walk targets' sub-frame anchors and body-path correction (issue 29) moved "
-    "it from 2.73 mm; any change to a walk's targets has moved it across the bar (5.11 mm before "
-    "ik.correct._bar_misses)"))
 def test_the_turning_giant_meets_every_bar(turn_giant):
-    """Every bar met by the giant's turn, the stricter skate included."""
+    """Every bar met by the giant's turn, the stricter skate included (5.11 mm over frames 100-126 while the IK
+    repair ranked a joint jump above a held toe 4-6 mm off its target; 2.81 mm since, ik.correct._bar_misses;
+    5.54 mm with a walk's sub-frame anchors, the feet of its double support bent out of the legs' reach, 1.25
+    mm since the bend keeps them within it, synthesis.targets.within_reach)."""
     assert turn_giant.report.check_bars() == [] and turn_giant.report.foot_skate_floor_mm <= 5.0
+
+
+#: Walk-turns the walking machine refuses (issue 29's fit; docs/path.md), and giants known to miss a bar:
+#: strict xfails, so a fix shows.
+REFUSED_TURNS = {"dataset-2_walk-turn-left_elderly_001": "the COM falls below the landing height",
+                 "dataset-2_walk-turn-right_elderly_001": "no periodic walking cycle found"}
+GIANT_MISSES = {"dataset-1_walk-back_normal_001": "a straight take walked backwards: the giant's right ball and "
+                "tip slide 12.7 mm (17.3 before the walks' sub-frame anchors) over frames 41-54; not investigated"}
+
+
+def _giant_case(name: str):
+    stem = name.rsplit("/", 1)[-1]
+    marks = ([pytest.mark.xfail(strict=True, raises=FroudeError, reason=REFUSED_TURNS[stem])] if stem in REFUSED_TURNS
+             else [pytest.mark.xfail(strict=True, reason=GIANT_MISSES[stem])] if stem in GIANT_MISSES else [])
+    return pytest.param(name, id=stem, marks=marks)
+
+
+@pytest.mark.slow  # a scale of each turn (3-5 s)
+@pytest.mark.parametrize("name", [_giant_case(n) for n in LOCO_TURNS])
+def test_every_walk_turn_scaled_to_a_giant_meets_every_bar(name, prepared):
+    """The giant's output of every walk-turn (and the two walks at an angle, the backward walk) meets every
+    physics bar, the stricter skate included: 8 of the 12 missed one while the bent feet of a double support
+    were left out of the legs' reach (a held tip 14 mm off its target on walk-turn-right_feminine_001;
+    synthesis.targets.within_reach)."""
+    prep = prepared[name]
+    r = pipeline.scale(prep, "giant", strides=math.ceil(prep.path.n_steps / 2) + 1).report
+    path_misses = r.extras.get("path_vs_clip", {}).get("misses", [])  # issue 28's own points, not these
+    assert [f for f in r.check_bars() if f not in path_misses] == [] and r.foot_skate_floor_mm <= 5.0
 
 
 def test_a_lost_turn_is_a_missed_bar_said_in_degrees(prepared):

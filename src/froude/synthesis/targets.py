@@ -338,11 +338,12 @@ def _lift_out_of_reach(hips: np.ndarray, body: BodyModel, markers: np.ndarray,
                        own: np.ndarray | None = None, forward: np.ndarray | None = None) -> np.ndarray:
     """markers (T, 2, 3, 3) [m] with every target beyond the leg's reach raised straight up until it is
     within it (hips (T, 2, 3) [m] of the initial pose; reach from _leg_reach less LIFT_AT_MARGINS margins;
-    soft cap LIFT_MAX_L × L). own (T, 2, 3, 3) [m], forward (3,): the initial pose's own foot markers and
-    the heading, if given (a walk): a target ahead of the hip no farther from it than the pose's own marker
-    is within reach, the pose reaching it. Not behind the hip: there a walking foot pushes off, and raising
-    it as the leg straightens lifts its ball clear of the floor (CMU 07_01's giant: a ball 63 mm up, rising
-    about the tip, slid 10 mm in the report's floor band in its first frames without it).
+    soft cap LIFT_MAX_L × L). own (T, 2, 3, 3) [m], forward (3,) or (T, 3): the initial pose's own foot
+    markers and the heading (per frame on a bent path), if given (a walk): a target ahead of the hip no
+    farther from it than the pose's own marker is within reach, the pose reaching it. Not behind the hip:
+    there a walking foot pushes off, and raising it as the leg straightens lifts its ball clear of the floor
+    (CMU 07_01's giant: a ball 63 mm up, rising about the tip, slid 10 mm in the report's floor band in its
+    first frames without it).
 
     When the body has travelled farther over a planted foot than the leg allows (an acceleration's longer
     stance, a faster run), holding the foot's points where they are ends with the knee locked and the IK
@@ -363,7 +364,8 @@ def _lift_out_of_reach(hips: np.ndarray, body: BodyModel, markers: np.ndarray,
         lift_reach = np.broadcast_to(reach[None, :], flat.shape)  # (T, 3)
         if own is not None and forward is not None:
             own_d = np.linalg.norm(own[:, i] - hips[:, i, None, :], axis=-1)  # (T, 3)
-            lift_reach = np.where(rel @ forward > 0.0, np.maximum(lift_reach, own_d), lift_reach)
+            ahead = np.einsum("tkj,tj->tk", rel, np.broadcast_to(forward, (rel.shape[0], 3))) > 0.0
+            lift_reach = np.where(ahead, np.maximum(lift_reach, own_d), lift_reach)
         lowest = -np.sqrt(np.maximum(lift_reach**2 - flat**2, 0.0))  # lowest reachable height below the hip
         need = np.where(flat < lift_reach, lowest - rel[..., UP_AXIS], np.inf)  # (T, 3) rise needed [m]
         rise = cap * np.tanh(np.maximum(need, 0.0) / cap)  # (T, 3)
@@ -387,6 +389,20 @@ def _lift_out_of_reach(hips: np.ndarray, body: BodyModel, markers: np.ndarray,
         scale = 1.0 + off_floor * (np.minimum(d_in / np.maximum(d, 1e-9), 1.0) - 1.0)
         out[:, i] = hips[:, i, None, :] + rel * scale[..., None]
     return out
+
+
+def within_reach(targets: Targets, body: BodyModel, forward: np.ndarray, walking: bool) -> Targets:
+    """The targets with every foot target beyond the leg's reach raised from the initial pose's hips
+    (``_lift_out_of_reach``; forward (T, 3): the heading per frame; walking: a walk's rule ahead of the hip).
+
+    ``build_targets`` does this on the straight output. A turning take's targets are then bent onto its path
+    (``synthesis.bend``), which moves each foot along the curve and sideways by the lean, so the bend does it
+    again on what it made: bent as they were built, a giant's two feet in a double support of
+    walk-turn-right_feminine_001 were 1.60 and 1.57 m from its hips for a 1.61 m leg, the IK met neither
+    (a held tip 14 mm off its target, the report's skate), and 8 of the 12 walk-turns' giants missed a bar."""
+    hips = body.joint_positions(targets.initial, [body.roles["left_hip"], body.roles["right_hip"]])
+    own = body.foot_markers(targets.initial) if walking else None
+    return replace(targets, markers=_lift_out_of_reach(hips, body, targets.markers, own, forward))
 
 
 def _ball_rise_about_tip(foot: np.ndarray, sweep: float) -> np.ndarray:

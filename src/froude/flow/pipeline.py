@@ -209,7 +209,7 @@ def targets_of(prep: Prepared, path: MachinePath, retarget: Retarget):
     along a turning take's path (bend), on the floor y = 0 as the clip stands on its own (raised)."""
     targets = build_targets(prep.cycle, path, retarget, prep.body, prep.output_meta)
     path = _replace(path, com=targets.com)  # the machine's COM as the character carries it (posture_com_offset)
-    bent = bend(targets, path, prep.turn, retarget.L, prep.origin, retarget.body, prep.cycle.order == "walking")
+    bent = bend(targets, path, prep.turn, retarget.L, prep.origin, retarget.body, prep.cycle.order)
     return raised(*bent, retarget.L * prep.cycle.floor_clearance)
 
 

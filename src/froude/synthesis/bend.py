@@ -203,15 +203,15 @@ def _per_frame(path: MachinePath, shift_step: np.ndarray) -> np.ndarray:
 
 
 def bend(targets: Targets, path: MachinePath, clip: TakePath | None, L: float,
-         origin: np.ndarray, body: BodyModel, walking: bool) -> tuple[Targets, MachinePath]:
+         origin: np.ndarray, body: BodyModel, order: str) -> tuple[Targets, MachinePath]:
     """The straight output's IK targets and machine path rolled onto the clip's path scaled by L (as they are
     when clip is None: a straight take, modelled as it is).
 
     COM, foot markers, the machine's COM and contact points are moved point by point; the initial motion's
     pose (the IK's start and the pose it is pulled toward) is moved rigidly with its COM target, turned
     by the heading gained there; the foot targets are then kept within the legs' reach of the turned pose
-    (``targets.within_reach``; body: the character's, walking: a walk's reach rule). origin: (3,) [m] where
-    the straight output starts (``Prepared.origin``).
+    (``targets.within_reach``; body: the character's; order: the cycle's, a walk's reach rule for
+    "walking"). origin: (3,) [m] where the straight output starts (``Prepared.origin``).
     """
     if clip is None:
         return targets, path
@@ -231,7 +231,8 @@ def bend(targets: Targets, path: MachinePath, clip: TakePath | None, L: float,
     rot[:, 0] = quat.mul(q, rot[:, 0])
     initial = _replace(init, root_positions=root, rotations=rot)
     forward = quat.rotate(q, np.broadcast_to(fwd0, (len(dpsi), 3)))
-    new_targets = within_reach(_replace(targets, com=com, markers=markers, initial=initial), body, forward, walking)
+    new_targets = within_reach(_replace(targets, com=com, markers=markers, initial=initial), body, forward,
+                               walking=order == "walking")
     new_path = _replace(path, com=bend_points(path.com, line, origin),
                         contacts=bend_points(path.contacts + shift_step[:, None] * left0, line, origin))
     return new_targets, new_path

@@ -231,8 +231,8 @@ def bend(targets: Targets, path: MachinePath, clip: TakePath | None, L: float,
     rot[:, 0] = quat.mul(q, rot[:, 0])
     initial = _replace(init, root_positions=root, rotations=rot)
     forward = quat.rotate(q, np.broadcast_to(fwd0, (len(dpsi), 3)))
-    new_targets = within_reach(_replace(targets, com=com, markers=markers, initial=initial), body, forward,
-                               walking=order == "walking")
+    markers = within_reach(initial, markers, body, forward, walking=order == "walking")
+    new_targets = _replace(targets, com=com, markers=markers, initial=initial)
     new_path = _replace(path, com=bend_points(path.com, line, origin),
                         contacts=bend_points(path.contacts + shift_step[:, None] * left0, line, origin))
     return new_targets, new_path

@@ -121,8 +121,7 @@ def build_targets(cyc: ReferenceCycle, path: MachinePath, retarget: Retarget, re
     # A walk's landing foot is raised only beyond the time-warped reference pose's own foot: a walking leg
     # lands almost straight, within the run's margins of its reach, and raised there (the Bandai walk scaled
     # to itself: its toe 15-23 mm up at every touchdown) the feet landed 0.5-0.9 frames late at 30 Hz
-    own = body.foot_markers(initial) if cyc.order == "walking" else None
-    markers = _lift_out_of_reach(hips, body, markers, own, path.frame[0])
+    markers = within_reach(initial, markers, body, path.frame[0], cyc.order == "walking", hips)
     # Each foot's lowest point rests on the ground at 0 until here (the cycle's heights are above each stance's
     # own lowest point, the thresholds below are tuned so), its markers where the clip's rest above that point
     rest = cyc.rest_heights
@@ -391,18 +390,21 @@ def _lift_out_of_reach(hips: np.ndarray, body: BodyModel, markers: np.ndarray,
     return out
 
 
-def within_reach(targets: Targets, body: BodyModel, forward: np.ndarray, walking: bool) -> Targets:
-    """The targets with every foot target beyond the leg's reach raised from the initial pose's hips
-    (``_lift_out_of_reach``; forward (T, 3): the heading per frame; walking: a walk's rule ahead of the hip).
+def within_reach(initial: Motion, markers: np.ndarray, body: BodyModel, forward: np.ndarray, walking: bool,
+                 hips: np.ndarray | None = None) -> np.ndarray:
+    """markers (T, 2, 3, 3) [m] with every foot target beyond the leg's reach of the pose ``initial`` raised
+    (``_lift_out_of_reach``; forward (3,) or (T, 3): the heading, per frame on a bent path; walking: a walk's
+    rule ahead of the hip, against the pose's own feet; hips (T, 2, 3) [m]: the pose's, when already known).
 
     ``build_targets`` does this on the straight output. A turning take's targets are then bent onto its path
     (``synthesis.bend``), which moves each foot along the curve and sideways by the lean, so the bend does it
     again on what it made: bent as they were built, a giant's two feet in a double support of
     walk-turn-right_feminine_001 were 1.60 and 1.57 m from its hips for a 1.61 m leg, the IK met neither
     (a held tip 14 mm off its target, the report's skate), and 8 of the 12 walk-turns' giants missed a bar."""
-    hips = body.joint_positions(targets.initial, [body.roles["left_hip"], body.roles["right_hip"]])
-    own = body.foot_markers(targets.initial) if walking else None
-    return replace(targets, markers=_lift_out_of_reach(hips, body, targets.markers, own, forward))
+    if hips is None:
+        hips = body.joint_positions(initial, [body.roles["left_hip"], body.roles["right_hip"]])
+    own = body.foot_markers(initial) if walking else None
+    return _lift_out_of_reach(hips, body, markers, own, forward)
 
 
 def _ball_rise_about_tip(foot: np.ndarray, sweep: float) -> np.ndarray:

@@ -378,11 +378,11 @@ def test_shape_fit_runs_from_the_nearest_starts_and_falls_back(monkeypatch):
     farther start is not fitted while one of them succeeds, and a failed fit's reason is kept. Toy problems
     stand in for the machine (a linear residual, one linear constraint y0 = y1), and the exact cycle search
     after the fit is a recorder."""
-    from froude.machine import walk_fit
+    from froude.machine import walk_shape
 
-    assert walk_fit.NEAREST_STARTS == 2
+    assert walk_shape.NEAREST_STARTS == 2
     fitted = []
-    monkeypatch.setattr(walk_fit, "_cycle_search", lambda z, *a, **k: (z, "step", 2, 0.0))
+    monkeypatch.setattr(walk_shape, "_cycle_search", lambda z, *a, **k: (z, "step", 2, 0.0))
 
     def problem(name, offset, valid_only_at_start=False):
         def evaluate(y):
@@ -398,14 +398,14 @@ def test_shape_fit_runs_from_the_nearest_starts_and_falls_back(monkeypatch):
         problem("f", np.array([5.0, 5.0]))
     broken = problem("b", np.array([0.5, 0.5]), valid_only_at_start=True)  # residual 0.25, its fit fails
     errors: list[str] = []
-    z, cost, w, calls, z0 = walk_fit._shape_fit_nearest([(far, 10, "far"), (near, 20, "near"), (mid, 30, "mid")],
-                                                        1.0, 0.0, (1, 1, 1), 120, errors)
+    z, cost, w, calls, z0 = walk_shape._shape_fit_nearest([(far, 10, "far"), (near, 20, "near"), (mid, 30, "mid")],
+                                                          1.0, 0.0, (1, 1, 1), 120, errors)
     assert z0 == "mid" and z[0] == ord("m") and calls == 32 and errors == [] and cost < 0.1
     assert fitted.count("f") == 1 and fitted.count("n") > 1  # the far start: its residual only, no fit
     assert abs(z[1] - z[2]) < 1e-9 and abs(z[1] - 2.0) < 2e-2  # on the constraint, at the toy's minimum
     fitted.clear()
-    z, *_, z0 = walk_fit._shape_fit_nearest([(far, 1, "far"), (near, 1, "near"), (broken, 1, "broken")], 1.0,
-                                            0.0, (1, 1, 1), 120, errors)
+    z, *_, z0 = walk_shape._shape_fit_nearest([(far, 1, "far"), (near, 1, "near"), (broken, 1, "broken")], 1.0,
+                                              0.0, (1, 1, 1), 120, errors)
     assert z0 == "near" and "b" in fitted and fitted.count("f") == 1
     assert len(errors) == 1 and "valid steps" in errors[0]
 
@@ -415,7 +415,7 @@ def test_choice_between_fits_does_not_hang_on_the_last_bits():
     cost is lower by more than COST_MARGIN; costs perturbed far above rounding (1e-6 relative, 1e4 times
     what the solver's tolerance moves a converged cost) never change the choice, and two fits at the same
     minimum keep the nearest."""
-    from froude.machine.walk_fit import COST_MARGIN, choose_fit
+    from froude.machine.walk_shape import COST_MARGIN, choose_fit
 
     assert COST_MARGIN >= 1e-3  # far above rounding (1e-12) and what STEP_TOL leaves in a cost (1e-8)
     cases = [([2.602, 2.602], 0), ([2.602, 2.602 * (1 - 1e-9)], 0), ([0.205, 0.162], 1), ([0.343, 1.2], 0),

@@ -121,7 +121,7 @@ def acceleration_response(freq_hz: np.ndarray, frame_time: float, cutoff_hz: flo
     central differences' −sin²(ω dt)/dt² (real: the chain has zero phase). Away from the clip's edges, the
     acceleration ``smooth_com`` measures of a periodic motion is its harmonics times this gain (aliases of
     harmonics above the Nyquist frequency aside), so a model's motion can be seen through the same
-    instrument without sampling it (:func:`froude.machine.walk_fit.stance_force_profile`)."""
+    instrument without sampling it (:func:`froude.machine.walk_shape.stance_force_profile`)."""
     w_dt = 2.0 * math.pi * np.asarray(freq_hz, float) * frame_time
     z1 = np.exp(-1j * w_dt)
     gain = np.ones(w_dt.shape)

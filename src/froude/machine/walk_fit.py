@@ -40,32 +40,44 @@ just past the other foot's touchdown, a weight-acceptance pulse at the clip's fi
 fitted by the shape fit); of the four periodic starts the shape fit runs from the two whose shape residual is
 the smallest (``_shape_fit_nearest``), the others only if both fail, and ``choose_fit`` picks between the
 converged ones (the nearest unless another's cost is lower by COST_MARGIN); where every start fails at the
-coarse resolution they all run again at the fine one. The solver is :mod:`froude.machine.gauss_newton`.
+coarse resolution they all run again at the fine one. A chosen fit whose force landmarks are further from the
+clip's than LANDMARK_TIMING_TOL is refined with the weight-acceptance pulse's centre free
+(``_refine_pulse_centre``). The shape fit, the choice and the refinement are :mod:`froude.machine.walk_shape`;
+the solver is :mod:`froude.machine.gauss_newton`.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
-from ..body.com_force import acceleration_response, force_landmarks
+from ..body.com_force import force_landmarks
 from ..body.gait import detect_gait, summarize, walks
 from ..body.model import BodyModel
 from ..core.constants import GRAVITY, UP_AXIS
 from ..core.motion import Motion
 from ..errors import FitError, NotAWalkingMotion
 from .forces import CUTOFF_HZ, clip_com
-from .gauss_newton import constrained_gauss_newton
 from .walk_cycle import (
     _VARS,
     CYCLE_SCALES,
     PULSE_VARS,
     _control,
     _cycle_search,
-    _scales,
 )
 from .walk_model import WalkingMachine
+from .walk_shape import (
+    SHAPE_N_PER_STANCE,
+    _refine_pulse_centre,
+    _shape_fit_nearest,
+    _shape_problem,
+    cycle_landmark_timing,
+    landmark_timing,
+    stance_force_profile,
+    step_phase_times,
+)
 from .walk_stance import measure_stance
 from .walking import (
     N_PER_STANCE,
@@ -81,8 +93,6 @@ __all__ = ["WalkFitResult", "fit_walking_detailed", "CYCLE_SCALES", "force_landm
 #: The start of the fit with pulses: amplitudes p, q [l0], the push-off pulse's centre past the other
 #: foot's touchdown (dtau_p, stance phase) and both widths (half the support, stance phase).
 PULSE_START = {"p": 0.03, "dtau_p": 0.007, "w_p": 0.04, "q": 0.02, "w_q": 0.075}
-
-
 #: The second start of the cycle search: a plain spring leg, Geyer et al.'s K ≈ 20 (k = 20 kN/m, m = 80 kg,
 #: l0 = 1 m gives 25), l_d = l0; (K, a, b, c).
 GEYER_CONTROL = (20.0, 0.0, 0.0, 0.0)
@@ -198,74 +208,6 @@ class WalkFitResult:
     steps: np.ndarray
 
 
-def stance_force_profile(rec, tau, *, frame_time=None, cutoff_hz=CUTOFF_HZ, time_unit=1.0):
-    """Total vertical force [m g] of the periodic machine over one leg's stance at phases tau (N,).
-
-    rec: the RecordedStep (:func:`froude.machine.walking.record_step`) of the periodic cycle. The leg
-    lands at the start of a step and lifts off t_stance later; the total force of both legs repeats every
-    step, so the stance profile is the step's force at (τ t_stance) mod t_step. With ``frame_time`` [s]
-    (and ``time_unit`` √(l0/g) [s]) the force is *measured like the clip's*: the machine's COM height, a
-    periodic signal, goes through the clip's zero-lag filter and double differentiation (eq. 1,
-    :func:`froude.machine.forces.smooth_com`) as their frequency response
-    (:func:`froude.body.com_force.acceleration_response`) on its harmonics up to the clip's Nyquist
-    frequency, so both forces are seen through the same instrument. In the frequency domain the result is
-    smooth in the machine's parameters; sampling it at the frame rate and interpolating (as before) put
-    kinks into the shape fit's residual wherever a sample crossed a phase, and its minimum sat on them.
-    """
-    w = rec.step
-    t_m = (np.asarray(tau, float) * w.t_stance) % w.t_step
-    if frame_time is None:
-        return rec.sample(t_m).total_force[:, 1]
-    n_fft = PROFILE_FFT_SAMPLES
-    y = rec.positions(np.arange(n_fft) * (w.t_step / n_fft))[0][:, 1]  # COM height over one step [l0]
-    coef = np.fft.rfft(y) / n_fft
-    harmonic = np.arange(coef.size)
-    freq_hz = harmonic / (w.t_step * time_unit)
-    gain = np.where(freq_hz < 0.5 / frame_time, acceleration_response(freq_hz, frame_time, cutoff_hz), 0.0)
-    gain[1:] *= 2.0  # the negative frequencies' half (no harmonic at the Nyquist index survives: see above)
-    # The sum over harmonics is elementwise on purpose: as a (N, H) complex matrix product it went to a
-    # multithreaded BLAS, whose start-up cost 20 times the sum itself on a loaded machine.
-    # Only the harmonics below the clip's Nyquist frequency count (gain 0 above: 8 of 129 at 30 Hz frames).
-    kept = gain != 0.0
-    phase = np.exp(2j * np.pi * np.outer(t_m / w.t_step, harmonic[kept]))
-    acc = np.einsum("ij,j->i", phase, (gain * coef)[kept]).real  # [l0 / s²]
-    return 1.0 + acc * time_unit ** 2  # l0 = g T²: the acceleration in g
-
-
-#: Samples of one machine step for the harmonics of its COM height (``stance_force_profile``): harmonics up
-#: to 64 of the step frequency (about 120 Hz), above every clip's Nyquist frequency up to 240 Hz frames.
-PROFILE_FFT_SAMPLES = 256
-
-
-#: Weights of the shape fit: periodicity and measured times are (nearly) hard, the force profile soft.
-SHAPE_WEIGHTS = {"periodic": 100.0, "targets": 30.0, "prior": 0.05, "com": 10.0}
-#: Extra weight of the force residual around each of the clip's landmarks (two peaks, trough), a Gaussian
-#: of LANDMARK_WIDTH in stance phase: 1 + 6 at a landmark. Without it the CMU clips' W-shaped single
-#: support pulled the machine's trough to its mean (02_01: +0.14 BW, +10.5 % of a step late); 3-10 and
-#: widths 0.04-0.06 all put 02_01 and the Bandai walk within the acceptance, 6 and 0.06 with most margin.
-LANDMARK_WEIGHT = 6.0
-LANDMARK_WIDTH = 0.06
-#: Least clearance of the landing leg in single support [l0] that the shape fit keeps, and the weight of a
-#: shortfall (``_clearance_shortfall``). The machine's landing leg, held at θ0 with length l_td, touches the
-#: ground when the COM falls to l_td cos θ0; a COM that dips towards that height in late single support and
-#: rises again (the W-shaped single support of the CMU walks) has a second, earlier touchdown within reach:
-#: at the graze the step map jumps (02_01's step time by 14 %), and a shape fit that ends 0.0004 l0 above it
-#: (0.4 mm) left the exact cycle search's success to the BLAS kernel (issue 26). 1 % of l0 (about 9 mm, below
-#: a walker's least toe clearance of 1-2 cm) is 25 times that and 20-100 times how far the fit's end point
-#: moves between kernels.
-MIN_CLEARANCE = 0.01
-CLEARANCE_WEIGHT = 100.0
-#: Simulator resolution of the shape fit (the exact cycle is found after it at N_PER_STANCE).
-SHAPE_N_PER_STANCE = 120
-#: The starts' cycle searches and shape fits run at SHAPE_N_PER_STANCE, a speed choice (half the
-#: simulator's work); where every start fails there (a cycle whose leg nearly unloads in single support, or a
-#: pulse of 0.04 of a stance over 5 steps, is resolved only finer) they run again at the exact cycle's own
-#: resolution (``fit_walking_detailed``'s n_per_stance, N_PER_STANCE). A reason of resolution, not of a clip:
-#: the Bandai walk_active_002 (a brisk walk, 1.43 m/s) found no start at 120 and fits at 240 (docs/walking.md).
-#: Samples of the step-phase COM height profile (double support, then single support).
-COM_SAMPLES = (8, 24)
-
-
 def stance_leg_length(m, tau, n_per_stance=N_PER_STANCE):
     """Leg length l and desired length l_d [l0] of one leg of the periodic machine ``m`` over its stance.
 
@@ -280,151 +222,6 @@ def stance_leg_length(m, tau, n_per_stance=N_PER_STANCE):
     xc = np.where(first, tr.contact_x[1], tr.contact_x[0]) + m.roll * tau
     l = np.hypot(tr.pos[:, 0] - xc, tr.pos[:, 1])
     return l, desired_leg_length(m.control, tau)
-
-
-def step_phase_times(t_double, t_step):
-    """(N,) times of the step-phase grid: COM_SAMPLES[0] in double support, COM_SAMPLES[1] in single."""
-    n1, n2 = COM_SAMPLES
-    return np.concatenate([np.linspace(0.0, t_double, n1, endpoint=False), np.linspace(t_double, t_step, n2)])
-
-
-def _clearance_shortfall(rec, theta0: float, l_td: float, n_samples: int = 200) -> float:
-    """max(0, MIN_CLEARANCE − c) / MIN_CLEARANCE [-] of one machine step (``record_step``'s RecordedStep).
-
-    c [l0]: the lowest dip of the COM below which the step would end early, the least height above the
-    landing height l_td cos θ0 at which the COM, in single support and past the stance foot, stops
-    descending and rises again (the landing leg's least clearance before its touchdown); no such dip: 0.
-    """
-    w = rec.step
-    t = np.linspace(w.t_double, w.t_step, n_samples)
-    pos, vel = rec.positions(t)
-    past = pos[:-1, 0] > l_td * math.sin(theta0)
-    turn = past & (vel[:-1, 1] < 0.0) & (vel[1:, 1] >= 0.0)  # a local minimum of the COM height
-    if not turn.any():
-        return 0.0
-    c = float(np.min(pos[:-1, 1][turn])) - l_td * math.cos(theta0)
-    return max(0.0, MIN_CLEARANCE - c) / MIN_CLEARANCE
-
-
-def _shape_problem(z1, T_c, roll, targets, tau, prof_ref, h_ref, frame_time, time_unit, tau_landmarks, free=(),
-                   n_per_stance=SHAPE_N_PER_STANCE):
-    """The shape fit's problem from the periodic cycle z1 (17,): (evaluate, to_z, n) for
-    ``gauss_newton.constrained_gauss_newton``: to_z(y) the cycle variables (17,) of the n scaled free ones y.
-
-    The fit is the least squares of the machine's stance force profile against the clip's, on the periodic
-    cycles.
-
-    Minimises ½‖r‖² + ½ w²‖y‖² subject to c = 0, y = (z − z1)/s the free variables in CYCLE_SCALES units:
-    r the vertical force over a stance at tau [BW], weighted up around the clip's landmarks at phases
-    tau_landmarks (``LANDMARK_WEIGHT``), the COM height over a step and the landing leg's clearance
-    shortfall (``_clearance_shortfall``, so that the exact cycle found after it is not at a graze); c the
-    periodicity and the relative errors of step time, double-support time and speed (7 equations, exact);
-    w = SHAPE_WEIGHTS["prior"] the pull to the periodic start z1. Solved by constrained Gauss-Newton
-    (:func:`froude.machine.gauss_newton.constrained_gauss_newton`) to a step below its ``STEP_TOL``: the end
-    point is the minimum, not where a budget ran out, so it does not follow the last bits of the clip
-    (issue 26); the exact cycle is found from it after at full resolution.
-    """
-    s_all = _scales(z1, free)
-    fr = s_all > 0
-    s = s_all[fr]
-    tgt = np.asarray(targets, float)
-    wc = SHAPE_WEIGHTS["com"]
-    wf = 1.0 + LANDMARK_WEIGHT * sum(np.exp(-0.5 * ((tau - tk) / LANDMARK_WIDTH) ** 2) for tk in tau_landmarks)
-
-    def evaluate(y):
-        z = to_z(y)
-        rec = record_step(WalkState(*z[:4]), z[4], _control(z, T_c), roll=roll, l_td=z[9], n_per_stance=n_per_stance)
-        w = rec.step
-        if not w.valid:
-            return None
-        prof = stance_force_profile(rec, tau, frame_time=frame_time, time_unit=time_unit)
-        h = rec.positions(step_phase_times(w.t_double, w.t_step))[0][:, 1]
-        nx = w.next
-        c = np.array([nx.u - z[0], nx.v - z[1], nx.d - z[2], nx.s - z[3], (w.t_step - tgt[0]) / tgt[0],
-                      (w.t_double - tgt[1]) / tgt[1], (w.step_length / w.t_step - tgt[2]) / tgt[2]])
-        graze = CLEARANCE_WEIGHT * _clearance_shortfall(rec, z[4], z[9])
-        return np.concatenate([wf * (prof - prof_ref), wc * (h - h_ref), [graze]]), c
-
-    def to_z(y):
-        z = z1.copy()
-        z[fr] = z1[fr] + s * y
-        return z
-
-    return evaluate, to_z, s.size
-
-
-#: How many of the periodic starts, nearest the clip's shape first, the walking fit runs the shape fit from
-#: (``_shape_fit_nearest``); further ones only while none has succeeded.
-NEAREST_STARTS = 2
-#: How much lower [relative] a farther start's converged shape cost must be than the nearest's to be chosen
-#: (``choose_fit``). A converged cost is the minimum's to within ½ H STEP_TOL² (about 1e-8 of it; rounding
-#: moves it by 1e-12): 1 % is a million times that, so the choice does not hang on the last bits, and far
-#: below the differences between distinct minima seen (a Bandai turn: 0.162 against 0.205, 21 %).
-COST_MARGIN = 0.01
-
-
-def choose_fit(costs) -> list[int]:
-    """The order in which the walking fit tries its shape fits' ends (the first whose exact cycle is found wins).
-
-    costs: the shape costs of the fits in the order of their starts' nearness to the clip (nearest first),
-    only converged fits (``constrained_gauss_newton`` returns no other). The nearest is chosen, and a farther
-    one replaces the choice only where its cost is lower than the chosen one's by more than COST_MARGIN
-    (relative), in order of nearness. Two starts that reach the same minimum (parameters within the solver's
-    tolerance) have the same cost to 1e-8 and the nearest is kept; distinct minima are told apart only by a
-    margin far above what rounding moves a cost. The rest follow by nearness (the fallbacks when an exact
-    cycle search fails).
-    """
-    order = list(range(len(costs)))
-    if not order:
-        return order
-    first = 0
-    for k in order[1:]:
-        if costs[k] < (1.0 - COST_MARGIN) * costs[first]:
-            first = k
-    return [first] + [k for k in order if k != first]
-
-
-def _shape_fit_nearest(candidates, T_c, roll, targets, n_per_stance, errors):
-    """The shape fits from the NEAREST_STARTS candidate starts nearest the clip, then the exact periodic cycle
-    from the end that ``choose_fit`` puts first.
-
-    candidates: [((evaluate, to_z, n) of ``_shape_problem``, cycle-search evaluations, prior z0 (17,))], one per
-    start. Every start is a periodic cycle meeting the same targets; Gauss-Newton goes downhill from where
-    it starts, so the starts whose shape residual ½‖r‖² is the smallest are the ones nearest the clip's
-    shape, and their fits run (the next ones only while none has succeeded: a fit or the exact cycle after
-    it can fail; the reasons are appended to ``errors``). Not only the nearest: the cost has several local
-    minima, and the nearest start need not lead to the lowest (a Bandai turn, 27 Nov: start residuals 5.6
-    and 16.7 ended at costs 0.205 and 0.162, and the output of the first missed the skate bar where the
-    second's met it). A fit that does not converge is discarded (its end is not a minimum). Returns (z (17,),
-    shape cost, WalkStep, evaluations, z0) or None.
-    """
-    ranked: list[tuple] = []
-    for (evaluate, to_z, n), it1, z0 in candidates:
-        start = evaluate(np.zeros(n))
-        if start is None:
-            errors.append("the walking shape fit starts from an invalid machine step")
-            continue
-        ranked.append((0.5 * float(start[0] @ start[0]), len(ranked), evaluate, to_z, n, start, it1, z0))
-    fits: list[tuple] = []
-    for k, (_, _, evaluate, to_z, n, start, it1, z0) in enumerate(sorted(ranked, key=lambda c: c[:2])):
-        if fits and k >= NEAREST_STARTS:
-            break
-        try:
-            y, cost = constrained_gauss_newton(evaluate, n, SHAPE_WEIGHTS["prior"], start=start,
-                                               what="the walking shape fit")
-        except FitError as e:
-            errors.append(str(e))
-            continue
-        fits.append((cost, to_z(y), it1, z0))
-    for i in choose_fit([f[0] for f in fits]):
-        cost, z2, it1, z0 = fits[i]
-        try:
-            z, w, it2, _ = _cycle_search(z2, T_c, roll, targets, n_per_stance)
-        except FitError as e:
-            errors.append(str(e))
-            continue
-        return z, cost, w, it1 + it2, z0
-    return None
 
 
 def _start_passes(n_per_stance: int) -> tuple:
@@ -548,6 +345,14 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     errors: list[str] = []
     pulses_off = tuple(PULSES_OFF[k] for k in PULSE_VARS)
     best, plain_reason = None, None
+    def problem(z1, free, n_shape):  # the shape fit's problem from the periodic cycle z1
+        return _shape_problem(z1, T_c, roll, targets, tau, prof_ref, h_ref_step, dt, T, tau_landmarks, free,
+                              n_per_stance=n_shape)
+
+    def refine(z2, n_shape):  # the weight-acceptance pulse placed where the landmarks miss
+        return _refine_pulse_centre(z2, lambda z1, free: problem(z1, free, n_shape), lambda z: cycle_landmark_timing(
+            z, T_c, roll, tau, dt, T, lm_ref, (stance_time, step_time), n_shape))
+
     for n_shape, held in _start_passes(n_per_stance):
         if held:
             # A refusal gives the plain passes' last reason: the held trough is a last resort, and its own
@@ -562,10 +367,9 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
                 except FitError as e:
                     errors.append(str(e))
                     continue
-                problem = _shape_problem(z1, T_c, roll, targets, tau, prof_ref, h_ref_step, dt, T, tau_landmarks,
-                                         free, n_per_stance=n_shape)
-                candidates.append((problem, it1, z0))
-        best = _shape_fit_nearest(candidates, T_c, roll, targets, n_per_stance, errors)
+                candidates.append((problem(z1, free, n_shape), it1, z0))
+        best = _shape_fit_nearest(candidates, T_c, roll, targets, n_per_stance, errors,
+                                  partial(refine, n_shape=n_shape))
         if best is not None:
             break
     if best is None:  # what the clip is (the gait's decision, as info says it), then why it is refused
@@ -597,10 +401,7 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     t_ref, h_ref, h_mod = (np.concatenate(p) for p in (t_parts, h_parts, m_parts))
     com_rms = float(np.sqrt(np.mean((h_mod - h_ref) ** 2)))
 
-    def timing(key):
-        # stance phase → time since touchdown [s], as a share of the clip's step
-        return float((lm_mod[key] * w.t_stance * T - lm_ref[key] * stance_time) / step_time)
-
+    timing = landmark_timing(lm_mod, w.t_stance * T, lm_ref, stance_time, step_time)
     reference = {"stance_time_s": stance_time, "double_support_s": double_time, "step_time_s": step_time,
                  "mean_speed_m_s": mean_speed, "theta0_rad": th0, "roll_m": roll * l0, "n_steps": len(steps),
                  "steps_s": [[float(a), float(b), float(c)] for a, b, c in zip(t_td, t_lo, t_nx)],
@@ -615,8 +416,8 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         "force_bw": lm_mod, "force_unfiltered_bw": lm_raw,
         "peak1_error_bw": lm_mod["peak1"] - lm_ref["peak1"], "trough_error_bw": lm_mod["trough"] - lm_ref["trough"],
         "peak2_error_bw": lm_mod["peak2"] - lm_ref["peak2"],
-        "peak1_timing_error_step": timing("tau_peak1"), "trough_timing_error_step": timing("tau_trough"),
-        "peak2_timing_error_step": timing("tau_peak2"),
+        "peak1_timing_error_step": float(timing[0]), "trough_timing_error_step": float(timing[1]),
+        "peak2_timing_error_step": float(timing[2]),
         "force_profile_rms_bw": float(np.sqrt(np.mean((prof_model - prof_ref) ** 2))),
     }
     fit = {"K": K0, "a": a0, "b": b0, "c": c0, "r2_vertical": r2, "rms_bw": rms, "note": fit_note,

@@ -47,7 +47,7 @@ def main(argv=None) -> int:
     from froude.body.model import BodyModel
     from froude.body.path import _stride_frames, unsmooth_path, unstraighten
     from froude.body.take import analysed_take
-    from froude.io.bvh import load_bvh
+    from froude.body.load import load_bvh
 
     from conftest import clip
 

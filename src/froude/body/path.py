@@ -105,6 +105,18 @@ class TakePath:
         n = self.arc_length_m.size
         return self.length_m / ((n - 1) * self.frame_time) if n > 1 else float("nan")
 
+    def speed_around(self, place_m: np.ndarray, window_s: float) -> np.ndarray:
+        """(...) the mean speed along the path [m/s] over window_s [s] of the take centred where it passes the
+        places place_m (...) [m of arc length]; the window kept inside the take (the mean speed where the
+        take is shorter than it)."""
+        arc = np.maximum.accumulate(self.arc_length_m)
+        t = np.arange(arc.size) * self.frame_time
+        if arc.size < 2 or not t[-1] > window_s:
+            return np.full(np.shape(place_m), self.path_speed_m_s)
+        half = 0.5 * window_s
+        mid = np.clip(np.interp(place_m, arc, t), half, t[-1] - half)
+        return (np.interp(mid + half, t, arc) - np.interp(mid - half, t, arc)) / window_s
+
     @property
     def n_steps(self) -> float:
         """How many steps the take spans: its duration over the step time (half the stride) [-]."""

@@ -94,10 +94,13 @@ def _knots(t_td: np.ndarray, t_double: np.ndarray, pe: np.ndarray):
 @dataclass(frozen=True)
 class StepPlan:
     """A walk step by step: step i is walked by machines[i] (scaled, SI view) stretched horizontally by
-    stretch[i] (§5.2; 1 for a re-solved cycle)."""
+    stretch[i] (§5.2; 1 for a re-solved cycle). continuous: the stretch varies linearly in time between the
+    steps' middles instead of holding over each step, so the COM's forward velocity does not jump at a
+    touchdown where it changes (a walker's speed along a turn, ``turn_speed_factors``)."""
 
     machines: tuple
     stretch: np.ndarray
+    continuous: bool = False
 
 
 def _stitch(plan: StepPlan, fps: float):
@@ -124,13 +127,21 @@ def _stitch(plan: StepPlan, fps: float):
     # starts where the last ended and eases into its own cycle (min-jerk over the step)
     y_td = np.array([m.l_td * math.cos(m.theta0) * m.l0 for m in ms])
     dy = np.concatenate([[0.0], y_td[:-1] - y_td[1:]])
+    if plan.continuous:
+        t_dense, x_dense, sigma, dsigma = _continuous_stretch(ms, sig, t_td, dur)
+        x_td = np.interp(t_td, t_dense, x_dense)
     for i in np.unique(k):
         sel = k == i
         local = t[sel] - t_td[i]
         mp = ms[i].path(local)  # the machine's step 0: its foot 0 leads, foot 1 trails
-        p[sel, 0] = x_td[i] + sig[i] * mp["p_com"][:, 0]
+        if plan.continuous:  # x' = σ(t) v_machine: the force along is σ f + m σ' v
+            p[sel, 0] = np.interp(t[sel], t_dense, x_dense)
+            force[sel, 0] = sigma(t[sel]) * mp["force"][:, 0] + ms[i].mass * dsigma(t[sel]) * mp["v_com"][:, 0]
+            force[sel, 1] = mp["force"][:, 1]
+        else:
+            p[sel, 0] = x_td[i] + sig[i] * mp["p_com"][:, 0]
+            force[sel] = mp["force"] * np.array([sig[i], 1.0])
         p[sel, 1] = mp["p_com"][:, 1] + dy[i] * (1.0 - min_jerk(local / dur[i]))
-        force[sel] = mp["force"] * np.array([sig[i], 1.0])
         lead[sel], trail[sel] = mp["contact"][:, 0], mp["contact"][:, 1]
 
     def x_at(times):
@@ -139,12 +150,74 @@ def _stitch(plan: StepPlan, fps: float):
         out = np.empty(times.shape)
         for i in np.unique(j):
             sel = j == i
-            out[sel] = x_td[i] + sig[i] * ms[i].path(times[sel] - t_td[i])["p_com"][:, 0]
+            if plan.continuous and i < n - 1:
+                out[sel] = np.interp(times[sel], t_dense, x_dense)
+            else:  # past the last touchdown: that machine's periodic walk
+                out[sel] = x_td[i] + sig[i] * ms[i].path(times[sel] - t_td[i])["p_com"][:, 0]
         return out
 
     t_double = np.array([m.t_double * m.time_unit for m in ms])
     t_stance = np.array([m.t_stance * m.time_unit for m in ms])
     return t, p, force, lead, trail, k, t_td, t_double, t_stance, x_td, x_at
+
+
+#: Samples of each step on which ``_continuous_stretch`` integrates the COM's forward velocity.
+STRETCH_SAMPLES = 129
+
+
+def _continuous_stretch(ms, sig: np.ndarray, t_td: np.ndarray, dur: np.ndarray):
+    """The COM's forward path under a stretch σ(t) linear between the steps' middles (σ = sig[i] there, held
+    before the first and after the last): x(t) = ∫ σ v_machine dt, each step's machine from its touchdown.
+
+    ms: the steps' machines (scaled); sig, t_td, dur (n,): their stretch, touchdown times and durations [s].
+    Returns (t (K,) [s], x (K,) [m], σ(times), σ'(times) [1/s]): x sampled STRETCH_SAMPLES times a step
+    (trapezoid rule), x(0) = 0.
+    """
+    t_mid = t_td + 0.5 * dur
+
+    def sigma(times):
+        return np.interp(times, t_mid, sig)
+
+    def dsigma(times):
+        if len(sig) < 2:
+            return np.zeros(np.shape(times))
+        slope = np.diff(sig) / np.diff(t_mid)
+        i = np.clip(np.searchsorted(t_mid, times, side="right") - 1, 0, len(slope) - 1)
+        inside = (np.asarray(times) >= t_mid[0]) & (np.asarray(times) < t_mid[-1])
+        return np.where(inside, slope[i], 0.0)
+
+    ts, xs, x0 = [], [], 0.0
+    for m, t0, d in zip(ms, t_td, dur):
+        g = np.linspace(0.0, d, STRETCH_SAMPLES)
+        f = sigma(t0 + g) * m.path(g)["v_com"][:, 0]
+        x = x0 + np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(g))])
+        ts.append(t0 + g)
+        xs.append(x)
+        x0 = float(x[-1])
+    return np.concatenate(ts), np.concatenate(xs), sigma, dsigma
+
+
+def turn_speed_factors(prep, step_length_m: float, n_steps: int) -> np.ndarray:
+    """(n_steps,) the clip's speed along its path where each of n_steps output steps walks, over its mean [-].
+
+    A walker slows into a turn and speeds up out of it (the shared walk-turns: 0.64 m/s where they turn most
+    against 0.88-1.01 on the straights); an output at one speed shows a blunter turn than the clip's path,
+    measured alike (its COM averaged over a stride *in time*). step_length_m: the output's step on the clip's
+    path (its length / L) [m]; each step's factor is the clip's speed over one of its steps around the step's
+    middle, the steps laid one after another by their factors; past the clip's end, 1 (the machine's speed).
+    """
+    cp = prep.path
+    window = prep.machine.t_step * prep.machine.time_unit  # the clip's step [s]
+    end, v_mean = float(np.max(cp.arc_length_m)), cp.path_speed_m_s
+    out, x = np.ones(n_steps), 0.0
+    for i in range(n_steps):
+        f = float(cp.speed_around(x + 0.5 * step_length_m, window)) / v_mean
+        f = float(cp.speed_around(x + 0.5 * f * step_length_m, window)) / v_mean  # at its own middle
+        if x + 0.5 * f * step_length_m > end:
+            break
+        out[i] = f
+        x += f * step_length_m
+    return out
 
 
 def walk_machine_path(prep, retarget, *, n_steps: int, fps: float, machine=None, speed: float = 1.0):
@@ -162,7 +235,8 @@ def walk_machine_path(prep, retarget, *, n_steps: int, fps: float, machine=None,
 def walk_scale_path(prep, retarget, speed: float, *, n_steps: int, fps: float):
     """The machine path and method name of a walk's ``scale``: faster by the re-solved walking cycle, slower
     by §5.2's stretch (below the clip's speed the re-solved cycle does not exist: ``machine.walk_speed``);
-    past Froude 0.5 refused (``check_walking_speed``)."""
+    past Froude 0.5 refused (``check_walking_speed``). A turning take's steps are each stretched besides by
+    the clip's speed along its path at their place (``turn_speed_factors``; docs/path.md)."""
     walk = prep.machine  # a WalkingMachine (prepare chose it for the walk)
     check_walking_speed(walk.scaled(retarget.L, retarget.M), speed)
     if speed > 1.0 + 1e-9:  # longer and quicker steps
@@ -170,7 +244,13 @@ def walk_scale_path(prep, retarget, speed: float, *, n_steps: int, fps: float):
         method = "physical (walking cycle re-solved at the new speed)"
     else:
         machine, stretch, method = walk, speed, "physical"
-    return walk_machine_path(prep, retarget, n_steps=n_steps, fps=fps, machine=machine, speed=stretch), method
+    if prep.turn is None:
+        return walk_machine_path(prep, retarget, n_steps=n_steps, fps=fps, machine=machine, speed=stretch), method
+    # along a turn the walker's speed varies: each step stretched by the clip's speed at its place
+    m = machine.scaled(retarget.L, retarget.M)
+    factors = turn_speed_factors(prep, stretch * m.step_length * m.l0 / retarget.L, n_steps)
+    method += f"; the clip's speed along its turn ({factors.min():.2f}-{factors.max():.2f} x)"
+    return steps_path(prep, retarget, StepPlan((m,) * n_steps, stretch * factors, continuous=True), fps), method
 
 
 def steps_path(prep, retarget, plan: StepPlan, fps: float):

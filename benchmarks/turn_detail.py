@@ -44,10 +44,10 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     from turns_matrix import _clips
 
+    from froude.body.load import load_bvh
     from froude.body.model import BodyModel
     from froude.body.path import _stride_frames, unsmooth_path, unstraighten
     from froude.body.take import analysed_take
-    from froude.body.load import load_bvh
 
     from conftest import clip
 

@@ -219,7 +219,7 @@ def scale(
     trunk_scale: float | None = None,
     speed: float | str = 1.0,
     target_speed: float | None = None,
-    strides: int = 4,
+    strides: int | None = None,
     duration: float | None = None,
     fps: float | None = None,
     method: str = "physical",

@@ -10,6 +10,7 @@ the reference's direction of travel.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from dataclasses import replace as _replace
 from pathlib import Path
@@ -97,7 +98,8 @@ def scale(prep: Prepared, character=None, *, report: bool = True, **options) -> 
 
     character: preset name, YAML/BVH path or Character (None: the reference's own body);
     speed: factor s on the dynamically scaled speed; target_speed: absolute speed [m/s] (overrides speed);
-    strides / duration [s]: output length; fps: output frame rate (default: the input's);
+    strides / duration [s]: output length (neither: ``default_strides``, 4 or a turning take's whole turn and a
+        stride on); fps: output frame rate (default: the input's);
     method: "physical" (froude) or "naive" (engines: angles copied, root × L, timing unchanged).
     speed_model: "law" (default; "auto" is the same): the machine's cycle re-solved at the new speed with
         the step and stance times of the human speed law (``machine.speed``, ``machine.speed_law``), faster
@@ -111,13 +113,26 @@ def scale(prep: Prepared, character=None, *, report: bool = True, **options) -> 
     return plan_scale(prep, character, **options).finish(report=report)
 
 
+#: Output strides when neither strides nor a duration is asked (``default_strides``).
+DEFAULT_STRIDES = 4
+
+
+def default_strides(prep: Prepared) -> int:
+    """The output's strides when none are asked: DEFAULT_STRIDES, and for a turning take at least its whole turn
+    and a stride on (an output that stopped mid-turn would be asked for part of the turn and, measured over its
+    last stride, still be turning: 9 of 12 walk-turns' children missed the heading bar at 4 strides)."""
+    if prep.turn is None:
+        return DEFAULT_STRIDES
+    return max(DEFAULT_STRIDES, math.ceil(prep.path.n_steps / 2) + 1)
+
+
 def plan_scale(
     prep: Prepared,
     character=None,
     *,
     speed: float = 1.0,
     target_speed: float | None = None,
-    strides: int | None = 4,
+    strides: int | None = None,
     duration: float | None = None,
     fps: float | None = None,
     method: str = "physical",
@@ -131,6 +146,8 @@ def plan_scale(
     if not (np.isfinite(fps) and fps > 0):
         raise FroudeError(f"fps must be > 0, got {fps}")
     notes = list(prep.notes)
+    if strides is None and duration is None:
+        strides = default_strides(prep)
     m_scaled = prep.machine.scaled(retarget.L, retarget.M)
     base_m_s = m_scaled.mean_speed_m_s  # the character's speed at x1
     speed = scale_factor(speed, target_speed, base_m_s)

@@ -35,13 +35,20 @@ FORCE_TOL = 0.10
 FORCE_FLOOR_BW = 0.005
 
 
-def intended_heading_change(clip: TakePath, n_steps_out: float) -> float:
+def intended_heading_change(clip: TakePath, n_steps_out: float, covered_m: float | None = None) -> float:
     """The heading change [rad] an output of n_steps_out steps is asked for: none for a straight take
-    (``is_straight``); otherwise the clip's turn per step kept, and the clip's whole turn at most (an output
-    as long as the clip or longer turns as the clip does; a shorter one turns in proportion to its steps)."""
+    (``is_straight``); otherwise the clip's whole turn for an output as long as the clip or longer, and for a
+    shorter one the share of it that the clip's path turns over the stretch the output covers (covered_m:
+    the output's path length on the clip's path, its length / L [m]), or, without it, the share of its
+    steps. A turn is not spread evenly over a take's steps: a 9-step take that turns in its middle five
+    has turned 99 % of its turn after 8 (walk-turn-left_active_001), not 8/9 of it."""
     if is_straight(clip):
         return 0.0
     share = min(1.0, n_steps_out / clip.n_steps) if clip.n_steps > 0 else 1.0
+    arc, psi = np.maximum.accumulate(clip.arc_length_m), clip.heading_rad
+    whole = float(psi[-1] - psi[0]) if psi.size else 0.0
+    if share < 1.0 and covered_m is not None and math.isfinite(covered_m) and abs(whole) > STRAIGHT_TAKE_RAD:
+        share = min(1.0, max(0.0, float(np.interp(covered_m, arc, psi) - psi[0]) / whole))
     return clip.heading_change_rad * share
 
 
@@ -182,7 +189,7 @@ def path_comparison(clip: TakePath, out: TakePath, clip_leg_length: float, out_l
     lengths, the lean into the curve, facing vs travel, and ``misses``: one sentence per bar missed, in the
     user's terms ("the output turns +2 deg where the clip turns +91 deg ...").
     """
-    want = intended_heading_change(clip, out.n_steps)
+    want = intended_heading_change(clip, out.n_steps, out.length_m * clip_leg_length / out_leg_length)
     misses = []
     got = out.heading_change_rad
     if math.isfinite(want) and not abs(got - want) <= HEADING_TOL_RAD:  # NaN misses too

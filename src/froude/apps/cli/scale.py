@@ -67,8 +67,9 @@ def register(sub) -> None:
     g.add_argument("--speed", type=speed("--speed"), default=None, metavar="Fx|Vm/s",
                    help="a factor on the character's dynamically scaled speed (0.7x, or a bare 0.7) or an "
                    "absolute speed (3.2m/s); default 1x")
-    g.add_argument("--strides", type=number(1, MAX_STRIDES, "strides", integer=True), default=4,
-                   help=f"output strides (two steps each), 1-{MAX_STRIDES}, default 4")
+    g.add_argument("--strides", type=number(1, MAX_STRIDES, "strides", integer=True), default=None,
+                   help=f"output strides (two steps each), 1-{MAX_STRIDES}; default 4, and for a turning take its "
+                   "whole turn and a stride on")
     g.add_argument("--duration", type=number(0, MAX_DURATION_S, "s", lo_open=True), default=None, metavar="S",
                    help="output length in seconds (overrides --strides; at least two steps are made)")
     add_fps(g)
@@ -181,11 +182,14 @@ def _speed_range(prep, args):
 def _bound(prep, args) -> bool:
     """Estimate the output's frames from the scaled machine's step time; refuse a runaway; note a
     --duration shorter than the two steps froude makes at least. True for long work."""
+    from ...flow.pipeline import default_strides  # lazy: start-up (froude --help imports no NumPy)
+
     rt = prep.retarget(args.character, **character_kwargs(args))
     m = prep.machine.scaled(rt.L, rt.M)
     step_s = m.step_time * m.time_unit
     fps = args.fps or prep.motion.fps
-    seconds = args.duration if args.duration is not None else 2 * args.strides * step_s
+    strides = args.strides if args.strides is not None else default_strides(prep)
+    seconds = args.duration if args.duration is not None else 2 * strides * step_s
     if args.duration is not None and args.duration < 2 * step_s:
         say(f"note: --duration {args.duration:g} s is shorter than two steps; the output is two steps "
             f"(about {2 * step_s:.2f} s), the shortest froude makes", args.quiet)

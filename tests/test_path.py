@@ -585,3 +585,27 @@ def test_scale_of_a_turn_makes_the_whole_turn_by_default(run_cli, tmp_path):
     assert code in (0, 1), err
     n = json.loads((tmp_path / "s.report.json").read_text())["n_frames"]
     assert n < json.loads((tmp_path / "c.report.json").read_text())["n_frames"] / 2
+
+
+def test_a_batch_of_turns_and_straight_clips(run_cli, tmp_path):
+    """Issue 28 acceptance 5, batch: two walk-turns and a straight walk with a plan that gives no length: every
+    output is written (status ok) and each turn makes its whole turn (the plan's default length is the
+    pipeline's, ``pipeline.default_strides``; at 4 strides walk-turn-left_exhausted_001's child stopped in its
+    turn and was refused)."""
+    import csv
+
+    names = ["bandai-locomotion/turns/dataset-2_walk-turn-left_exhausted_001",
+             "bandai-locomotion/turns/dataset-2_walk-turn-right_feminine_001",
+             "bandai-locomotion/walks/dataset-2_walk_normal_002"]
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("characters: [child]\n")
+    out = tmp_path / "out"
+    code, _, err = run_cli("batch", *[clip(n) for n in names], "--plan", plan, "-o", out, "--workers", 1, "-q")
+    with open(out / "index.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert code == 0 and len(rows) == 3 and all(r["status"] == "ok" for r in rows), (err, rows)
+    for r in rows:
+        rep = json.loads(pipeline.report_path(out / r["output"]).read_text())
+        h = (rep["extras"].get("path_vs_clip") or {}).get("heading_change_deg")
+        if "turn" in r["clip"]:
+            assert h and abs(h["output"] - h["clip"]) <= 3.0 and abs(h["clip"]) > 80.0, (r["clip"], h)

@@ -28,6 +28,8 @@ REFERENCE_KEYS = ("mass", "sex", "length_scale")
 #: counts before any list is built, so a runaway plan is one line and exit 2 at once.
 MAX_VARIATIONS = 10_000
 MAX_TASKS = 1_000_000
+#: The plan's word for the pipeline's default output length (``pipeline.default_strides``).
+AUTO = "auto"
 
 
 EXAMPLE_PLAN = """\
@@ -39,7 +41,7 @@ characters:
   - {height: {from: 1.0, to: 2.2, steps: 7}}      # a range: 7 characters, 1.0 m to 2.2 m
   - {base: troll, leg_scale: [0.8, 0.9, 1.0]}     # a list on top of a preset
 speeds: [0.8, 1.0, 1.2, 3.5m/s]   # factors on each character's scaled speed, or absolute speeds
-strides: 4                        # or a list: [2, 4]
+strides: 4                        # or a list: [2, 4]; default auto: 4, a turning take's whole turn
 accelerations:                    # speed changes (each character x each entry)
   - {to_factor: 1.3, steps: 30}
   - {to_speed: 2.5, steps: 20, lead_steps: 2, hold_steps: 4}
@@ -146,13 +148,14 @@ def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
     speeds = data.get("speeds", None if has_acc else [1.0])
     speeds = [] if speeds is None else speeds if isinstance(speeds, list) else [speeds]
     speed_args = [_speed(s, f"speeds[{k}]", bad) for k, s in enumerate(speeds)]
-    strides = data.get("strides", 4)
+    # auto: pipeline.default_strides (4; a turning take's whole turn and a stride on)
+    strides = data.get("strides", AUTO)
     strides = strides if isinstance(strides, list) else [strides]
     if not strides:
-        bad("strides", "a whole number >= 1 or a list of them")
+        bad("strides", "a whole number >= 1, auto, or a list of them")
     for k, n in enumerate(strides):
-        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-            bad(f"strides[{k}]", f"a whole number >= 1, got {n!r}")
+        if n != AUTO and (isinstance(n, bool) or not isinstance(n, int) or n < 1):
+            bad(f"strides[{k}]", f"a whole number >= 1 or auto, got {n!r}")
     accs = data.get("accelerations") or []
     if not isinstance(accs, list):
         bad("accelerations", "a list of mappings such as {to_factor: 1.3, steps: 30}")
@@ -172,8 +175,9 @@ def parse_plan(data, source: str = "plan", base_dir=None) -> Plan:
     variations = []
     for label, spec, numbers in characters:
         for (sid, sarg), n in itertools.product(speed_args, strides):
-            variations.append(Variation(f"{label}_{sid}_{n}str", "scale", label, spec, numbers,
-                                        sarg + (("strides", n),) + common))
+            length = () if n == AUTO else (("strides", n),)
+            variations.append(Variation(f"{label}_{sid}" + ("" if n == AUTO else f"_{n}str"), "scale", label, spec,
+                                        numbers, sarg + length + common))
         for aid, aarg in acc_args:
             variations.append(Variation(f"{label}_{aid}", "accelerate", label, spec, numbers, aarg + common))
     _check_unique_ids(variations, bad)

@@ -46,8 +46,9 @@ def register(sub) -> None:
     p.add_argument("--speed", type=speed("--speed"), default=None, metavar="Fx|Vm/s",
                    help=f"starting speed: a factor (1.2x, or a bare 1.2) or a speed (3.5m/s); the studio's "
                    f"slider spans {VIEW_SPEED_RANGE[0]:g}x-{VIEW_SPEED_RANGE[1]:g}x (default 1x)")
-    p.add_argument("--strides", type=number(*VIEW_STRIDES, "strides", integer=True), default=4,
-                   help=f"starting output length in strides, {VIEW_STRIDES[0]}-{VIEW_STRIDES[1]} (default 4)")
+    p.add_argument("--strides", type=number(*VIEW_STRIDES, "strides", integer=True), default=None,
+                   help=f"starting output length in strides, {VIEW_STRIDES[0]}-{VIEW_STRIDES[1]} (default 4, and "
+                   "for a turning take its whole turn and a stride on)")
     add_load_options(p)
     p.set_defaults(func=run)
 
@@ -77,7 +78,8 @@ def run(args) -> int:
     clip = load_clip(clip, args.length_scale, args.keep_all_frames, False, args.joint_map, args.up)
     say(f"froude view: preparing {args.clip or 'the embedded sample (09_01)'} (fit once, reused for every change) ...")
     prep = pipeline.prepare(clip, mass=args.mass)
-    params = Params(character=args.character, speed=_start_factor(prep, args), strides=args.strides).check()
+    strides = args.strides if args.strides is not None else min(pipeline.default_strides(prep), VIEW_STRIDES[1])
+    params = Params(character=args.character, speed=_start_factor(prep, args), strides=strides).check()
     code = serve(prep, host=args.host, port=args.port, params=params, open_browser=args.open,
                  announce=lambda m: print(m, flush=True))
     say("froude view: stopped")

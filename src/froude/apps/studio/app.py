@@ -522,7 +522,9 @@ class Studio:
 
         self.session = Session(prep)
         self.clip_name = clip_name or (Path(prep.source).name if prep.source else "clip")
-        params = (params or Params()).check(self.session.presets)
+        if params is None:  # a turning take's output makes its whole turn (pipeline.default_strides)
+            params = Params(strides=min(pipeline.default_strides(prep), int(LIMITS["strides"].hi)))
+        params = params.check(self.session.presets)
         self.first = with_report(prep, self.session.solve(params, report=False))  # raises on a bad start
         self.first.track.capsules  # noqa: B018 -- every tab starts from it
         self.tabs: dict[int, Tab] = {}

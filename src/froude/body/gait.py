@@ -17,6 +17,7 @@ support: a walk vaults (highest in mid single support), a run bounces (lowest th
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -161,6 +162,35 @@ def running_direction(gait: Gait, com: np.ndarray) -> np.ndarray | None:
     return v / n if n > 0.05 * np.sqrt(GRAVITY * gait.leg_length) else None
 
 
+#: A take whose COM travels in directions this far apart [rad] over its first and last quarters turns: its
+#: midstances are found along each stance's own travel (``midstance_times``). Far above a straight take's
+#: veer with its sway's tilt of a quarter's chord (the shared straight takes: under 10 degrees), far below a
+#: turn (84-97 degrees).
+TURNING_TAKE_RAD = math.radians(30.0)
+
+
+def _turns(com: np.ndarray) -> bool:
+    """Whether the COM (F, 3) [m] travels in directions more than TURNING_TAKE_RAD apart over the take's first
+    and last quarters."""
+    F = com.shape[0]
+    q = F // 4
+    if q < 1:
+        return False
+    d0, d1 = com[q] - com[0], com[-1] - com[-1 - q]
+    d0[UP_AXIS] = d1[UP_AXIS] = 0.0
+    n0, n1 = float(np.linalg.norm(d0)), float(np.linalg.norm(d1))
+    return n0 > 0 and n1 > 0 and float(d0 @ d1) < n0 * n1 * math.cos(TURNING_TAKE_RAD)
+
+
+def _stance_travel(rel: np.ndarray, fwd: np.ndarray) -> np.ndarray:
+    """(3,) the horizontal direction the COM travels over a stance relative to its ball, rel (K, 3) [m] the COM
+    less the ball over the stance's frames; fwd (the take's direction) where it travels too little or back."""
+    moved = rel[-1] - rel[0]
+    moved[UP_AXIS] = 0.0
+    n = float(np.linalg.norm(moved))
+    return moved / n if n > 0 and float(moved @ fwd) > 0 else fwd
+
+
 def midstance_times(gait: Gait, com: np.ndarray) -> np.ndarray:
     """Sorted midstance times [frames]: where the COM passes over the stance foot's ball, one per stance.
 
@@ -178,10 +208,12 @@ def midstance_times(gait: Gait, com: np.ndarray) -> np.ndarray:
         return np.zeros(0)
     F = com.shape[0]
     reach = MIDSTANCE_EXTRAPOLATION_S / gait.frame_time
+    turning = _turns(com)
     out = []
     for st in gait.stances:
-        d = (com - ball[:, st.foot]) @ fwd  # (F,) [m]: < 0 while the ball is ahead of the COM
         a, b = max(st.start - 1, 0), min(st.stop + 1, F)
+        along = _stance_travel(com[a:b] - ball[a:b, st.foot], fwd) if turning else fwd
+        d = (com - ball[:, st.foot]) @ along  # (F,) [m]: < 0 while the ball is ahead of the COM
         seg = d[a:b]
         up = np.flatnonzero((seg[:-1] < 0) & (seg[1:] >= 0))
         if up.size:

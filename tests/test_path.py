@@ -609,3 +609,24 @@ def test_a_batch_of_turns_and_straight_clips(run_cli, tmp_path):
         h = (rep["extras"].get("path_vs_clip") or {}).get("heading_change_deg")
         if "turn" in r["clip"]:
             assert h and abs(h["output"] - h["clip"]) <= 3.0 and abs(h["clip"]) > 80.0, (r["clip"], h)
+
+
+def test_a_shorter_output_is_asked_the_share_of_the_turn_its_stretch_makes(prepared):
+    """``intended_heading_change`` for an output shorter than the clip: the clip's turn times the share of it
+    that the clip's path makes over the stretch the output covers, not the share of the clip's steps (a take
+    turns in a few of its steps). On walk-turn-left_active_001 (its turn in the middle of 9 steps): an output
+    covering the path up to where it has turned half its heading is asked half the turn; one covering the
+    first 10 % of the path, almost none of it, where the steps' share asks a tenth."""
+    from froude.report.path_report import intended_heading_change
+
+    path = prepared["bandai-locomotion/turns/dataset-2_walk-turn-left_active_001"].path
+    arc, psi = np.maximum.accumulate(path.arc_length_m), path.heading_rad
+    whole, total = psi[-1] - psi[0], path.heading_change_rad
+    half_way = float(arc[np.argmax(np.abs(psi - psi[0]) >= 0.5 * abs(whole))])
+    assert intended_heading_change(path, 0.5 * path.n_steps, half_way) == pytest.approx(0.5 * total, rel=0.02)
+    start = 0.1 * float(arc[-1])
+    share = float(np.interp(start, arc, psi) - psi[0]) / whole
+    assert abs(share) < 0.05  # the take walks straight before it turns
+    assert intended_heading_change(path, 0.1 * path.n_steps, start) == pytest.approx(total * share, abs=1e-12)
+    assert intended_heading_change(path, 0.1 * path.n_steps) == pytest.approx(0.1 * total, rel=1e-12)
+    assert intended_heading_change(path, 2.0 * path.n_steps, 2.0 * float(arc[-1])) == total

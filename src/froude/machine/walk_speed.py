@@ -57,15 +57,22 @@ STEP_TIME_EXPONENT = -0.5
 FAST_STEP_TIME_EXPONENT = -0.7
 
 
-def check_walking_speed(machine: WalkingMachine, s: float, what: str = "walk") -> None:
+def check_walking_speed(machine: WalkingMachine, s: float, what: str = "walk", peak: float = 1.0) -> None:
     """Raise PastWalkRunTransition (one line, in m/s) when s × the machine's speed is past the walk-run
     transition; FitError for a speed factor that is not a positive number.
 
-    machine: the (scaled) walking machine whose speed unit √(g l0) gives m/s; s: speed factor [-].
+    machine: the (scaled) walking machine whose speed unit √(g l0) gives m/s; s: speed factor [-]; peak: the
+    fastest stretch of the output over its mean speed (a turn's, ``synthesis.walking.turn_speed_factors``):
+    s × peak × the machine's speed is checked, and the refusal says so.
     """
     if not (math.isfinite(s) and s > 0):
         raise FitError(f"speed factor must be > 0, got {s}")
-    U = s * machine.mean_speed
+    U = s * peak * machine.mean_speed
+    if U > WALK_RUN_U and peak != 1.0:
+        raise PastWalkRunTransition(
+            f"a {what} at x{s:g} is past the walk-run transition where it is fastest ({U * machine.speed_unit:.2f} "
+            f"m/s, {peak:.2f} x its mean; Froude number U = {U:.2f} > {WALK_RUN_U}): people run there; ask at most "
+            f"x{WALK_RUN_U / (peak * machine.mean_speed):.2f}")
     if U > WALK_RUN_U:
         v = U * machine.speed_unit
         v_max = WALK_RUN_U * machine.speed_unit

@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.constants import UP_AXIS
-from ..errors import FroudeError, PastWalkRunTransition
+from ..errors import FroudeError
 from ..machine.walk_fit import fit_walking_detailed
-from ..machine.walk_speed import WALK_RUN_U, check_walking_speed, walking_machines_at_speeds
+from ..machine.walk_speed import check_walking_speed, walking_machines_at_speeds
 from .cycle import extract_cycle, sample_cycle
 from .feet import min_jerk
 from .phases import FootEvent
@@ -220,18 +220,6 @@ def turn_speed_factors(prep, step_length_m: float, n_steps: int) -> np.ndarray:
     return out
 
 
-def _check_turn_peak(walk, speed: float, peak: float) -> None:
-    """Refuse (PastWalkRunTransition, one line in m/s) a turning walk at speed factor ``speed`` whose fastest
-    stretch (``peak`` × its mean, ``turn_speed_factors``) is past the walk-run transition, though its mean
-    is not. walk: the scaled WalkingMachine."""
-    U = speed * peak * walk.mean_speed
-    if U > WALK_RUN_U:
-        raise PastWalkRunTransition(
-            f"a walk at x{speed:g} along this turn is past the walk-run transition where the clip walks fastest "
-            f"({U * walk.speed_unit:.2f} m/s, {peak:.2f} x its mean; Froude number U = {U:.2f} > {WALK_RUN_U}): "
-            f"people run there; ask at most x{WALK_RUN_U / (peak * walk.mean_speed):.2f}")
-
-
 def walk_machine_path(prep, retarget, *, n_steps: int, fps: float, machine=None, speed: float = 1.0):
     """The scaled walking machine for n_steps steps in the world (a ``pipeline.MachinePath``).
 
@@ -261,7 +249,7 @@ def walk_scale_path(prep, retarget, speed: float, *, n_steps: int, fps: float):
     # along a turn the walker's speed varies: each step stretched by the clip's speed at its place
     m = machine.scaled(retarget.L, retarget.M)
     factors = turn_speed_factors(prep, stretch * m.step_length * m.l0 / retarget.L, n_steps)
-    _check_turn_peak(walk.scaled(retarget.L, retarget.M), speed, float(factors.max()))
+    check_walking_speed(walk.scaled(retarget.L, retarget.M), speed, "walk along this turn", float(factors.max()))
     method += f"; the clip's speed along its turn ({factors.min():.2f}-{factors.max():.2f} x)"
     return steps_path(prep, retarget, StepPlan((m,) * n_steps, stretch * factors, continuous=True), fps), method
 

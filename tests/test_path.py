@@ -170,6 +170,71 @@ def test_the_travel_line_undoes_the_stride_average():
     assert abs(end_chord_turn_deg(track) - walker) < 1.5 < abs(end_chord_turn_deg(twice) - walker)
 
 
+def _swayed_arc(stride: float, dt: float):
+    """(walker's line (F, 3), its COM swaying 3 cm sideways at the stride and surging 1.5 cm along at the step
+    period (F, 3), its steps (a touchdown every half stride, feet alternating)): a 90 deg turn of radius 1.2 m
+    between straight parts of two strides each."""
+    from froude.body.path import PathStep
+
+    com = _arc(math.radians(90.0), 1.2, 1.2, dt, straight_s=2 * stride)
+    t = np.arange(len(com)) * dt
+    vel = np.gradient(com, dt, axis=0)
+    fwd = vel / np.linalg.norm(vel, axis=1, keepdims=True)
+    left = np.cross(UP, fwd)
+    swayed = (com + 0.03 * np.sin(2 * math.pi * t / stride)[:, None] * left
+              + 0.015 * np.sin(4 * math.pi * t / stride)[:, None] * fwd)
+    on = np.arange(0.1, t[-1] - 0.5 * stride, 0.5 * stride)
+    steps = tuple(PathStep(i % 2, a, a + 0.5 * stride, 0.0, 0.0, math.inf, 0.0, 0.0, 0.0) for i, a in enumerate(on))
+    return com, swayed, steps
+
+
+def test_the_travel_line_is_the_com_without_its_sway():
+    """The travel line the output is bent along is the walker's COM less its periodic sway (``unswayed_track``):
+    on a 90 deg turn of radius 1.2 m with a 3 cm sway and a 1.5 cm surge, it lies within 6 mm of the line the
+    walker swayed about (4.9 mm; the stride average's inverse, ``unsmooth_path``, 17.7 mm off in the turn), and
+    averaged over a stride it gives back the path closer than the inverse does (4.0 mm against 6.4; not
+    exactly: a sway that turns with the path does not average out, and the path is itself 5.1 mm off the
+    walker's line averaged). At its ends it is the path, so its end directions are the travel over the end
+    strides."""
+    from froude.body.path import unswayed_track
+
+    dt, stride = 1 / 120, 1.1
+    com, swayed, steps = _swayed_arc(stride, dt)
+    n_box = int(round(stride / dt))
+    path = smooth_path(swayed, n_box)
+    heading = np.unwrap(yaw_of(np.gradient(path, dt, axis=0)))
+    track = unswayed_track(swayed, path, heading, steps, dt, stride)
+    inner = slice(n_box, len(com) - n_box)  # the end strides go over to the path
+
+    def off_mm(x):
+        return 1000 * np.abs(x - com)[inner][:, [0, 2]].max()
+
+    inverse = unsmooth_path(path, n_box)
+    assert off_mm(track) < 6.0 < 15.0 < off_mm(inverse)
+
+    def averaged_off_mm(x):
+        return 1000 * np.abs(smooth_path(x, n_box) - path)[:, [0, 2]].max()
+
+    assert averaged_off_mm(track) < 4.5 < averaged_off_mm(inverse)
+    assert np.abs(track - path)[[0, -1]][:, [0, 2]].max() < 1e-12
+
+
+def test_no_sway_is_taken_off_without_alternating_steps():
+    """Without three steps whose feet alternate there is no stride phase to hang a sway on: ``unswayed_track``
+    says so (None) and the travel line is the stride average's inverse."""
+    from dataclasses import replace
+
+    from froude.body.path import stride_phase, unswayed_track
+
+    dt, stride = 1 / 120, 1.1
+    _, swayed, steps = _swayed_arc(stride, dt)
+    same_foot = tuple(replace(s, foot=0) for s in steps)
+    assert stride_phase(steps, len(swayed), dt) is not None
+    assert stride_phase(same_foot, len(swayed), dt) is None and stride_phase(steps[:2], len(swayed), dt) is None
+    path = smooth_path(swayed, int(round(stride / dt)))
+    assert unswayed_track(swayed, path, np.zeros(len(swayed)), same_foot, dt, stride) is None
+
+
 # ---- machines along the path, and never silently straight (issue 28 points 2 and 4) ---------------------
 #: A turning walk that today's walking machine fits (the other turns: see docs/path.md for which pass).
 TURN = "bandai-locomotion/turns/dataset-2_walk-turn-left_masculine_001"
@@ -354,13 +419,14 @@ def _giant_case(name: str):
 @pytest.mark.parametrize("name", [_giant_case(n) for n in LOCO_TURNS])
 def test_every_walk_turn_scaled_to_a_giant_meets_every_bar(name, prepared):
     """The giant's output of every walk-turn (and the two walks at an angle, the backward walk) meets every
-    physics bar, the stricter skate included: 8 of the 12 missed one while the bent feet of a double support
-    were left out of the legs' reach (a held tip 14 mm off its target on walk-turn-right_feminine_001;
-    synthesis.targets.within_reach)."""
+    physics bar, the path's among them and the stricter skate included: 8 of the 12 missed one while the bent
+    feet of a double support were left out of the legs' reach (a held tip 14 mm off its target on
+    walk-turn-right_feminine_001; synthesis.targets.within_reach); 2 (5.0 and 7.3 mm, the toes of a planted
+    foot) when the travel line took off the COM's sway, until each foot was bent as one piece
+    (synthesis.bend.foot_places)."""
     prep = prepared[name]
     r = pipeline.scale(prep, "giant", strides=math.ceil(prep.path.n_steps / 2) + 1).report
-    path_misses = r.extras.get("path_vs_clip", {}).get("misses", [])  # issue 28's own points, not these
-    assert [f for f in r.check_bars() if f not in path_misses] == [] and r.foot_skate_floor_mm <= 5.0
+    assert r.check_bars() == [] and r.foot_skate_floor_mm <= 5.0
 
 
 def test_a_lost_turn_is_a_missed_bar_said_in_degrees(prepared):
@@ -621,7 +687,7 @@ def test_a_shorter_output_is_asked_the_share_of_the_turn_its_stretch_makes(prepa
 
     path = prepared["bandai-locomotion/turns/dataset-2_walk-turn-left_active_001"].path
     arc, psi = np.maximum.accumulate(path.arc_length_m), path.heading_rad
-    whole, total = psi[-1] - psi[0], path.heading_change_rad
+    whole, total = psi[-1] - psi[0], path.travel_heading_change_rad
     half_way = float(arc[np.argmax(np.abs(psi - psi[0]) >= 0.5 * abs(whole))])
     assert intended_heading_change(path, 0.5 * path.n_steps, half_way) == pytest.approx(0.5 * total, rel=0.02)
     start = 0.1 * float(arc[-1])

@@ -78,7 +78,8 @@ class TakePath:
     curvature_1_m: (F,) dheading/ds [1/m]; speed_m_s: (F,) speed along the path; facing_rad: (F,) the
     pelvis' facing (unwrapped; NaN without hip joints); facing_vs_travel_rad: (F,) facing minus travel,
     wrapped to (-pi, pi]: 0 forwards, +-pi/2 side steps, pi backwards. heading_change_rad: the take's
-    total (windowed, see the module); window_s: the window used; stride_s: the smoothing length.
+    total (windowed, see the module); window_s: the window used; stride_s: the smoothing length;
+    com_world: (F, 3) the COM the path was measured from [m] (None: not kept).
     """
 
     frame_time: float
@@ -93,6 +94,7 @@ class TakePath:
     window_s: float
     stride_s: float
     steps: tuple[PathStep, ...]
+    com_world: np.ndarray | None = None
 
     @property
     def length_m(self) -> float:
@@ -118,20 +120,42 @@ class TakePath:
         return (np.interp(mid + half, t, arc) - np.interp(mid - half, t, arc)) / window_s
 
     @property
+    def travel_heading_change_rad(self) -> float:
+        """The heading change from the travel over the take's first stride to that over its last [rad]: the
+        path's heading at its end minus at its start (``smooth_path`` continues the track by its end strides,
+        so these are the directions of the COM's chords over them; NaN without frames).
+
+        Over a whole stride the sway cancels; over the shorter windows of a short take's
+        ``heading_change_rad`` (a quarter of it) the sway tilts each chord by its phase there: 7.8 degrees
+        between the two on walk-turn-left_normal_001 (3.4 s: +96.4 against +88.6 here). An output is
+        compared with its clip on this (``report.path_report``): its steps need not fall at the clip's phases
+        of the sway. Where the window is a stride the two agree (within 0.4 degrees on the shared turns:
+        the window's frames are rounded differently)."""
+        h = self.heading_rad
+        return float(h[-1] - h[0]) if h.size else float("nan")
+
+    @property
     def n_steps(self) -> float:
         """How many steps the take spans: its duration over the step time (half the stride) [-]."""
         return (self.arc_length_m.size - 1) * self.frame_time / (0.5 * self.stride_s)
 
     def travel_line(self) -> tuple[np.ndarray, np.ndarray]:
         """The line the body travels along, without the stride average's blur: (heading (F,) [rad], arc length
-        (F,) [m]) per frame of the track whose stride average is this path (``unsmooth_path``).
+        (F,) [m]) per frame of the COM's track without its periodic sway (``unswayed_track``; without
+        alternating steps to give the sway's phase, or without the COM, the track whose stride average is this
+        path, ``unsmooth_path``).
 
         The path is the COM averaged over a stride, so it cuts a turn's corner (on two walk-turns of the shared
         data 1.3 and 1.9 % shorter than the path averaged again). An output made to travel along the path itself
         and measured the same way was averaged twice: up to 2.9 % slower along its path than the clip x sqrt(L)
         and turning up to 6 degrees less over its end chords (benchmarks/turns_matrix.py, docs/path.md).
         """
-        track = unsmooth_path(self.p_world_path, _stride_frames(self.stride_s, self.frame_time))
+        track = None
+        if self.com_world is not None:
+            track = unswayed_track(self.com_world, self.p_world_path, self.heading_rad, self.steps,
+                                   self.frame_time, self.stride_s)
+        if track is None:
+            track = unsmooth_path(self.p_world_path, _stride_frames(self.stride_s, self.frame_time))
         arc, heading, _ = _track_geometry(track, self.frame_time)
         # the same branch of the angle as the path's (the bend turns by heading differences from its start)
         if heading.size:
@@ -246,7 +270,8 @@ def smooth_path(com: np.ndarray, n_box: int) -> np.ndarray:
 
 
 def unsmooth_path(p_path: np.ndarray, n_box: int) -> np.ndarray:
-    """(F, 3) a track whose stride average (``smooth_path`` over n_box frames) is p_path (F, 3) [m], nearly.
+    """(F, 3) a track whose stride average (``smooth_path`` over n_box frames) is p_path (F, 3) [m], nearly: the
+    travel line of a take whose steps give no phase for its sway (``unswayed_track``, ``TakePath.travel_line``).
 
     x = p + S(1 − S) p + S(1 − S)² p, S the stride average: the inverse's series S⁻¹ = Σ (1 − S)^k to its
     third term, the two after the first filtered by S. Of a turn's component over two strides (where S =
@@ -265,6 +290,72 @@ def unsmooth_path(p_path: np.ndarray, n_box: int) -> np.ndarray:
     rest = rest - smooth_path(rest, n_box)  # (1 − S)² p
     x[:, HORIZONTAL_AXES] += smooth_path(rest, n_box)[:, HORIZONTAL_AXES]
     return x
+
+
+#: Harmonics of the stride in a take's periodic sway (``periodic_sway``): the COM sways sideways once a stride and
+#: surges along the travel once a step; 2 and 6 harmonics made the same outputs of the shared walk-turns within
+#: one of 47 (``benchmarks/turns_matrix.py``).
+SWAY_HARMONICS = 4
+
+
+def stride_phase(steps: tuple[PathStep, ...], n_frames: int, frame_time: float) -> np.ndarray | None:
+    """(F,) the stride phase per frame [strides]: foot 0 touches down at whole numbers, foot 1 at halves;
+    linear between the steps' touchdowns, on at their mean step time before the first and past the last.
+    None with fewer than 3 steps or steps whose feet do not alternate (no phase to hang a sway on)."""
+    if len(steps) < 3 or any(a.foot == b.foot for a, b in zip(steps[:-1], steps[1:])):
+        return None
+    t_on = np.array([st.t0_s for st in steps] + [steps[-1].t1_s])  # (n + 1,) [s]
+    u = np.arange(t_on.size, dtype=float) + (steps[0].foot % 2)  # steps since a touchdown of foot 0
+    step_s = (t_on[-1] - t_on[0]) / (t_on.size - 1)
+    t = np.arange(n_frames) * frame_time
+    out = np.interp(t, t_on, u)
+    out = np.where(t < t_on[0], u[0] + (t - t_on[0]) / step_s, out)
+    out = np.where(t > t_on[-1], u[-1] + (t - t_on[-1]) / step_s, out)
+    return 0.5 * out
+
+
+def periodic_sway(com: np.ndarray, p_path: np.ndarray, heading_rad: np.ndarray, phase: np.ndarray,
+                  harmonics: int = SWAY_HARMONICS) -> np.ndarray:
+    """(F, 3) the part of the COM's horizontal offset from its path [m] that repeats every stride: the offset
+    along and across the travel (heading_rad (F,)) fitted over the whole take by a Fourier series of the stride
+    phase (F,) [strides] without its constant (least squares). com, p_path: (F, 3) [m]. This is what the
+    machines make of a take: one stride, repeated; the rest of the offset (the corner a turn cuts, a stride
+    unlike the others) is the take's own path."""
+    d = com - p_path
+    d[:, UP_AXIS] = 0.0
+    fwd, left = direction_of(heading_rad), direction_of(heading_rad + 0.5 * np.pi)
+    offset = np.stack([np.einsum("ij,ij->i", d, fwd), np.einsum("ij,ij->i", d, left)], axis=1)  # (F, 2)
+    angle = 2.0 * np.pi * phase[:, None] * np.arange(1, harmonics + 1)
+    basis = np.concatenate([np.cos(angle), np.sin(angle)], axis=1)  # (F, 2 harmonics)
+    coef, *_ = np.linalg.lstsq(basis, offset, rcond=None)
+    fit = basis @ coef  # (F, 2) along, across
+    return fit[:, :1] * fwd + fit[:, 1:] * left
+
+
+def unswayed_track(com: np.ndarray, p_path: np.ndarray, heading_rad: np.ndarray, steps: tuple[PathStep, ...],
+                   frame_time: float, stride_s: float) -> np.ndarray | None:
+    """(F, 3) the COM's track without its periodic sway (``periodic_sway``) [m], on the path's height; None
+    when the steps give no stride phase (``stride_phase``).
+
+    An output is the machines' stride, sway included, carried along a line; measured as the clip was (its COM
+    averaged over a stride), it has the clip's path when that line is the clip's COM less the sway the
+    machines put back, whatever the stride average blurs: the stride average's inverse (``unsmooth_path``)
+    gave back 84 % of a turn over two strides, and the shared walk-turns' outputs missed the radius per step
+    by 4-19 % (14 of 30; 7 with this line, ``benchmarks/turns_matrix.py``). Over the first and the last
+    stride the track goes over to the path (a smoothstep of the distance from the end): past the clip's ends
+    an output runs straight on in the line's end direction, which a few frames' velocity of the track would
+    set up to 10 degrees off the travel over the end stride (the sway's phase is extrapolated there).
+    com, p_path: (F, 3) [m]; heading_rad: (F,) the path's; stride_s [s].
+    """
+    F = com.shape[0]
+    phase = stride_phase(steps, F, frame_time)
+    if phase is None:
+        return None
+    rest = com - periodic_sway(com, p_path, heading_rad, phase) - p_path
+    rest[:, UP_AXIS] = 0.0
+    i = np.arange(F)
+    u = np.clip(np.minimum(i, F - 1 - i) / max(stride_s / frame_time, 1.0), 0.0, 1.0)
+    return p_path + (u * u * (3.0 - 2.0 * u))[:, None] * rest
 
 
 def facing_yaw(motion: Motion, body: BodyModel) -> np.ndarray:
@@ -316,7 +407,7 @@ def take_path(motion: Motion, body: BodyModel, com: np.ndarray, gait: Gait,
     fvt = wrap_angle(facing - heading)
     total, w = heading_change(com, dt, stride_s, None if window_strides is None else window_strides * stride_s)
     steps = _steps(gait, com, s, heading, fvt, F, dt)
-    return TakePath(dt, p, s, heading, curvature, speed, facing, fvt, total, w, stride_s, steps)
+    return TakePath(dt, p, s, heading, curvature, speed, facing, fvt, total, w, stride_s, steps, com)
 
 
 def _steps(gait: Gait, com: np.ndarray, s: np.ndarray, heading: np.ndarray, fvt: np.ndarray, F: int,

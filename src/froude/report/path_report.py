@@ -37,7 +37,8 @@ FORCE_FLOOR_BW = 0.005
 
 def intended_heading_change(clip: TakePath, n_steps_out: float, covered_m: float | None = None) -> float:
     """The heading change [rad] an output of n_steps_out steps is asked for: none for a straight take
-    (``is_straight``); otherwise the clip's whole turn for an output as long as the clip or longer, and for a
+    (``is_straight``); otherwise the clip's whole turn (its travel's, ``TakePath.travel_heading_change_rad``:
+    what the output is compared on) for an output as long as the clip or longer, and for a
     shorter one the share of it that the clip's path turns over the stretch the output covers (covered_m:
     the output's path length on the clip's path, its length / L [m]), or, without it, the share of its
     steps. A turn is not spread evenly over a take's steps: a 9-step take that turns in its middle five
@@ -49,7 +50,7 @@ def intended_heading_change(clip: TakePath, n_steps_out: float, covered_m: float
     whole = float(psi[-1] - psi[0]) if psi.size else 0.0
     if share < 1.0 and covered_m is not None and math.isfinite(covered_m) and abs(whole) > STRAIGHT_TAKE_RAD:
         share = min(1.0, max(0.0, float(np.interp(covered_m, arc, psi) - psi[0]) / whole))
-    return clip.heading_change_rad * share
+    return clip.travel_heading_change_rad * share
 
 
 def _deg(x: float) -> float | None:
@@ -185,19 +186,24 @@ def path_comparison(clip: TakePath, out: TakePath, clip_leg_length: float, out_l
     """The output's path against the clip's (``Report.extras["path"]``): figures and the bars missed.
 
     Returns a JSON-able dict (degrees, metres, leg lengths): the clip's and the output's total heading
-    change, the intended one (``intended_heading_change``), turn per step, radius per turning step in leg
-    lengths, the lean into the curve, facing vs travel, and ``misses``: one sentence per bar missed, in the
-    user's terms ("the output turns +2 deg where the clip turns +91 deg ...").
+    change (of a turning clip, its travel's: ``TakePath.travel_heading_change_rad``), the intended one
+    (``intended_heading_change``), turn per step, radius per turning step in leg lengths, the lean into the
+    curve, facing vs travel, and ``misses``: one sentence per bar missed, in the user's terms ("the output
+    turns +2 deg where the clip turns +91 deg ...").
     """
     want = intended_heading_change(clip, out.n_steps, out.length_m * clip_leg_length / out_leg_length)
     misses = []
-    got = out.heading_change_rad
+    # a turn is compared on the travel over the first and the last stride (the sway's phase does not tilt it);
+    # a straight take's output, asked for no turn, on its own windows
+    turning = not is_straight(clip)
+    got = out.travel_heading_change_rad if turning else out.heading_change_rad
+    turn = clip.travel_heading_change_rad if turning else clip.heading_change_rad
     if math.isfinite(want) and not abs(got - want) <= HEADING_TOL_RAD:  # NaN misses too
         how = "turns" if math.isfinite(got) else "has no measurable heading"
         shown = f" {math.degrees(got):+.0f} deg" if math.isfinite(got) else ""
-        part = "" if abs(want - clip.heading_change_rad) < 1e-9 else \
+        part = "" if abs(want - turn) < 1e-9 else \
             f" ({math.degrees(want):+.0f} deg for its {out.n_steps:.0f} steps of the clip's {clip.n_steps:.0f})"
-        misses.append(f"the output {how}{shown} where the clip turns {math.degrees(clip.heading_change_rad):+.0f} "
+        misses.append(f"the output {how}{shown} where the clip turns {math.degrees(turn):+.0f} "
                       f"deg{part} (within 3 deg)")
     f_clip, f_out = clip.mean_facing_vs_travel_rad, out.mean_facing_vs_travel_rad
     if math.isfinite(f_clip) and not abs(wrap_angle(f_out - f_clip)) <= FACING_TOL_RAD:
@@ -226,7 +232,7 @@ def path_comparison(clip: TakePath, out: TakePath, clip_leg_length: float, out_l
                      "modelled straight and the output runs straight")
     return {
         "notes": notes,
-        "heading_change_deg": {"clip": _deg(clip.heading_change_rad), "output": _deg(got), "intended": _deg(want)},
+        "heading_change_deg": {"clip": _deg(turn), "output": _deg(got), "intended": _deg(want)},
         "steps": {"clip": round(clip.n_steps, 2), "output": round(out.n_steps, 2)},
         "turn_per_step_deg": {"clip": [_deg(s.heading_change_rad) for s in clip.steps],
                               "output": [_deg(s.heading_change_rad) for s in out.steps]},

@@ -2,11 +2,12 @@
 take (``body.path.straighten``), and their output's targets are rolled back onto the path, scaled.
 
 A point of the straight output at distance a along its travel direction and offset r (sideways and up)
-goes to C(a) + Rot(Δψ(a)) r, where the centreline C turns as the clip's travel line does (the track whose
-stride average is the clip's path, ``TakePath.travel_line``): Δψ(a) is the heading it has gained where
+goes to C(a) + Rot(Δψ(a)) r, where the centreline C turns as the clip's travel line does (its COM's track
+without the sway the machines put back, ``TakePath.travel_line``): Δψ(a) is the heading it has gained where
 the clip's path has arc length a / L (the path scaled by L about the start; a speed change keeps
-it in metres), and C is the integral of the turned travel direction. A point that stays (a planted foot)
-stays, so the IK in the world frame plants the feet where the map puts them; the COM's offset from the
+it in metres), and C is the integral of the turned travel direction. A foot's markers go rigidly with one
+place (``foot_places``: on the ground its contact point's), so a planted foot stays planted and whole and
+the IK in the world frame plants the feet where the map puts them; the COM's offset from the
 path (its sway, its lean into the turn) is turned with the path, so the lateral dynamics are the clip's.
 Before the start and past the clip's end the centreline runs straight on.
 """
@@ -17,7 +18,7 @@ from dataclasses import replace as _replace
 
 import numpy as np
 
-__all__ = ["Centreline", "bend", "bend_points", "lean_shift"]
+__all__ = ["Centreline", "bend", "bend_points", "foot_places", "lean_shift"]
 
 from ..body.model import BodyModel
 from ..body.path import TakePath, yaw_quat
@@ -70,10 +71,12 @@ class Centreline:
         return base + over[..., None] * d, dpsi
 
 
-def bend_points(x: np.ndarray, line: Centreline, origin: np.ndarray) -> np.ndarray:
-    """(..., 3) straight-output points [m] (NaN kept) moved onto the centreline (see the module)."""
+def bend_points(x: np.ndarray, line: Centreline, origin: np.ndarray, a: np.ndarray | None = None) -> np.ndarray:
+    """(..., 3) straight-output points [m] (NaN kept) moved onto the centreline (see the module); a (...): the
+    place [m] each is moved with (default its own distance along the straight travel), its offset from
+    there (along and across) turned with the line's heading there."""
     rel = x - origin * (1 - UP)
-    a = rel @ line.fwd0
+    a = rel @ line.fwd0 if a is None else np.broadcast_to(a, x.shape[:-1])
     r = rel - a[..., None] * line.fwd0
     r[..., UP_AXIS] = x[..., UP_AXIS]
     finite = np.isfinite(a)
@@ -108,8 +111,8 @@ def _smooth_blend(u: np.ndarray) -> np.ndarray:
     return u * u * (3.0 - 2.0 * u)
 
 
-def lean_shift(com: np.ndarray, markers: np.ndarray, path: MachinePath, clip: TakePath, L: float, origin: np.ndarray,
-               fwd0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def lean_shift(com: np.ndarray, markers: np.ndarray, path: MachinePath, clip: TakePath, L: float, line: Centreline,
+               origin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """How far to move each foot sideways in the straight output [m] so that it leans into the turn as the
     clip does (issue 28, acceptance 2): per frame (T, 2) and per machine step (n,), along UP x fwd0 (+ =
     left of the straight travel).
@@ -125,12 +128,16 @@ def lean_shift(com: np.ndarray, markers: np.ndarray, path: MachinePath, clip: Ta
     (the path) stays: the feet go out of the curve, as the clip's do. The move is not
     bounded: the turns of the shared walks ask up to 0.11 leg lengths under pure scaling, a faster walk or an
     erratic step (the exhausted walks) up to 0.19; a bound of 0.05-0.09 (tried) cost the lean of steady turns
-    more than it saved in skating.
-    com: (T, 3), markers: (T, 2, 3, 3) the straight output's COM and foot marker targets [m]; origin, fwd0: (3,)
-    its start and travel direction.
+    more than it saved in skating. The lean each step would have without the move is measured on the output
+    bent along the line, in the frontal plane of the clip's path there (the report's): the bend itself moves
+    the COM against the stance foot where the line curves between them (the COM passes the foot while the
+    line turns), by more the sharper the line (``TakePath.travel_line``).
+    com: (T, 3), markers: (T, 2, 3, 3) the straight output's COM and foot marker targets [m]; line: the
+    centreline it is bent along; origin: (3,) its start.
     """
     n = len(path.foot_of_step)
     T = len(path.times)
+    fwd0 = line.fwd0
     left0 = np.cross(UP, fwd0)
     shift_step = np.zeros(n)
     out = np.zeros((T, 2))
@@ -139,6 +146,10 @@ def lean_shift(com: np.ndarray, markers: np.ndarray, path: MachinePath, clip: Ta
         return out, shift_step
     t = path.times
     a_com = (com - origin * (1 - UP)) @ fwd0  # (T,) straight arc length of the COM target [m]
+    com_b, markers_b = bend_points(com, line, origin), bend_points(markers, line, origin)
+    # left of the clip's path where the COM is (the report measures the lean across the output's path)
+    psi = np.interp(a_com / L, np.maximum.accumulate(clip.arc_length_m), clip.heading_rad) - clip.heading_rad[0]
+    left = quat.rotate(yaw_quat(psi), np.broadcast_to(left0, (T, 3)))
     for k in range(n):
         f = int(path.foot_of_step[k])
         on = (t >= path.contact_on[k]) & (t < path.contact_off[k])
@@ -148,15 +159,15 @@ def lean_shift(com: np.ndarray, markers: np.ndarray, path: MachinePath, clip: Ta
         # the stance foot's contact point as the report measures it (body.gait: the mean of the foot's
         # lowest marker over the stance), here of its targets: the machine's contact point lies elsewhere
         # on the foot (2-3 cm sideways on the Bandai walks)
-        mk = markers[on, f]  # (n_on, 3, 3)
+        mk = markers_b[on, f]  # (n_on, 3, 3)
         low = mk[np.arange(mk.shape[0]), np.argmin(mk[:, :, UP_AXIS], axis=1)]
         if not np.isfinite(low).all():
             continue
-        d = com[on] - low.mean(axis=0)
+        d = com_b[on] - low.mean(axis=0)
         h = float(np.mean(d[:, UP_AXIS]))
         if not h > 0:
             continue
-        pred = float(np.mean(np.arctan2(d @ left0, d[:, UP_AXIS])))
+        pred = float(np.mean(np.arctan2(np.einsum("ij,ij->i", d, left[on]), d[:, UP_AXIS])))
         s_k = float(np.interp(path.contact_on[k], t, a_com)) / L  # the clip's arc length here [m]
         # before the clip's first step of this foot or past its last by more than a stride: the machine's
         # stride as it is; within one stride, the end step's (the report may place a step a little differently)
@@ -176,6 +187,36 @@ def lean_shift(com: np.ndarray, markers: np.ndarray, path: MachinePath, clip: Ta
         # the foot goes right (against left0) to put the COM further left of it
         shift_step[k] = -h * (np.tan(want) - np.tan(pred))
     return _per_frame(path, shift_step), shift_step
+
+
+def foot_places(path: MachinePath, markers: np.ndarray, origin: np.ndarray, fwd0: np.ndarray) -> np.ndarray:
+    """(T, 2) the place along the straight travel [m] with which each foot's markers are bent (``bend_points``).
+
+    A foot is bent as one rigid piece. On the ground it goes with its contact point, one place for the whole
+    contact: its markers that stay stay, and the heel rises about the toes as in the straight output. Bent
+    marker by marker instead, a planted foot was stretched and turned where the line curves under it (heel and
+    toes 0.25 L apart, up to 16 degrees of the line's turn between them in a sharp turn), the IK could not
+    fit it, and the toes of planted feet slid 5-12 mm (the outputs of 4 of the shared walk-turns, at the
+    line of ``TakePath.travel_line``). In the air it goes with its own centre (the mean of its markers'
+    places), from and to its contact places over the first and last SWING_HOLD of the swing (smoothstep).
+    markers: (T, 2, 3, 3) the straight output's foot marker targets [m]; origin, fwd0: (3,).
+    """
+    t = path.times
+    a_centre = np.nanmean((markers - origin * (1 - UP)) @ fwd0, axis=2)  # (T, 2)
+    a_contact = _per_frame(path, (path.contacts - origin * (1 - UP)) @ fwd0)  # (T, 2), one per contact
+    on_ground = np.ones((len(t), 2))  # the contact's share of the place
+    for f in (0, 1):
+        ks = np.flatnonzero(path.foot_of_step == f)
+        if ks.size == 0:
+            on_ground[:, f] = 0.0
+            continue
+        for j in range(ks.size - 1):
+            off, on = path.contact_off[ks[j]], path.contact_on[ks[j + 1]]
+            sw = (t >= off) & (t < on)
+            u = (t[sw] - off) / max(on - off, 1e-9)
+            on_ground[sw, f] = 1.0 - _smooth_blend(np.minimum(u, 1.0 - u) / SWING_HOLD)
+        on_ground[(t < path.contact_on[ks[0]]) | (t >= path.contact_off[ks[-1]]), f] = 0.0
+    return on_ground * a_contact + (1.0 - on_ground) * a_centre
 
 
 def _per_frame(path: MachinePath, shift_step: np.ndarray) -> np.ndarray:
@@ -217,10 +258,12 @@ def bend(targets: Targets, path: MachinePath, clip: TakePath | None, L: float,
         return targets, path
     fwd0 = path.frame[0]
     line = Centreline.of(clip, L, origin, fwd0)
-    shift, shift_step = lean_shift(targets.com, targets.markers, path, clip, L, origin, fwd0)
+    shift, shift_step = lean_shift(targets.com, targets.markers, path, clip, L, line, origin)
     left0 = np.cross(UP, fwd0)
     com = bend_points(targets.com, line, origin)
-    markers = bend_points(targets.markers + shift[:, :, None, None] * left0, line, origin)
+    # each foot's markers moved rigidly, with the line at the foot's place (foot_places)
+    a_feet = foot_places(path, targets.markers, origin, fwd0)
+    markers = bend_points(targets.markers + shift[:, :, None, None] * left0, line, origin, a_feet[:, :, None])
     init = targets.initial
     # the pose moved rigidly with its COM target: turned by the heading gained there, about it (a rig's root
     # may lie far from the body: Bandai's joint_Root, 2.4 m ahead of the COM in a straightened turn)

@@ -462,6 +462,40 @@ def yaw_quat(angle_rad: np.ndarray) -> np.ndarray:
     return quat.from_axis_angle(np.broadcast_to(UP, a.shape + (3,)), a)
 
 
+def yaw_carrier(motion: Motion) -> int:
+    """The joint that a turn about the up axis is given to when a take is straightened or put back: the root,
+    or, on a rig whose root does not turn over the take and holds one child (Bandai's joint_Root over its
+    Hips), that child. Turned at a static root, the body's heading was split between the root (the path's turn) and
+    its child (the body's own): averaged over a stride's occurrences at different places of the turn, the
+    reference stride's two rotations jumped at its loop by the turn of a stride, which the pose keeps where
+    their sum does not (walk-turn-right_normal_001's outputs: the root 29 degrees in one frame)."""
+    sk = motion.skeleton
+    kids = np.flatnonzero(np.asarray(sk.parents) == 0)
+    if kids.size != 1 or motion.n_frames < 2:
+        return 0
+    still = np.ptp(motion.rotations[:, 0], axis=0).max() <= 1e-9
+    return int(kids[0]) if still else 0
+
+
+def _turned(motion: Motion, q: np.ndarray, root_world: np.ndarray, carrier: int) -> Motion:
+    """The motion with each frame turned by q (F, 4) about the up axis, its root at root_world (F, 3) [m] as a
+    point of the body moved rigidly: the root turned (carrier 0), or its one child turned within it and the
+    root moved so that the child lands where the rigid move puts it."""
+    from dataclasses import replace
+
+    rot = motion.rotations.copy()
+    root = root_world
+    if carrier == 0:
+        rot[:, 0] = quat.mul(q, rot[:, 0])
+    else:
+        r0 = rot[:, 0]
+        rot[:, carrier] = quat.mul(quat.mul(quat.conj(r0), quat.mul(q, r0)), rot[:, carrier])
+        off = quat.rotate(r0, motion.local_translations()[:, carrier])  # (F, 3) the child from the root
+        root = root_world + quat.rotate(q, off) - off
+        root[:, UP_AXIS] = root_world[:, UP_AXIS]
+    return replace(motion, root_positions=root, rotations=rot)
+
+
 def straighten(motion: Motion, path: TakePath) -> Motion:
     """The take unrolled onto a straight line: each frame moved rigidly so that its point of the path
     lands at its arc length along the path's first direction, turned by the heading it has gained.
@@ -472,8 +506,9 @@ def straighten(motion: Motion, path: TakePath) -> Motion:
     path turns moves a little in the straightened take (rigid per frame: about a δ²/2 sideways and a δ
     along for a foot n from the path and an angle δ = Δs/r of turn between it and the COM). In a gentle
     walk-turn that is centimetres; in CMU 16_51's sharp running turn a planted foot moves 0.3-0.4 m over
-    a stance (measured in the turns3 work, issue 28), which is why that clip's fit refuses it. The inverse,
-    point by point, is ``synthesis.bend``. Returns a new Motion (meta "straightened": the heading change undone [rad]).
+    a stance (measured in the turns3 work, issue 28), which is why that clip's fit refuses it. The turn is
+    given to ``yaw_carrier``'s joint. The inverse, point by point, is ``synthesis.bend``. Returns a new
+    Motion (meta "straightened": the heading change undone [rad]).
     """
     from dataclasses import replace
 
@@ -484,11 +519,10 @@ def straighten(motion: Motion, path: TakePath) -> Motion:
     rel = motion.root_positions - path.p_world_path
     rel[:, UP_AXIS] = motion.root_positions[:, UP_AXIS]
     root = p0 * (1 - UP) + path.arc_length_m[:, None] * fwd0 + quat.rotate(q, rel)
-    rot = motion.rotations.copy()
-    rot[:, 0] = quat.mul(q, rot[:, 0])
+    out = _turned(motion, q, root, yaw_carrier(motion))
     meta = dict(motion.meta)
     meta["straightened"] = float(dpsi[-1]) if dpsi.size else 0.0
-    return replace(motion, root_positions=root, rotations=rot, meta=meta)
+    return replace(out, meta=meta)
 
 
 def unstraighten_points(x_straight: np.ndarray, path: TakePath) -> np.ndarray:
@@ -518,7 +552,6 @@ def unstraighten(motion: Motion, path: TakePath) -> Motion:
 
     dpsi = path.heading_rad - path.heading_rad[0]
     root = unstraighten_points(motion.root_positions, path)
-    rot = motion.rotations.copy()
-    rot[:, 0] = quat.mul(yaw_quat(dpsi), rot[:, 0])
+    out = _turned(motion, yaw_quat(dpsi), root, yaw_carrier(motion))
     meta = {k: v for k, v in motion.meta.items() if k != "straightened"}
-    return replace(motion, root_positions=root, rotations=rot, meta=meta)
+    return replace(out, meta=meta)

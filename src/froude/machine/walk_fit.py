@@ -294,6 +294,14 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     step_time = float(np.mean(t_nx - t_td))
     t_first, t_last = float(t_td.min()), float(t_nx.max())
     mean_speed = float((np.interp(t_last, times, x_fwd) - np.interp(t_first, times, x_fwd)) / (t_last - t_first))
+    if motion.meta.get("straightened") is not None and summary.step_frequency > 0:
+        # A turning take (straightened along its path) slows into its turn and out of it: its complete steps,
+        # a few of its steps, time it off its mean step (walk-turn-right_normal_001: 0.551 s against 0.536,
+        # 3 %; left_active_001 -2 %), and the machine, whose cycle every output step repeats, walked off the
+        # take's cadence by as much (issue 28's cadence bar, 2 %). Its steps are timed at the take's mean
+        # step (the gait's step frequency, info's), double support and stance in proportion.
+        k = 1.0 / (summary.step_frequency * step_time)
+        step_time, double_time, stance_time = k * step_time, k * double_time, k * stance_time
 
     # Priors at the touchdowns (dimensionless, l0 = mean touchdown leg length).
     l0 = float(np.mean([geo[j].l0 for _, j, _ in steps]))

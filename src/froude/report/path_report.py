@@ -40,7 +40,8 @@ def intended_heading_change(clip: TakePath, n_steps_out: float, covered_m: float
     (``is_straight``); otherwise the clip's whole turn (its travel's, ``TakePath.travel_heading_change_rad``:
     what the output is compared on) for an output as long as the clip or longer, and for a
     shorter one the share of it that the clip's path turns over the stretch the output covers (covered_m:
-    the output's path length on the clip's path, its length / L [m]), or, without it, the share of its
+    the output's path length on the clip's path, its length / L [m]; the clip's heading taken half a stride
+    before its end, where the output's last stride's travel is), or, without it, the share of its
     steps. A turn is not spread evenly over a take's steps: a 9-step take that turns in its middle five
     has turned 99 % of its turn after 8 (walk-turn-left_active_001), not 8/9 of it."""
     if is_straight(clip):
@@ -49,7 +50,10 @@ def intended_heading_change(clip: TakePath, n_steps_out: float, covered_m: float
     arc, psi = np.maximum.accumulate(clip.arc_length_m), clip.heading_rad
     whole = float(psi[-1] - psi[0]) if psi.size else 0.0
     if share < 1.0 and covered_m is not None and math.isfinite(covered_m) and abs(whole) > STRAIGHT_TAKE_RAD:
-        share = min(1.0, max(0.0, float(np.interp(covered_m, arc, psi) - psi[0]) / whole))
+        # the output's travel over its last stride, which ends where it has covered covered_m, is the clip's
+        # path's heading half a stride before (the path is the COM averaged over a centred stride)
+        end = covered_m - 0.5 * clip.stride_s * clip.path_speed_m_s
+        share = min(1.0, max(0.0, float(np.interp(end, arc, psi) - psi[0]) / whole))
     return clip.travel_heading_change_rad * share
 
 

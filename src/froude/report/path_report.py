@@ -38,22 +38,25 @@ FORCE_FLOOR_BW = 0.005
 def intended_heading_change(clip: TakePath, n_steps_out: float, covered_m: float | None = None) -> float:
     """The heading change [rad] an output of n_steps_out steps is asked for: none for a straight take
     (``is_straight``); otherwise the clip's whole turn (its travel's, ``TakePath.travel_heading_change_rad``:
-    what the output is compared on) for an output as long as the clip or longer, and for a
-    shorter one the share of it that the clip's path turns over the stretch the output covers (covered_m:
-    the output's path length on the clip's path, its length / L [m]; the clip's heading taken half a stride
-    before its end, where the output's last stride's travel is), or, without it, the share of its
-    steps. A turn is not spread evenly over a take's steps: a 9-step take that turns in its middle five
-    has turned 99 % of its turn after 8 (walk-turn-left_active_001), not 8/9 of it."""
+    what the output is compared on) for an output that goes past the clip's end, and for one that stops short
+    of it the clip's path's turn over the stretch the output covers (covered_m: the output's path length on
+    the clip's path, its length / L [m]; the clip's heading taken half a stride before its end, where the
+    output's last stride's travel is), or, without covered_m, the share of the clip's steps that the
+    output's n_steps_out make (at most the whole turn). A turn is not spread evenly over a take's steps: a
+    9-step take that turns in its middle five has turned 99 % of its turn after 8 (walk-turn-left_active_001),
+    not 8/9 of it; and a slower output along the same path takes more steps to cover less of it."""
     if is_straight(clip):
         return 0.0
     share = min(1.0, n_steps_out / clip.n_steps) if clip.n_steps > 0 else 1.0
     arc, psi = np.maximum.accumulate(clip.arc_length_m), clip.heading_rad
     whole = float(psi[-1] - psi[0]) if psi.size else 0.0
-    if share < 1.0 and covered_m is not None and math.isfinite(covered_m) and abs(whole) > STRAIGHT_TAKE_RAD:
-        # the output's travel over its last stride, which ends where it has covered covered_m, is the clip's
-        # path's heading half a stride before (the path is the COM averaged over a centred stride)
+    if covered_m is not None and math.isfinite(covered_m) and abs(whole) > STRAIGHT_TAKE_RAD:
+        # where the output stops on the clip's path, whatever its steps (a slower output at the same path takes
+        # more of them to cover less of it): past the clip's end the whole turn; before it, the clip's path's
+        # heading half a stride before the place (the output is measured on its travel over its last stride,
+        # the path is the COM averaged over a centred stride)
         end = covered_m - 0.5 * clip.stride_s * clip.path_speed_m_s
-        share = min(1.0, max(0.0, float(np.interp(end, arc, psi) - psi[0]) / whole))
+        share = 1.0 if covered_m >= arc[-1] else float(np.interp(end, arc, psi) - psi[0]) / whole
     return clip.travel_heading_change_rad * share
 
 
@@ -195,7 +198,8 @@ def path_comparison(clip: TakePath, out: TakePath, clip_leg_length: float, out_l
     curve, facing vs travel, and ``misses``: one sentence per bar missed, in the user's terms ("the output
     turns +2 deg where the clip turns +91 deg ...").
     """
-    want = intended_heading_change(clip, out.n_steps, out.length_m * clip_leg_length / out_leg_length)
+    covered = out.length_m * clip_leg_length / out_leg_length  # the output's path on the clip's [m]
+    want = intended_heading_change(clip, out.n_steps, covered)
     misses = []
     # a turn is compared on the travel over the first and the last stride (the sway's phase does not tilt it);
     # a straight take's output, asked for no turn, on its own windows
@@ -206,7 +210,7 @@ def path_comparison(clip: TakePath, out: TakePath, clip_leg_length: float, out_l
         how = "turns" if math.isfinite(got) else "has no measurable heading"
         shown = f" {math.degrees(got):+.0f} deg" if math.isfinite(got) else ""
         part = "" if abs(want - turn) < 1e-9 else \
-            f" ({math.degrees(want):+.0f} deg for its {out.n_steps:.0f} steps of the clip's {clip.n_steps:.0f})"
+            f" ({math.degrees(want):+.0f} deg where it stops, {covered:.1f} m along its {clip.length_m:.1f} m path)"
         misses.append(f"the output {how}{shown} where the clip turns {math.degrees(turn):+.0f} "
                       f"deg{part} (within 3 deg)")
     f_clip, f_out = clip.mean_facing_vs_travel_rad, out.mean_facing_vs_travel_rad

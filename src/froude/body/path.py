@@ -341,7 +341,7 @@ def unswayed_track(com: np.ndarray, p_path: np.ndarray, heading_rad: np.ndarray,
     averaged over a stride), it has the clip's path when that line is the clip's COM less the sway the
     machines put back, whatever the stride average blurs: the stride average's inverse (``unsmooth_path``)
     gave back 84 % of a turn over two strides, and the shared walk-turns' outputs missed the radius per step
-    by 4-19 % (14 of 30; 7 with this line, ``benchmarks/turns_matrix.py``). Over the first and the last
+    by 4-19 % (14 of 24; 7 with this line, ``benchmarks/turns_matrix.py``). Over the first and the last
     stride the track goes over to the path (a smoothstep of the distance from the end): past the clip's ends
     an output runs straight on in the line's end direction, which a few frames' velocity of the track would
     set up to 10 degrees off the travel over the end stride (the sway's phase is extrapolated there).
@@ -477,7 +477,7 @@ def yaw_carrier(motion: Motion) -> int:
     return int(kids[0]) if still else 0
 
 
-def _turned(motion: Motion, q: np.ndarray, root_world: np.ndarray, carrier: int) -> Motion:
+def turn_about_up(motion: Motion, q: np.ndarray, root_world: np.ndarray, carrier: int) -> Motion:
     """The motion with each frame turned by q (F, 4) about the up axis, its root at root_world (F, 3) [m] as a
     point of the body moved rigidly: the root turned (carrier 0), or its one child turned within it and the
     root moved so that the child lands where the rigid move puts it."""
@@ -519,7 +519,7 @@ def straighten(motion: Motion, path: TakePath) -> Motion:
     rel = motion.root_positions - path.p_world_path
     rel[:, UP_AXIS] = motion.root_positions[:, UP_AXIS]
     root = p0 * (1 - UP) + path.arc_length_m[:, None] * fwd0 + quat.rotate(q, rel)
-    out = _turned(motion, q, root, yaw_carrier(motion))
+    out = turn_about_up(motion, q, root, yaw_carrier(motion))
     meta = dict(motion.meta)
     meta["straightened"] = float(dpsi[-1]) if dpsi.size else 0.0
     return replace(out, meta=meta)
@@ -552,6 +552,6 @@ def unstraighten(motion: Motion, path: TakePath) -> Motion:
 
     dpsi = path.heading_rad - path.heading_rad[0]
     root = unstraighten_points(motion.root_positions, path)
-    out = _turned(motion, yaw_quat(dpsi), root, yaw_carrier(motion))
+    out = turn_about_up(motion, yaw_quat(dpsi), root, yaw_carrier(motion))
     meta = {k: v for k, v in motion.meta.items() if k != "straightened"}
     return replace(out, meta=meta)

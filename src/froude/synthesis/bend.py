@@ -21,7 +21,7 @@ import numpy as np
 __all__ = ["Centreline", "bend", "bend_points", "foot_places", "lean_shift"]
 
 from ..body.model import BodyModel
-from ..body.path import TakePath, yaw_quat
+from ..body.path import TakePath, turn_about_up, yaw_carrier, yaw_quat
 from ..core import quat
 from ..core.constants import GRAVITY, UP, UP_AXIS
 from .targets import Targets, within_reach
@@ -111,8 +111,8 @@ def _smooth_blend(u: np.ndarray) -> np.ndarray:
     return u * u * (3.0 - 2.0 * u)
 
 
-def lean_shift(com: np.ndarray, markers: np.ndarray, path: MachinePath, clip: TakePath, L: float, line: Centreline,
-               origin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def lean_shift(com: np.ndarray, markers: np.ndarray, a_com: np.ndarray, path: MachinePath, clip: TakePath, L: float,
+               left0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """How far to move each foot sideways in the straight output [m] so that it leans into the turn as the
     clip does (issue 28, acceptance 2): per frame (T, 2) and per machine step (n,), along UP x fwd0 (+ =
     left of the straight travel).
@@ -132,21 +132,17 @@ def lean_shift(com: np.ndarray, markers: np.ndarray, path: MachinePath, clip: Ta
     bent along the line, in the frontal plane of the clip's path there (the report's): the bend itself moves
     the COM against the stance foot where the line curves between them (the COM passes the foot while the
     line turns), by more the sharper the line (``TakePath.travel_line``).
-    com: (T, 3), markers: (T, 2, 3, 3) the straight output's COM and foot marker targets [m]; line: the
-    centreline it is bent along; origin: (3,) its start.
+    com: (T, 3), markers: (T, 2, 3, 3) the output's COM and foot marker targets bent along the line [m];
+    a_com: (T,) the COM's distance along the straight travel [m]; left0: (3,) left of the straight travel.
     """
     n = len(path.foot_of_step)
     T = len(path.times)
-    fwd0 = line.fwd0
-    left0 = np.cross(UP, fwd0)
     shift_step = np.zeros(n)
     out = np.zeros((T, 2))
     foot_c, s_c, lean_c, fr_c = _clip_step_figures(clip)
     if n == 0 or len(foot_c) < 2 or T < 2:
         return out, shift_step
     t = path.times
-    a_com = (com - origin * (1 - UP)) @ fwd0  # (T,) straight arc length of the COM target [m]
-    com_b, markers_b = bend_points(com, line, origin), bend_points(markers, line, origin)
     # left of the clip's path where the COM is (the report measures the lean across the output's path)
     psi = np.interp(a_com / L, np.maximum.accumulate(clip.arc_length_m), clip.heading_rad) - clip.heading_rad[0]
     left = quat.rotate(yaw_quat(psi), np.broadcast_to(left0, (T, 3)))
@@ -159,11 +155,11 @@ def lean_shift(com: np.ndarray, markers: np.ndarray, path: MachinePath, clip: Ta
         # the stance foot's contact point as the report measures it (body.gait: the mean of the foot's
         # lowest marker over the stance), here of its targets: the machine's contact point lies elsewhere
         # on the foot (2-3 cm sideways on the Bandai walks)
-        mk = markers_b[on, f]  # (n_on, 3, 3)
+        mk = markers[on, f]  # (n_on, 3, 3)
         low = mk[np.arange(mk.shape[0]), np.argmin(mk[:, :, UP_AXIS], axis=1)]
         if not np.isfinite(low).all():
             continue
-        d = com_b[on] - low.mean(axis=0)
+        d = com[on] - low.mean(axis=0)
         h = float(np.mean(d[:, UP_AXIS]))
         if not h > 0:
             continue
@@ -257,22 +253,24 @@ def bend(targets: Targets, path: MachinePath, clip: TakePath | None, L: float,
     if clip is None:
         return targets, path
     fwd0 = path.frame[0]
-    line = Centreline.of(clip, L, origin, fwd0)
-    shift, shift_step = lean_shift(targets.com, targets.markers, path, clip, L, line, origin)
     left0 = np.cross(UP, fwd0)
+    line = Centreline.of(clip, L, origin, fwd0)
+    a_com = (targets.com - origin * (1 - UP)) @ fwd0  # (T,) the COM's distance along the straight travel [m]
     com = bend_points(targets.com, line, origin)
     # each foot's markers moved rigidly, with the line at the foot's place (foot_places)
-    a_feet = foot_places(path, targets.markers, origin, fwd0)
-    markers = bend_points(targets.markers + shift[:, :, None, None] * left0, line, origin, a_feet[:, :, None])
-    init = targets.initial
+    a_feet = foot_places(path, targets.markers, origin, fwd0)[:, :, None]  # (T, 2, 1)
+    markers = bend_points(targets.markers, line, origin, a_feet)
+    shift, shift_step = lean_shift(com, markers, a_com, path, clip, L, left0)
+    # a foot moved sideways in the straight output is moved so, turned with the line at the foot's place
+    _, dpsi_feet = line.at(a_feet)
+    markers = markers + shift[:, :, None, None] * quat.rotate(yaw_quat(dpsi_feet), left0)
     # the pose moved rigidly with its COM target: turned by the heading gained there, about it (a rig's root
-    # may lie far from the body: Bandai's joint_Root, 2.4 m ahead of the COM in a straightened turn)
-    _, dpsi = line.at((targets.com - origin * (1 - UP)) @ line.fwd0)
+    # may lie far from the body: Bandai's joint_Root, 2.4 m ahead of the COM in a straightened turn), at the
+    # joint the straightening turned (``body.path.yaw_carrier``)
+    init = targets.initial
+    _, dpsi = line.at(a_com)
     q = yaw_quat(dpsi)
-    root = com + quat.rotate(q, init.root_positions - targets.com)
-    rot = init.rotations.copy()
-    rot[:, 0] = quat.mul(q, rot[:, 0])
-    initial = _replace(init, root_positions=root, rotations=rot)
+    initial = turn_about_up(init, q, com + quat.rotate(q, init.root_positions - targets.com), yaw_carrier(init))
     forward = quat.rotate(q, np.broadcast_to(fwd0, (len(dpsi), 3)))
     markers = within_reach(initial, markers, body, forward, walking=order == "walking")
     new_targets = _replace(targets, com=com, markers=markers, initial=initial)

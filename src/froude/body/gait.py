@@ -202,15 +202,21 @@ def midstance_times(gait: Gait, com: np.ndarray) -> np.ndarray:
     crossing lies within MIDSTANCE_EXTRAPOLATION_S of the edge. com: (F, 3) [m]. Empty without a
     running direction or the balls' paths.
     """
+    return np.sort(np.asarray([t for _, t in _midstances(gait, com)], float))
+
+
+def _midstances(gait: Gait, com: np.ndarray) -> list[tuple[int, float]]:
+    """(stance index, midstance time [frames]) of each stance whose COM passes over its ball
+    (``midstance_times``); a braking plant whose COM stays behind the foot until liftoff has none."""
     ball = gait.ball
     fwd = None if ball is None else running_direction(gait, com)
     if ball is None or fwd is None:
-        return np.zeros(0)
+        return []
     F = com.shape[0]
     reach = MIDSTANCE_EXTRAPOLATION_S / gait.frame_time
     turning = _turns(com)
     out = []
-    for st in gait.stances:
+    for k, st in enumerate(gait.stances):
         a, b = max(st.start - 1, 0), min(st.stop + 1, F)
         along = _stance_travel(com[a:b] - ball[a:b, st.foot], fwd) if turning else fwd
         d = (com - ball[:, st.foot]) @ along  # (F,) [m]: < 0 while the ball is ahead of the COM
@@ -218,16 +224,16 @@ def midstance_times(gait: Gait, com: np.ndarray) -> np.ndarray:
         up = np.flatnonzero((seg[:-1] < 0) & (seg[1:] >= 0))
         if up.size:
             i = a + int(up[0])
-            out.append(i + float(-d[i] / (d[i + 1] - d[i])))
+            out.append((k, i + float(-d[i] / (d[i + 1] - d[i]))))
         elif st.stop == F and F >= 2 and d[-1] < 0 < d[-1] - d[-2]:  # the crossing just after the end
             t = (F - 1) - d[-1] / (d[-1] - d[-2])
             if t - (F - 1) <= reach:
-                out.append(float(t))
+                out.append((k, float(t)))
         elif st.start == 0 and F >= 2 and d[0] > 0 and d[1] > d[0]:  # just before the start
             t = -d[0] / (d[1] - d[0])
             if -t <= reach:
-                out.append(float(t))
-    return np.sort(np.asarray(out, float))
+                out.append((k, float(t)))
+    return out
 
 
 def _whole_stride_span(t: np.ndarray) -> tuple[float, int]:
@@ -251,9 +257,11 @@ def step_period(gait: Gait, n_frames: int, com: np.ndarray | None = None) -> flo
     """
     dt = gait.frame_time
     if com is not None:
-        mids = midstance_times(gait, com)
-        if len(mids) >= 2:
-            span, n = _whole_stride_span(mids)
+        found = _midstances(gait, com)
+        # Consecutive midstances are one step apart only when no stance between them lacks one (a braking
+        # plant's COM never passes its foot: CMU 16_51's first three stances, which read 2.8 Hz for 5).
+        if len(found) >= 2 and all(k1 == k0 + 1 for (k0, _), (k1, _) in zip(found, found[1:])):
+            span, n = _whole_stride_span(np.asarray([t for _, t in found]))
             return float(span * dt / n)
     spans, steps = [], []
     for times in ([s.t_on for s in gait.stances if s.start > 0],

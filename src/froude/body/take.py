@@ -71,7 +71,7 @@ def modelled_part(motion: Motion, summary: GaitSummary, com: np.ndarray, gait: G
         note = (f"the speed changes within the take (first stride {v[0]:.2f} m/s, last {v[-1]:.2f}, strides "
                 f"{v.min():.2f}-{v.max():.2f}): the machine runs its mean over {t0:.2f}-{t1:.2f} s, "
                 f"{summary.mean_speed:.2f} m/s, and speed factors refer to that; to model one part, give its "
-                "time range (froude --range T0:T1; Python time_range=(t0, t1))")
+                "time range (--range T0:T1 on scale, fit or accelerate; Python time_range=(t0, t1))")
     return text, note
 
 

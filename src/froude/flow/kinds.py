@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from ..body.gait import GaitSummary, require_running, walks
-from ..machine.fit import fit_machine_detailed
+from ..machine.fit import fit_machine_detailed, unsprung_note
 from ..machine.speed import machine_at_speed
 from ..synthesis.cycle import extract_cycle
 from ..synthesis.phases import fit_events
@@ -47,6 +47,10 @@ class MotionKind(Protocol):
 
     def fit(self, motion, body, com, markers, gait, source: str, mass: float) -> tuple[Any, Any]:
         """(fit result, ``synthesis.cycle.ReferenceCycle``) of a clip (``pipeline.prepare``)."""
+        ...
+
+    def fit_notes(self, fit) -> tuple[str, ...]:
+        """What the user should know of a fit (``fit``'s result): the parts of the take it left out."""
         ...
 
     def machine_at_speed(self, prep, speed: float, memo: dict) -> Any:
@@ -100,6 +104,10 @@ class Running:
     def fit(self, motion, body, com, markers, gait, source: str, mass: float):
         fit = self.fit_detailed(motion, body, mass=mass, source=Path(source).name)
         return fit, extract_cycle(motion, body, gait, com, markers, events=fit_events(fit.machine, motion))
+
+    def fit_notes(self, fit) -> tuple[str, ...]:
+        note = unsprung_note(fit.machine)
+        return (note,) if note else ()
 
     def machine_at_speed(self, prep, speed: float, memo: dict):
         hit = memo.get(speed)
@@ -160,6 +168,9 @@ class Walking:
         from ..synthesis.walking import fit_walk  # lazy: start-up (a run's verbs load no walking code)
 
         return fit_walk(motion, body, com, markers, gait, source, mass)
+
+    def fit_notes(self, fit) -> tuple[str, ...]:
+        return ()
 
     def machine_at_speed(self, prep, speed: float, memo: dict):
         from ..machine.walk_speed import walking_machines_at_speeds  # lazy: start-up

@@ -64,7 +64,8 @@ def prepare(clip, *, mass: float = 70.0, sex: str = "male", joint_map=None, leng
     machine = fit.machine
     modelled, note = modelled_part(motion, summary, com, gait)
     return Prepared(motion, body, com, markers, gait, summary, machine, cycle, source, fit,
-                    modelled=modelled, notes=take.notes + ((note,) if note else ()), clip_path=take.clip_path,
+                    modelled=modelled, notes=take.notes + kind.fit_notes(fit) + ((note,) if note else ()),
+                    clip_path=take.clip_path,
                     turn=turn, kind=kind)
 
 

@@ -48,7 +48,7 @@ from .orbit import solve_orbit
 from .units import speed_unit, time_unit
 
 __all__ = ["StanceFit", "FitResult", "fit_stance_control", "fit_machine", "fit_machine_detailed",
-           "CYCLE_SCALES", "SWAY_SAMPLES"]
+           "unsprung_note", "unsprung_stances", "CYCLE_SCALES", "SWAY_SAMPLES"]
 
 #: Scales of the cycle variables for the minimum-norm search (K relative to its prior).
 CYCLE_SCALES = {"U": 0.05, "H": 0.02, "theta0": 0.03, "K": 0.1, "a": 0.01, "b": 0.02, "c": 0.02}
@@ -159,6 +159,35 @@ class FitResult:
     h_ref: np.ndarray
     h_machine: np.ndarray
     traj: object
+
+
+def _spring_fit(sg, mg: float) -> StanceFit | None:
+    """Eq. 2 fitted to one full stance (``fit_stance_control``), or None when the leg does not act as a spring
+    in it (K ≤ 0: the force does not rise as the leg shortens, as in a hard braking plant at a turn's entry:
+    CMU 16_51's right foot at 0.33 s, K = −2.1 straightened, 0.3 in 3-D as taken). Such a stance is
+    reported (``unsprung_stances``) and left out of the pooled fit that the machine's leg is searched from:
+    one stance of a take does not refuse the take. mg [N]."""
+    try:
+        return fit_stance_control(sg.tau, sg.l / sg.l0, sg.f_leg / mg)
+    except FitError:
+        return None
+
+
+def unsprung_stances(machine: SimpleMachine) -> list[dict]:
+    """The full stances of a fitted running machine in which the leg did not act as a spring (left out of the
+    pooled fit): their records in ``machine.stances`` (foot, touchdown time [s], duration [s])."""
+    return [d for d in machine.stances if not d["partial"] and d["fit"] is None]
+
+
+def unsprung_note(machine: SimpleMachine) -> str | None:
+    """One line on the stances left out of the leg's fit (``unsprung_stances``), None without any."""
+    left_out = unsprung_stances(machine)
+    if not left_out:
+        return None
+    which = ", ".join(f"the {d['foot']} foot's at {d['t_touchdown_s']:.2f} s" for d in left_out)
+    n_full = sum(not d["partial"] for d in machine.stances)
+    return (f"{len(left_out)} of {n_full} stances ({which}) do not act as a spring (the leg's force does not rise "
+            "as it shortens, as in a braking plant): the machine's leg is fitted to the others")
 
 
 def fit_machine(motion: Motion, body: BodyModel | None = None, mass: float = 70.0, **kw) -> SimpleMachine:
@@ -502,10 +531,11 @@ def fit_machine_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
     geo, stances = _stance_geometries(gait, p, f, f[:, UP_AXIS] / mg, markers, heading, lateral, line, dt, src)
     full = [sg for sg in geo if not sg.partial]
     # Per-stance and pooled control fits (dimensionless).
-    fits = [None if sg.partial else fit_stance_control(sg.tau, sg.l / sg.l0, sg.f_leg / mg) for sg in geo]
-    pooled = fit_stance_control(np.concatenate([s.tau for s in full]),
-                                np.concatenate([s.l / s.l0 for s in full]),
-                                np.concatenate([s.f_leg / mg for s in full]))
+    fits = [None if sg.partial else _spring_fit(sg, mg) for sg in geo]
+    springs = [sg for sg, ft in zip(geo, fits) if ft is not None] or full  # none a spring: the pooled fit says so
+    pooled = fit_stance_control(np.concatenate([s.tau for s in springs]),
+                                np.concatenate([s.l / s.l0 for s in springs]),
+                                np.concatenate([s.f_leg / mg for s in springs]))
 
     # Measured figures.
     ev = _events(geo, stances, F)

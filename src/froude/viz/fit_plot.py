@@ -22,10 +22,10 @@ def plot_fit(res, path, title: str = "") -> None:
     m = res.machine
     mg = m.mass * m.g
     T = m.time_unit
-    # The stance shown: the first full stance of the stride used for the cycle comparison.
-    i = next(k for k, s in enumerate(res.stances) if not s.partial and s.t_touchdown >= res.stride_events[0] - 1e-9) \
-        if any(not s.partial and s.t_touchdown >= res.stride_events[0] - 1e-9 for s in res.stances) \
-        else next(k for k, s in enumerate(res.stances) if not s.partial)
+    # The stance shown: the first fitted stance of the stride used for the cycle comparison, else the first
+    # fitted one (a stance that is not a spring has no fit to draw).
+    fitted = [k for k, ft in enumerate(res.stance_fits) if ft is not None]
+    i = next((k for k in fitted if res.stances[k].t_touchdown >= res.stride_events[0] - 1e-9), fitted[0])
     sg, ft = res.stances[i], res.stance_fits[i]
     tau = sg.tau
     t_ms = tau * sg.duration * 1e3

@@ -340,7 +340,7 @@ def test_the_output_slows_into_the_turn_as_the_clip_does(prepared, turn_giant):
     averaged over a stride in time), turned up to 6 deg less per step than the clip's path over the same
     stretch. Each output step's speed along its path, over the output's mean, is the clip's over one clip
     step around the same place (arc length / L), over the clip's mean, within 5 %
-    (``synthesis.walking.turn_speed_factors``). The clip's figure is computed here from its arc length."""
+    (``TakePath.speed_factors``). The clip's figure is computed here from its arc length."""
     from froude.body.gait import detect_gait
     from froude.body.path import take_path
 
@@ -408,7 +408,7 @@ def test_a_walk_turn_keeps_its_turn_per_step(prepared, name):
     turns as the clip's path over the same stretch (the step's arc length / L) within 3 deg, and the steps
     turning 10 deg or more with the same radius in leg lengths within 5 %. On walk-turn-left_feminine_001: at
     one speed along a travel line with one correction (before 29 Nov) the worst step was 2.9 deg and 10.3 % off;
-    with the clip's speed along the turn (``turn_speed_factors``) 1.6 deg and 5.5 %; with the travel line's
+    with the clip's speed along the turn (``TakePath.speed_factors``) 1.6 deg and 5.5 %; with the travel line's
     second term (``body.path.unsmooth_path``) 1.4 deg and 4.6 %; along the COM less its sway
     (``unswayed_track``) 0.7 deg and 3.7 %, and 5.1 % since the machine walks the take's mean cadence (which
     took 4 other outputs inside the bar, ``benchmarks/turns_matrix.py``); 3.6 % since the take's step frequency

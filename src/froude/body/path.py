@@ -119,6 +119,27 @@ class TakePath:
         mid = np.clip(np.interp(place_m, arc, t), half, t[-1] - half)
         return (np.interp(mid + half, t, arc) - np.interp(mid - half, t, arc)) / window_s
 
+    def speed_factors(self, step_length_m: float, n_steps: int, window_s: float) -> np.ndarray:
+        """(n_steps,) the take's speed along its path where each of n_steps output steps goes, over its mean [-].
+
+        A walker slows into a turn and speeds up out of it (the shared walk-turns: 0.64 m/s where they turn most
+        against 0.88-1.01 on the straights), a runner brakes into it (CMU 16_51: 3.1 m/s before, 2.3 in it); an
+        output at one speed shows a blunter turn than the take's path and leans as a faster or slower body
+        would. step_length_m: an output step on this path at factor 1 (its length / L) [m]; each step's factor
+        is the take's speed over window_s [s] (one of its steps) around the step's middle, the steps laid one
+        after another by their factors; past the take's end, 1 (the machine's speed).
+        """
+        end, v_mean = float(np.max(self.arc_length_m)), self.path_speed_m_s
+        out, x = np.ones(n_steps), 0.0
+        for i in range(n_steps):
+            f = float(self.speed_around(x + 0.5 * step_length_m, window_s)) / v_mean
+            f = float(self.speed_around(x + 0.5 * f * step_length_m, window_s)) / v_mean  # at its own middle
+            if x + 0.5 * f * step_length_m > end:
+                break
+            out[i] = f
+            x += f * step_length_m
+        return out
+
     @property
     def travel_heading_change_rad(self) -> float:
         """The heading change from the travel over the take's first stride to that over its last [rad]: the

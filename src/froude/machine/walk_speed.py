@@ -62,7 +62,7 @@ def check_walking_speed(machine: WalkingMachine, s: float, what: str = "walk", p
     transition; FitError for a speed factor that is not a positive number.
 
     machine: the (scaled) walking machine whose speed unit √(g l0) gives m/s; s: speed factor [-]; peak: the
-    fastest stretch of the output over its mean speed (a turn's, ``synthesis.walking.turn_speed_factors``):
+    fastest stretch of the output over its mean speed (a turn's, ``TakePath.speed_factors``):
     s × peak × the machine's speed is checked, and the refusal says so.
     """
     if not (math.isfinite(s) and s > 0):

@@ -96,7 +96,7 @@ class StepPlan:
     """A walk step by step: step i is walked by machines[i] (scaled, SI view) stretched horizontally by
     stretch[i] (§5.2; 1 for a re-solved cycle). continuous: the stretch varies linearly in time between the
     steps' middles instead of holding over each step, so the COM's forward velocity does not jump at a
-    touchdown where it changes (a walker's speed along a turn, ``turn_speed_factors``)."""
+    touchdown where it changes (a walker's speed along a turn, ``TakePath.speed_factors``)."""
 
     machines: tuple
     stretch: np.ndarray
@@ -197,29 +197,6 @@ def _continuous_stretch(ms, sig: np.ndarray, t_td: np.ndarray, dur: np.ndarray):
     return np.concatenate(ts), np.concatenate(xs), sigma, dsigma
 
 
-def turn_speed_factors(prep, step_length_m: float, n_steps: int) -> np.ndarray:
-    """(n_steps,) the clip's speed along its path where each of n_steps output steps walks, over its mean [-].
-
-    A walker slows into a turn and speeds up out of it (the shared walk-turns: 0.64 m/s where they turn most
-    against 0.88-1.01 on the straights); an output at one speed shows a blunter turn than the clip's path,
-    measured alike (its COM averaged over a stride *in time*). step_length_m: the output's step on the clip's
-    path (its length / L) [m]; each step's factor is the clip's speed over one of its steps around the step's
-    middle, the steps laid one after another by their factors; past the clip's end, 1 (the machine's speed).
-    """
-    cp = prep.path
-    window = prep.machine.t_step * prep.machine.time_unit  # the clip's step [s]
-    end, v_mean = float(np.max(cp.arc_length_m)), cp.path_speed_m_s
-    out, x = np.ones(n_steps), 0.0
-    for i in range(n_steps):
-        f = float(cp.speed_around(x + 0.5 * step_length_m, window)) / v_mean
-        f = float(cp.speed_around(x + 0.5 * f * step_length_m, window)) / v_mean  # at its own middle
-        if x + 0.5 * f * step_length_m > end:
-            break
-        out[i] = f
-        x += f * step_length_m
-    return out
-
-
 def walk_machine_path(prep, retarget, *, n_steps: int, fps: float, machine=None, speed: float = 1.0):
     """The scaled walking machine for n_steps steps in the world (a ``pipeline.MachinePath``).
 
@@ -236,7 +213,7 @@ def walk_scale_path(prep, retarget, speed: float, *, n_steps: int, fps: float):
     """The machine path and method name of a walk's ``scale``: faster by the re-solved walking cycle, slower
     by §5.2's stretch (below the clip's speed the re-solved cycle does not exist: ``machine.walk_speed``);
     past Froude 0.5 refused (``check_walking_speed``). A turning take's steps are each stretched besides by
-    the clip's speed along its path at their place (``turn_speed_factors``; docs/path.md)."""
+    the clip's speed along its path at their place (``TakePath.speed_factors``; docs/path.md)."""
     walk = prep.machine  # a WalkingMachine (prepare chose it for the walk)
     check_walking_speed(walk.scaled(retarget.L, retarget.M), speed)
     if speed > 1.0 + 1e-9:  # longer and quicker steps
@@ -248,7 +225,8 @@ def walk_scale_path(prep, retarget, speed: float, *, n_steps: int, fps: float):
         return walk_machine_path(prep, retarget, n_steps=n_steps, fps=fps, machine=machine, speed=stretch), method
     # along a turn the walker's speed varies: each step stretched by the clip's speed at its place
     m = machine.scaled(retarget.L, retarget.M)
-    factors = turn_speed_factors(prep, stretch * m.step_length * m.l0 / retarget.L, n_steps)
+    factors = prep.path.speed_factors(stretch * m.step_length * m.l0 / retarget.L, n_steps,
+                                      prep.machine.t_step * prep.machine.time_unit)
     check_walking_speed(walk.scaled(retarget.L, retarget.M), speed, "walk along this turn", float(factors.max()))
     method += f"; the clip's speed along its turn ({factors.min():.2f}-{factors.max():.2f} x)"
     return steps_path(prep, retarget, StepPlan((m,) * n_steps, stretch * factors, continuous=True), fps), method

@@ -502,6 +502,19 @@ def test_a_braking_stance_does_not_refuse_the_run(run_cli, tmp_path):
     assert code == 0 and "1 of 6 stances (the right foot's at 0.33 s) do not act as a spring" in err, err
 
 
+def test_a_toe_off_is_not_a_stance(run_cli):
+    """CMU 16_18 starts with its left foot rolling off the floor: every marker of it rose over the contact
+    threshold for 60 ms between the heel's rise and the toe's (0.00-0.03 s and 0.09-0.14 s), and info read a
+    0.05 s stance and two left stances in a row. A foot that lifts for less than a swing has not stepped
+    (``body.gait.MIN_SWING_S``): the contacts alternate and each complete one lasts a walker's stance."""
+    code, out, err = run_cli("info", clip("cmu-turns/16_18"), "--json")
+    assert code == 0, err
+    d = json.loads(out)
+    feet = [c["foot"] for c in d["contacts"]]
+    assert all(a != b for a, b in zip(feet, feet[1:])), feet
+    assert min(d["stance_times_s"]) > 0.5, d["stance_times_s"]
+
+
 def test_a_braking_stance_is_a_step_of_the_cadence():
     """The step frequency counts consecutive midstances as one step apart; CMU 16_51's first three stances
     (stutter steps braking into the turn) have none, the COM staying behind the planted foot, and the

@@ -323,7 +323,7 @@ def detect_gait(motion: Motion, body: BodyModel, markers: np.ndarray | None = No
                     Stance(foot, int(s0), int(s1), local_ground, pts.mean(axis=0), bool(s0 == 0 or s1 == F),
                            t_on, t_off)
                 )
-    stance_list.sort(key=lambda s: s.start)
+    stance_list = _join_short_lifts(sorted(stance_list, key=lambda s: s.start), dt, contact)
     any_contact = np.asarray(contact.any(axis=1), bool)
     flights = []
     if stance_list:
@@ -338,6 +338,28 @@ def detect_gait(motion: Motion, body: BodyModel, markers: np.ndarray | None = No
     if com is not None and F >= 8:
         gait = reconcile_contacts(gait, vertical_force_bw(com, dt), h_foot)
     return gait
+
+
+#: A foot that leaves the ground for less than this [s] has not stepped: the shortest swing of a human gait (a
+#: sprinter's: the other foot's stance and two flights) lasts well over 0.2 s. A heel-to-toe roll at a take's
+#: edge can lift every marker over the contact threshold for longer than ``detect_gait``'s gap closing (CMU
+#: 16_18's left foot: 0.00-0.03 s and 0.09-0.14 s, one toe-off read as a stance of its own).
+MIN_SWING_S = 0.1
+
+
+def _join_short_lifts(stances: list[Stance], dt: float, contact: np.ndarray) -> list[Stance]:
+    """Sorted stances with each foot's contacts less than MIN_SWING_S apart joined into one (contact (F, 2)
+    bool is marked in between, in place); dt [s]."""
+    out: list[Stance] = []
+    for st in stances:
+        prev = next((k for k in range(len(out) - 1, -1, -1) if out[k].foot == st.foot), None)
+        if prev is not None and (st.start - out[prev].stop) * dt < MIN_SWING_S:
+            a = out[prev]
+            contact[a.stop:st.start, st.foot] = True
+            out[prev] = replace(a, stop=st.stop, t_off=st.t_off, partial=a.partial or st.partial)
+            continue
+        out.append(st)
+    return sorted(out, key=lambda s: s.start)
 
 
 def reconcile_contacts(gait: Gait, fy_bw: np.ndarray, h_foot: np.ndarray) -> Gait:

@@ -515,6 +515,22 @@ def test_a_toe_off_is_not_a_stance(run_cli):
     assert min(d["stance_times_s"]) > 0.5, d["stance_times_s"]
 
 
+def test_a_lean_missed_for_speed_says_the_speeds(prepared):
+    """The running machine runs a take's mean speed; CMU 16_51 brakes into its turn (3.1 m/s before it, 2.3 in
+    it), so its child runs the turn faster than the clip (scaled) and leans further into it, as
+    tan phi = v^2 / (g r) says: a missed bar, and its sentence gives both speeds, each measured along its own
+    path (the output's step, the clip's at that place x sqrt(L))."""
+    prep = prepared["cmu-turns/16_51"]
+    res = pipeline.scale(prep, "child")
+    cmp = res.report.extras["path_vs_clip"]
+    rows = [r for r in cmp["lean_per_turning_step"] if not r["met"]]
+    assert rows, cmp["lean_per_turning_step"]
+    worst = max(rows, key=lambda r: abs(r["lean_deg"] - r["wanted_deg"]))
+    assert worst["speed_m_s"] > 1.1 * worst["clip_speed_m_s"] and worst["lean_deg"] > worst["wanted_deg"], worst
+    text = next(m for m in cmp["misses"] if m.startswith("the output leans"))
+    assert f"at {worst['clip_speed_m_s']:.2f} m/s (scaled), the output at {worst['speed_m_s']:.2f}" in text, text
+
+
 def test_a_braking_stance_is_a_step_of_the_cadence():
     """The step frequency counts consecutive midstances as one step apart; CMU 16_51's first three stances
     (stutter steps braking into the turn) have none, the COM staying behind the planted foot, and the

@@ -95,6 +95,21 @@ def _froude_turn(st) -> float:
         if st.arc_length_m > 0 else 0.0
 
 
+#: A step whose speed along the path differs from the clip's there (scaled) by more than this [-] has the
+#: difference said beside its lean: tan phi = v^2 / (g r), so 10 % of speed is about 20 % of tan phi.
+STEP_SPEED_NOTE = 0.1
+
+
+def _speed_there(row: dict) -> str:
+    """" at Y m/s (scaled), the output at X: tan phi = v^2 / (g r)" for a lean row (``lean_per_step``) whose
+    step's speed along the path is off the clip's there by more than STEP_SPEED_NOTE (the lean a steady machine
+    cannot copy from a take that brakes into its turn), else ""."""
+    v, v_c = row["speed_m_s"], row["clip_speed_m_s"]
+    if not (v_c > 0 and abs(v / v_c - 1.0) > STEP_SPEED_NOTE):
+        return ""
+    return f" at {v_c:.2f} m/s (scaled), the output at {v:.2f}: tan phi = v^2 / (g r)"
+
+
 def lean_per_step(clip: TakePath, out: TakePath, L: float) -> list[dict]:
     """Per turning step of the output (> 2 degrees): its lean (COM over the stance foot, ``body.path``)
     against the one asked for, in degrees.
@@ -115,6 +130,7 @@ def lean_per_step(clip: TakePath, out: TakePath, L: float) -> list[dict]:
     foot_clip = np.array([st.foot for st in clip.steps])
     lean_clip = np.array([st.lean_rad for st in clip.steps])
     fr_clip = np.array([_froude_turn(st) for st in clip.steps])
+    v_clip = np.array([st.speed_m_s for st in clip.steps])
     rows = []
     for st, s in zip(out.steps, s_out):
         same = foot_clip == st.foot
@@ -124,6 +140,7 @@ def lean_per_step(clip: TakePath, out: TakePath, L: float) -> list[dict]:
         if not s_clip[same][0] <= place <= s_clip[same][-1]:
             continue
         clip_lean = float(np.interp(place, s_clip[same], lean_clip[same]))
+        clip_speed = math.sqrt(L) * float(np.interp(place, s_clip, v_clip))  # scaled [m/s]
         want = clip_lean
         if not pure:
             fr_c = float(np.interp(place, s_clip, fr_clip))
@@ -131,6 +148,7 @@ def lean_per_step(clip: TakePath, out: TakePath, L: float) -> list[dict]:
         tol = LEAN_TOL_RAD if pure else LEAN_SPEED_TOL_RAD
         rows.append({"start_s": round(st.t0_s, 3), "foot": "left" if st.foot == 0 else "right",
                      "lean_deg": _deg(st.lean_rad), "clip_deg": _deg(clip_lean), "wanted_deg": _deg(want),
+                     "speed_m_s": round(st.speed_m_s, 3), "clip_speed_m_s": round(clip_speed, 3),
                      "tol_deg": round(math.degrees(tol), 1), "met": bool(abs(st.lean_rad - want) <= tol)})
     return rows
 
@@ -222,8 +240,8 @@ def path_comparison(clip: TakePath, out: TakePath, clip_leg_length: float, out_l
     if bad:
         r = max(bad, key=lambda r: abs(r["lean_deg"] - r["wanted_deg"]))
         misses.append(f"the output leans {r['lean_deg']:+.1f} deg over its {r['foot']} foot at {r['start_s']:.2f} s "
-                      f"where {r['wanted_deg']:+.1f} deg is asked (the clip's {r['clip_deg']:+.1f}; within "
-                      f"{r['tol_deg']:.0f} deg; {len(bad)} of {len(leans)} turning steps off)")
+                      f"where {r['wanted_deg']:+.1f} deg is asked (the clip's {r['clip_deg']:+.1f}{_speed_there(r)}; "
+                      f"within {r['tol_deg']:.0f} deg; {len(bad)} of {len(leans)} turning steps off)")
     forces = [] if is_straight(clip) else force_per_stride(out)
     _with_clip_force(forces, force_per_stride(clip), out_leg_length / clip_leg_length,
                      out.path_speed_m_s, clip.path_speed_m_s)

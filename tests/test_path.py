@@ -374,10 +374,28 @@ def test_the_turning_giant_meets_every_bar(turn_giant):
 
 #: Walk-turns the walking machine refuses (issue 29's fit; docs/path.md), and giants known to miss a bar:
 #: strict xfails, so a fix shows.
-REFUSED_TURNS = {"dataset-2_walk-turn-left_elderly_001": "the COM falls below the landing height",
+REFUSED_TURNS = {"dataset-2_walk-turn-left_elderly_001": "no periodic walking cycle found",
                  "dataset-2_walk-turn-right_elderly_001": "no periodic walking cycle found"}
 GIANT_MISSES = {"dataset-1_walk-back_normal_001": "a straight take walked backwards: the giant's right ball and "
                 "tip slide 12.7 mm (17.3 before the walks' sub-frame anchors) over frames 41-54; not investigated"}
+
+
+def test_a_refused_walk_says_what_it_is(run_cli, tmp_path):
+    """A walk the walking machine refuses is said in the user's terms: the step, its double support, the speed
+    and the stance force the cycle had to meet, as info measures the take (its step frequency, its speed along
+    the path), in one line, exit 2, nothing written."""
+    name = clip("bandai-locomotion/turns/dataset-2_walk-turn-left_elderly_001")
+    out = tmp_path / "giant.bvh"
+    code, _, err = run_cli("scale", name, "--character", "giant", "-o", out, "-q")
+    assert code == 2 and err.count("\n") == 1 and not out.exists(), err
+    m = re.search(r"its steps: ([\d.]+) s, (\d+) % of each in double support, ([\d.]+) m/s; its vertical force over a "
+                  r"stance: peaks ([\d.]+) and ([\d.]+), trough ([\d.]+) body weights", err)
+    assert m, err
+    code, js, _ = run_cli("info", name, "--json")
+    d = json.loads(js)
+    assert abs(float(m[1]) * d["step_frequency_hz"] - 1.0) < 0.03, (m[1], d["step_frequency_hz"])
+    assert abs(float(m[3]) / d["path"]["path_speed_m_s"] - 1.0) < 0.05, (m[3], d["path"]["path_speed_m_s"])
+    assert 0.5 < float(m[6]) < min(float(m[4]), float(m[5])), err
 
 
 def _giant_case(name: str):

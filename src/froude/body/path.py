@@ -107,7 +107,7 @@ class TakePath:
         n = self.arc_length_m.size
         return self.length_m / ((n - 1) * self.frame_time) if n > 1 else float("nan")
 
-    def speed_around(self, place_m: np.ndarray, window_s: float) -> np.ndarray:
+    def speed_around(self, place_m: np.ndarray | float, window_s: float) -> np.ndarray:
         """(...) the mean speed along the path [m/s] over window_s [s] of the take centred where it passes the
         places place_m (...) [m of arc length]; the window kept inside the take (the mean speed where the
         take is shorter than it)."""

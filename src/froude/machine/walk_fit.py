@@ -234,6 +234,23 @@ def _start_passes(n_per_stance: int) -> tuple:
     return tuple(dict.fromkeys(((SHAPE_N_PER_STANCE, False), (n_per_stance, False), (SHAPE_N_PER_STANCE, True))))
 
 
+def _refusal(reason: str) -> str:
+    """The walking fit's last failure said as what it means for the walk: the shape fit's own words (a
+    Gauss-Newton that finds no descent or does not converge) are about the search, not the clip."""
+    if reason.startswith("the walking shape fit"):
+        return ("no walking cycle whose ground force over a stance comes near this walk's could be fitted "
+                f"({reason.removeprefix('the walking shape fit ')})")
+    return reason
+
+
+def _walk_figures(step_s: float, double_s: float, speed_m_s: float, landmarks: dict) -> str:
+    """The clip's figures a walking cycle must meet, in the user's terms: its step [s], double support [% of a
+    step], speed [m/s] and the ground force's landmarks over a stance [body weights]."""
+    return (f"its steps: {step_s:.2f} s, {100 * double_s / step_s:.0f} % of each in double support, "
+            f"{speed_m_s:.2f} m/s; its vertical force over a stance: peaks {landmarks['peak1']:.2f} and "
+            f"{landmarks['peak2']:.2f}, trough {landmarks['trough']:.2f} body weights")
+
+
 # Long because, like fit.fit_machine_detailed, the walking fit is one sequential pass whose intermediates
 # all end up in the WalkFitResult.
 def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: float = 70.0, *,
@@ -381,7 +398,9 @@ def fit_walking_detailed(motion: Motion, body: BodyModel | None = None, mass: fl
         if best is not None:
             break
     if best is None:  # what the clip is (the gait's decision, as info says it), then why it is refused
-        raise FitError(f"{src}: {summary.kind} that the walking machine cannot follow: {plain_reason or errors[-1]}")
+        figures = _walk_figures(step_time, double_time, mean_speed, lm_ref)
+        raise FitError(f"{src}: {summary.kind} that the walking machine cannot follow: "
+                       f"{_refusal(plain_reason or errors[-1])} ({figures})")
     z, cost, w, iters, z0 = best
     state = WalkState(*map(float, z[:4]))
     th, ctl = float(z[4]), _control(z, T_c)

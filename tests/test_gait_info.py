@@ -69,6 +69,19 @@ def test_info_on_02_01_walk_has_no_flight_phase(run_cli):
     assert t["motion"].startswith("walking")
 
 
+@pytest.mark.parametrize("name", ["cmu-turns/16_51", "02_04"])
+def test_info_lists_flights_fewer_than_half_the_steps_have(run_cli, name):
+    """A run into a tight turn (CMU 16_51: flights between 2 of its 7 pairs of contacts) and a jump in place (02_04:
+    one flight of half a second) printed "flight times: no flight phase" beside the flights their JSON lists:
+    the row lists them, said as a minority of the steps."""
+    d = _info_json(run_cli, name)
+    t = _info_table(run_cli, name)
+    assert d["flight_times_s"] and not d["has_flight_phase"]
+    listed = [float(x) for x in t["flight times"].split(" s ")[0].split(",")]
+    assert listed == pytest.approx(d["flight_times_s"], abs=1e-3)
+    assert f"between {len(listed)} of the {len(d['contacts']) - 1} pairs of contacts" in t["flight times"]
+
+
 def test_info_json_is_the_only_stdout(run_cli):
     code, out, err = run_cli("info", clip("09_01"), "--json")
     json.loads(out)  # nothing but JSON on stdout

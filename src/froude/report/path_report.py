@@ -165,8 +165,10 @@ def force_per_stride(path: TakePath) -> list[dict]:
     velocities), and where the path's heading at the middle is not that bisector the push leaks across it
     (by the speed's change times the sine of the angle between them). Without that correction the clips
     themselves missed the bar on 12 of 89 turning strides (the walkers slow into the turn and speed up out of
-    it: walk-turn-left_exhausted_001, 0.031 body weights against 0.049). v: the COM's speed at the two
-    touchdowns, their mean; r: v T over the turn of the COM's velocity between them.
+    it: walk-turn-left_exhausted_001, 0.031 body weights against 0.049). Divided by the chord factor
+    sin(dpsi/2) / (dpsi/2) of the velocity's turn dpsi over the stride, it is the mean force across the path at
+    each instant (exactly, around a circle at a steady speed). v: the COM's speed at the two touchdowns, their
+    mean; r: v T over the turn of the COM's velocity between them.
     """
     frames = np.arange(path.heading_rad.size)
     rows = []
@@ -180,7 +182,11 @@ def force_per_stride(path: TakePath) -> list[dict]:
         dpsi_com = float(wrap_angle(yaw_of(u1) - yaw_of(u0)))
         v0, v1 = float(np.linalg.norm(u0)), float(np.linalg.norm(u1))
         travel = direction_of(yaw_of(u0) + 0.5 * dpsi_com)  # the bisector of the two velocities
-        got = (float((u1 - u0) @ left) - (v1 - v0) * float(travel @ left)) / T
+        # the mean force's component across the middle, over the chord factor: at a steady speed around a circle
+        # the velocity's change over the stride is its chord, 2 v sin(dpsi / 2), while the force across the
+        # path is m v^2 / r at every instant, v dpsi in all (a 90 deg stride read 10 % short)
+        chord = float(np.sinc(dpsi_com / (2.0 * math.pi)))  # sin(dpsi / 2) / (dpsi / 2)
+        got = (float((u1 - u0) @ left) - (v1 - v0) * float(travel @ left)) / T / chord
         v = 0.5 * (v0 + v1)
         need = v * dpsi_com / T  # v^2 / r, r = v T / dpsi
         if not (math.isfinite(got) and math.isfinite(need)):

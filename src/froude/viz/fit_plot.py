@@ -23,10 +23,12 @@ def plot_fit(res, path, title: str = "") -> None:
     mg = m.mass * m.g
     T = m.time_unit
     # The stance shown: the first fitted stance of the stride used for the cycle comparison, else the first
-    # fitted one (a stance that is not a spring has no fit to draw).
-    fitted = [k for k, ft in enumerate(res.stance_fits) if ft is not None]
+    # fitted one; a stance that is no spring has no fit of its own, and where no stance has one (the pooled fit
+    # can hold where each alone does not) the first full stance is drawn with the pooled fit.
+    fitted = [k for k, ft in enumerate(res.stance_fits) if ft is not None] or \
+        [k for k, s in enumerate(res.stances) if not s.partial]
     i = next((k for k in fitted if res.stances[k].t_touchdown >= res.stride_events[0] - 1e-9), fitted[0])
-    sg, ft = res.stances[i], res.stance_fits[i]
+    sg, ft = res.stances[i], res.stance_fits[i] or res.pooled
     tau = sg.tau
     t_ms = tau * sg.duration * 1e3
     taus = np.linspace(0.0, 1.0, 101)

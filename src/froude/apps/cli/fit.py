@@ -49,9 +49,12 @@ def fit_table(res) -> str:
     lines = ["stance  foot   t_td [s]  dur [s]  l0 [m]  θtd [°]  θlo [°]  drop [cm]  Fz pk [BW]      K       a       b"
              "       c     r²"]
     for i, (sg, ft) in enumerate(zip(res.stances, res.stance_fits)):
-        fit = ("      (partial: not fitted)" if sg.partial else "      (not a spring: left out of the fit)") \
-            if ft is None else (
-            f" {ft.K:6.1f} {ft.a:+7.3f} {ft.b:+7.3f} {ft.c:+7.3f} {ft.r2:6.3f}")
+        if ft is not None:
+            fit = f" {ft.K:6.1f} {ft.a:+7.3f} {ft.b:+7.3f} {ft.c:+7.3f} {ft.r2:6.3f}"
+        elif sg.partial:
+            fit = "      (partial: not fitted)"
+        else:
+            fit = "      (not a spring: left out of the fit)"
         lines.append(f"{i:>6}  {('left', 'right')[sg.foot]:<5} {sg.t_touchdown:9.3f} {sg.duration:8.3f} {sg.l0:7.3f} "
                      f"{math.degrees(sg.theta_touchdown):8.1f} {math.degrees(sg.theta_liftoff):8.1f} "
                      f"{100 * sg.com_drop:10.1f} {sg.peak_vertical_force / (m.mass * m.g):11.2f}{fit}")
